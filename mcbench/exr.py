@@ -1,0 +1,111 @@
+"""Multi-layer OpenEXR I/O through the OpenEXR Python bindings.
+
+A file holds named layers: a 3-channel layer ``color`` is stored as the channels
+``color.R``, ``color.G``, ``color.B``; a 1-channel layer ``depth`` as ``depth``.
+Writes are atomic (temporary file in the same folder, then ``os.replace``), so a run
+killed mid-write never leaves a truncated EXR behind that Snakemake would trust.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import OpenEXR
+
+from mcbench import BenchError
+
+__all__ = ["ExrError", "NonFiniteError", "read_layers", "write_layers", "read_metadata", "check_finite"]
+
+
+class ExrError(BenchError):
+    """A missing, corrupt or incomplete EXR file; the message names the file."""
+
+
+class NonFiniteError(BenchError):
+    """An EXR layer holds NaN or Inf pixels; the message names the file, layer and count."""
+
+
+def write_layers(path: str | os.PathLike, layers: dict[str, np.ndarray],
+                 metadata: dict[str, str | int | float] | None = None,
+                 dtype=np.float32) -> None:
+    """Write ``layers`` (each (H, W) or (H, W, 3)) to a ZIP-compressed EXR, atomically.
+
+    ``metadata`` values are stored as string header attributes (``mcbench.<key>``).
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    channels = {}
+    shape = None
+    for name, array in layers.items():
+        array = np.ascontiguousarray(array, dtype=dtype)
+        if array.ndim not in (2, 3) or (array.ndim == 3 and array.shape[2] not in (1, 3)):
+            raise ValueError(f"{path}: layer '{name}' has shape {array.shape}; expected (H, W) or (H, W, 3)")
+        if array.ndim == 3 and array.shape[2] == 1:
+            array = np.ascontiguousarray(array[..., 0])
+        if shape is None:
+            shape = array.shape[:2]
+        elif array.shape[:2] != shape:
+            raise ValueError(f"{path}: layer '{name}' is {array.shape[:2]}, other layers are {shape}")
+        channels[name] = array
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    for key, value in (metadata or {}).items():
+        header[f"mcbench.{key}"] = str(value)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp.exr", dir=path.parent)
+    os.close(fd)
+    try:
+        with OpenEXR.File(header, channels) as exr:
+            exr.write(tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def _open(path: Path) -> OpenEXR.File:
+    if not path.exists():
+        raise ExrError(f"{path}: EXR file is missing")
+    try:
+        return OpenEXR.File(str(path))
+    except Exception as exc:  # the bindings raise a bare Exception on corrupt files
+        raise ExrError(f"{path}: cannot read EXR ({exc})") from exc
+
+
+def read_layers(path: str | os.PathLike, names: list[str] | None = None,
+                dtype=np.float32) -> dict[str, np.ndarray]:
+    """Read the named layers (all when ``names`` is None) as float arrays.
+
+    Raises :class:`ExrError` naming the file when it is missing, corrupt, or lacks a layer.
+    """
+    path = Path(path)
+    with _open(path) as exr:
+        try:
+            available = {name: ch.pixels for name, ch in exr.channels().items()}
+        except Exception as exc:
+            raise ExrError(f"{path}: cannot decode EXR pixels ({exc})") from exc
+        wanted = list(available) if names is None else list(names)
+        missing = [n for n in wanted if n not in available]
+        if missing:
+            raise ExrError(f"{path}: missing layer(s) {missing}; file has {sorted(available)}")
+        return {n: np.array(available[n], dtype=dtype) for n in wanted}
+
+
+def read_metadata(path: str | os.PathLike) -> dict[str, str]:
+    """Return the ``mcbench.*`` header attributes of an EXR (prefix stripped)."""
+    path = Path(path)
+    with _open(path) as exr:
+        return {k[len("mcbench."):]: str(v) for k, v in exr.header().items() if k.startswith("mcbench.")}
+
+
+def check_finite(path: str | os.PathLike, layers: dict[str, np.ndarray]) -> None:
+    """Raise :class:`NonFiniteError` naming ``path``, the layer and the count of bad pixels."""
+    problems = []
+    for name, array in layers.items():
+        bad = ~np.isfinite(array)
+        if bad.any():
+            per_pixel = bad.reshape(bad.shape[0], bad.shape[1], -1).any(axis=2)
+            problems.append(f"layer '{name}' has {int(per_pixel.sum())} pixel(s) with NaN/Inf")
+    if problems:
+        raise NonFiniteError(f"{path}: " + "; ".join(problems))

@@ -1,0 +1,31 @@
+#!/usr/bin/env bash
+# Set up the project on a fresh machine: Debian's libllvm19 for Mitsuba's LLVM variant
+# (when missing and we are root), a virtual environment in .venv, and the pinned packages.
+# Safe to run again: it only installs what is missing.
+set -euo pipefail
+cd "$(dirname "$0")"
+
+have_llvm19() {
+    ls /usr/lib/*/libLLVM.so.19* /usr/lib/*/libLLVM-19.so /usr/lib/llvm-19/lib/libLLVM*.so* >/dev/null 2>&1
+}
+
+if [ -n "${DRJIT_LIBLLVM_PATH:-}" ] && [ -e "${DRJIT_LIBLLVM_PATH}" ]; then
+    :
+elif ! have_llvm19; then
+    if [ "$(id -u)" = "0" ] && command -v apt-get >/dev/null 2>&1; then
+        echo "setup: installing Debian's libllvm19 for Mitsuba's llvm_ad_rgb variant"
+        (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq libllvm19 >/dev/null) \
+            || echo "setup: notice: could not install libllvm19; renders fall back to scalar_rgb (slower)"
+    else
+        echo "setup: notice: libLLVM 19 not found and not root; renders fall back to Mitsuba's scalar_rgb (slower)"
+    fi
+fi
+
+PYTHON="${PYTHON:-python3.11}"
+command -v "$PYTHON" >/dev/null 2>&1 || PYTHON=python3
+if [ ! -x .venv/bin/python ]; then
+    "$PYTHON" -m venv .venv
+fi
+.venv/bin/python -m pip install -q --upgrade pip >/dev/null
+.venv/bin/python -m pip install -q -e ".[test]"
+echo "setup: done (.venv ready; activate with '. .venv/bin/activate')"
