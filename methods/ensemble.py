@@ -1,0 +1,677 @@
+"""Ensemble denoising (Zheng et al. 2021): per-pixel, per-channel convex combination of
+base denoiser outputs with weights from the dual-buffer MSE estimate, then a
+cross-bilateral filter on the weight maps.
+
+Objective (Eq. 11-14). For one pixel-channel with base outputs ``y_i^A, y_i^B`` and noisy
+halves ``x^A, x^B``, the estimated MSE matrix is <M> = (<M>^A + <M>^B) / 2 with
+<M>^A_ij = x^A x^B - x^B (y_i^A + y_j^A) + y_i^A y_j^A (and A <-> B). Since
+<M>^A_ij = (y_i^A - x^B)(y_j^A - x^B) + x^A x^B - (x^B)^2, on the simplex (sum w = 1)
+
+    L(w) = w^T <M> w = 1/2 |A w - b|^2 - 1/2 (x^A - x^B)^2,                     (Eq. 25)
+
+with A the 2 x N matrix whose columns are the points a_i = (y_i^A, y_i^B) and
+b = (x^B, x^A). So the minimiser of Eq. 13 is given by the Euclidean projection p* of b onto
+the convex hull of the N points a_i, and any simplex weights w with A w = p*.
+
+Solvers
+-------
+``"iterative"`` (paper Sec. 4.1, default): random start, then repeatedly combine the current
+ensemble z = (w.y^A, w.y^B) with one base denoiser through the two-denoiser closed form
+(Eq. 29) and update w <- (1 - alpha) w + alpha e_i (Eq. 31); the denoiser is chosen cycling
+through all N in a freshly shuffled order per cycle; stop when no weight moved by more
+than ``tolerance`` over a whole cycle or after ``max_iterations`` iterations.
+Randomness comes from a counter-based splitmix64 generator seeded from
+(seed, pixel-channel index), not from ``np.random``: inside numba ``prange`` loops
+``np.random`` draws from per-thread states, so which pixel gets which numbers would depend
+on thread scheduling and the thread count. With the counter-based generator the result is
+identical for identical inputs and seed whatever the threading.
+
+``"exact"``: closed-form 2D geometry. p* = b if b lies in the hull (on a segment, or in a
+triangle of the points by Caratheodory), else p* is the closest point over all points and
+segments. Hull membership is decided in O(N) by the equivalent separation test: with p the
+closest point over all points and segments, b is outside iff every point satisfies
+(a_k - p).(b - p) <= 0; the O(N^3) triangle search only runs for the fallback witness.
+Non-unique weights (b inside the hull, several points on the optimal face -- collinear or
+coincident, e.g. identical base outputs) are resolved by a deterministic rule: among all
+optimal simplex weight vectors take the one of **minimum Euclidean norm** (equivalently
+closest to the naive average 1/N). It is unique and permutation-equivariant (permuting the
+denoisers permutes the weights). It is computed exactly: only candidate points can carry
+weight (outside the hull: the points on the optimal face, (a_k - p*).n >= -tol with
+n = (b - p*)/|b - p*|; otherwise all N). The equality-constrained minimum-norm solution on
+a support S is w_i = 1/|S| + (a_i - a_bar).mu with U mu = p* - a_bar (U the 2 x 2 scatter
+of a_i - a_bar over S, pseudo-inverse with eigenvalue threshold relative to trace U and an
+absolute floor for coincident points); by
+the KKT conditions the answer is the feasible one (w >= -tol, |sum w_i a_i - p*| <= tol)
+of minimum norm over all supports S. Fast paths: a unique optimum (one candidate vertex,
+or two distinct candidate points) is returned directly, and the minimum-norm solution over
+all candidates is taken when it is already non-negative; only otherwise are subsets
+enumerated, which is exponential in the number of candidates (2^N - 1 supports, N <= 20
+allowed) -- but only on those non-unique pixels. Tolerances are relative to the pixel's
+scale max(|y|, |x|) (floor 1e-30): coordinates are divided by it before the geometry.
+
+Weight filter (Sec. 4.2): raw combined images z, z^A, z^B, Var[z] ~ (z^A - z^B)^2 / 2, and a
+cross-bilateral filter (Eq. 32-34) of all N x C weight maps with one kernel per pixel
+guided by z/Var[z], albedo and normal (``mcbench.bilateral``). A convex combination of
+simplex vectors stays on the simplex.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, prange
+
+from mcbench.bilateral import cross_bilateral_filter
+from mcbench.buffers import Denoised, RenderBuffers
+
+KIND = "combiner"
+LABEL = "Ensemble"
+
+SOLVERS = ("iterative", "exact")
+MAX_EXACT_N = 20
+_CHUNK = 256  # pixel-channels per parallel work item (scratch arrays are per item)
+
+# ---------------------------------------------------------------------------------------
+# counter-based random numbers (splitmix64)
+# ---------------------------------------------------------------------------------------
+_GOLDEN = np.uint64(0x9E3779B97F4A7C15)
+_M1 = np.uint64(0xBF58476D1CE4E5B9)
+_M2 = np.uint64(0x94D049BB133111EB)
+_S30 = np.uint64(30)
+_S27 = np.uint64(27)
+_S31 = np.uint64(31)
+_S11 = np.uint64(11)
+_INV53 = 1.0 / 9007199254740992.0  # 2^-53
+
+
+@njit(cache=True, inline="always")
+def _mix64(z):
+    z = (z ^ (z >> _S30)) * _M1
+    z = (z ^ (z >> _S27)) * _M2
+    return z ^ (z >> _S31)
+
+
+@njit(cache=True, inline="always")
+def _next(state):
+    """splitmix64 step: returns (new_state, 64 random bits)."""
+    state = state + _GOLDEN
+    return state, _mix64(state)
+
+
+@njit(cache=True, inline="always")
+def _uniform(bits):
+    """Uniform double in [0, 1) from 64 random bits."""
+    return float(bits >> _S11) * _INV53
+
+
+# ---------------------------------------------------------------------------------------
+# objective
+# ---------------------------------------------------------------------------------------
+def objective(weights, color_a, color_b, denoised_a, denoised_b) -> np.ndarray:
+    """Eq. 13 value L(w) = w^T <M> w per pixel-channel, via Eq. 25.
+
+    weights, denoised_a, denoised_b: (N, H, W, C); color_a, color_b: (H, W, C).
+    Returns (H, W, C) float64 (squared radiance units).
+    """
+    w = np.asarray(weights, np.float64)
+    za = np.einsum("nhwc,nhwc->hwc", w, np.asarray(denoised_a, np.float64))
+    zb = np.einsum("nhwc,nhwc->hwc", w, np.asarray(denoised_b, np.float64))
+    xa = np.asarray(color_a, np.float64)
+    xb = np.asarray(color_b, np.float64)
+    return 0.5 * ((za - xb) ** 2 + (zb - xa) ** 2) - 0.5 * (xa - xb) ** 2
+
+
+# ---------------------------------------------------------------------------------------
+# iterative solver (Sec. 4.1)
+# ---------------------------------------------------------------------------------------
+@njit(cache=True)
+def _iterative_one(ya, yb, xa, xb, w, order, state, max_iterations, tolerance):
+    n = ya.shape[0]
+    # random start in [0, 1]^N, normalised (Sec. 4.1.2)
+    total = 0.0
+    for j in range(n):
+        state, bits = _next(state)
+        w[j] = _uniform(bits)
+        total += w[j]
+    if total > 0.0:
+        for j in range(n):
+            w[j] /= total
+    else:
+        for j in range(n):
+            w[j] = 1.0 / n
+    it = 0
+    while it < max_iterations:
+        # freshly shuffled cycle (Fisher-Yates)
+        for j in range(n):
+            order[j] = j
+        for j in range(n - 1, 0, -1):
+            state, bits = _next(state)
+            r = int(_uniform(bits) * (j + 1))
+            if r > j:
+                r = j
+            t = order[j]
+            order[j] = order[r]
+            order[r] = t
+        max_change = 0.0
+        for jj in range(n):
+            if it >= max_iterations:
+                break
+            i = order[jj]
+            za = 0.0
+            zb = 0.0
+            for j in range(n):
+                za += w[j] * ya[j]
+                zb += w[j] * yb[j]
+            # Eq. 29 with y_1 = current ensemble z, y_2 = base denoiser i
+            da = za - ya[i]
+            db = zb - yb[i]
+            c1 = da * da + db * db
+            c2 = (za - xb) * da + (zb - xa) * db
+            alpha = 0.0
+            if c1 > 0.0 and np.isfinite(c1):
+                alpha = c2 / c1
+                if not np.isfinite(alpha) or alpha < 0.0:
+                    alpha = 0.0
+                elif alpha > 1.0:
+                    alpha = 1.0
+            if alpha > 0.0:
+                for j in range(n):
+                    old = w[j]
+                    nw = (1.0 - alpha) * old
+                    if j == i:
+                        nw += alpha
+                    ch = abs(nw - old)
+                    if ch > max_change:
+                        max_change = ch
+                    w[j] = nw
+            it += 1
+        if max_change <= tolerance:
+            break
+    total = 0.0
+    for j in range(n):
+        if w[j] < 0.0:
+            w[j] = 0.0
+        total += w[j]
+    if total > 0.0:
+        for j in range(n):
+            w[j] /= total
+    else:
+        for j in range(n):
+            w[j] = 1.0 / n
+    return it
+
+
+@njit(parallel=True, cache=True)
+def _iterative_kernel(ya, yb, xa, xb, seed_state, max_iterations, tolerance):
+    """ya, yb: (P, N); xa, xb: (P,). Returns weights (P, N) and iteration counts (P,)."""
+    P, n = ya.shape
+    seed_state = _mix64(seed_state)
+    out = np.empty((P, n))
+    iters = np.empty(P, np.int64)
+    nchunks = (P + _CHUNK - 1) // _CHUNK
+    for c in prange(nchunks):
+        w = np.empty(n)
+        order = np.empty(n, np.int64)
+        for p in range(c * _CHUNK, min(P, (c + 1) * _CHUNK)):
+            state = _mix64(seed_state + np.uint64(p))
+            iters[p] = _iterative_one(ya[p], yb[p], xa[p], xb[p], w, order, state,
+                                      max_iterations, tolerance)
+            for j in range(n):
+                out[p, j] = w[j]
+    return out, iters
+
+
+# ---------------------------------------------------------------------------------------
+# exact solver (projection onto the convex hull, minimum-norm tie-break)
+# ---------------------------------------------------------------------------------------
+_GEOM_TOL = 1e-10    # distances in units of the pixel's scale
+_W_TOL = 1e-9        # weights
+_RES_TOL = 1e-8      # residual |sum w a - p*| in units of the scale
+_EIG_TOL = 1e-12     # pseudo-inverse threshold relative to trace(U)
+
+
+@njit(cache=True)
+def _min_norm_on_support(u, v, idx, m, px, py, wtmp):
+    """Equality-constrained min-norm weights on support idx[:m] (others 0).
+
+    Writes wtmp (over all N); returns (feasible, squared norm)."""
+    n = u.shape[0]
+    for j in range(n):
+        wtmp[j] = 0.0
+    mu_ = 0.0
+    mv_ = 0.0
+    for t in range(m):
+        mu_ += u[idx[t]]
+        mv_ += v[idx[t]]
+    mu_ /= m
+    mv_ /= m
+    s11 = 0.0
+    s12 = 0.0
+    s22 = 0.0
+    for t in range(m):
+        du = u[idx[t]] - mu_
+        dv = v[idx[t]] - mv_
+        s11 += du * du
+        s12 += du * dv
+        s22 += dv * dv
+    ru = px - mu_
+    rv = py - mv_
+    tr = s11 + s22
+    lam_u = 0.0
+    lam_v = 0.0
+    if tr > 0.0:
+        # eigen-decomposition of the symmetric 2x2 scatter, pseudo-inverse
+        half = 0.5 * (s11 - s22)
+        disc = np.sqrt(half * half + s12 * s12)
+        l1 = 0.5 * tr + disc
+        l2 = 0.5 * tr - disc
+        if abs(s12) > 0.0 or half != 0.0:
+            # eigenvector of l1
+            if half >= 0.0:
+                e1u = half + disc
+                e1v = s12
+            else:
+                e1u = s12
+                e1v = disc - half
+            nrm = np.sqrt(e1u * e1u + e1v * e1v)
+            e1u /= nrm
+            e1v /= nrm
+        else:
+            e1u = 1.0
+            e1v = 0.0
+        e2u = -e1v
+        e2v = e1u
+        # relative threshold, plus an absolute one: spreads below 0.1 * _GEOM_TOL (in units
+        # of the scale) count as coincident points, not as an (ill-conditioned) direction
+        thr = max(_EIG_TOL * tr, m * (0.1 * _GEOM_TOL) ** 2)
+        if l1 > thr:
+            c = (e1u * ru + e1v * rv) / l1
+            lam_u += c * e1u
+            lam_v += c * e1v
+        if l2 > thr:
+            c = (e2u * ru + e2v * rv) / l2
+            lam_u += c * e2u
+            lam_v += c * e2v
+    inv_m = 1.0 / m
+    norm2 = 0.0
+    ok = True
+    ressu = 0.0
+    ressv = 0.0
+    for t in range(m):
+        k = idx[t]
+        wk = inv_m + (u[k] - mu_) * lam_u + (v[k] - mv_) * lam_v
+        wtmp[k] = wk
+        norm2 += wk * wk
+        if wk < -_W_TOL:
+            ok = False
+        ressu += wk * u[k]
+        ressv += wk * v[k]
+    if ok:
+        if np.sqrt((ressu - px) ** 2 + (ressv - py) ** 2) > _RES_TOL:
+            ok = False
+    return ok, norm2
+
+
+@njit(cache=True)
+def _clip_normalise(w):
+    n = w.shape[0]
+    total = 0.0
+    for j in range(n):
+        if w[j] < 0.0:
+            w[j] = 0.0
+        total += w[j]
+    if total > 0.0:
+        for j in range(n):
+            w[j] /= total
+    else:
+        for j in range(n):
+            w[j] = 1.0 / n
+
+
+@njit(cache=True)
+def _triangle_witness(u, v, bu, bv):
+    """A triangle of points containing b (Caratheodory) and b's barycentric coordinates."""
+    n = u.shape[0]
+    for i in range(n):
+        for j in range(i + 1, n):
+            for k in range(j + 1, n):
+                area = (u[j] - u[i]) * (v[k] - v[i]) - (v[j] - v[i]) * (u[k] - u[i])
+                if abs(area) <= 1e-14:
+                    continue
+                b1 = ((u[j] - bu) * (v[k] - bv) - (v[j] - bv) * (u[k] - bu)) / area
+                b2 = ((u[k] - bu) * (v[i] - bv) - (v[k] - bv) * (u[i] - bu)) / area
+                b3 = 1.0 - b1 - b2
+                if b1 >= -1e-12 and b2 >= -1e-12 and b3 >= -1e-12:
+                    return True, i, j, k, b1, b2, b3
+    return False, 0, 0, 0, 0.0, 0.0, 0.0
+
+
+@njit(cache=True)
+def _exact_one(ya, yb, xa, xb, w, u, v, cand, idx, wtmp, wbest):
+    """Minimum-norm minimiser of Eq. 13 for one pixel-channel; writes w (N,).
+
+    Returns a code: 0 unique fast path, 1 min-norm over all candidates, 2 enumeration,
+    3 fallback to the geometric witness."""
+    n = ya.shape[0]
+    s = 1e-30
+    for j in range(n):
+        s = max(s, abs(ya[j]), abs(yb[j]))
+    s = max(s, abs(xa), abs(xb))
+    for j in range(n):
+        u[j] = ya[j] / s
+        v[j] = yb[j] / s
+    bu = xb / s  # b = (x^B, x^A) pairs with a_i = (y_i^A, y_i^B)
+    bv = xa / s
+    if n == 1:
+        w[0] = 1.0
+        return 0
+
+    # closest point over all vertices and segments; the witness (i, j, t) realises it
+    best = np.inf
+    wi = 0
+    wj = 0
+    wt = 0.0
+    pu = 0.0
+    pv = 0.0
+    for i in range(n):
+        d2 = (u[i] - bu) ** 2 + (v[i] - bv) ** 2
+        if d2 < best:
+            best = d2
+            wi = i
+            wj = i
+            wt = 0.0
+            pu = u[i]
+            pv = v[i]
+    for i in range(n):
+        for j in range(i + 1, n):
+            du = u[j] - u[i]
+            dv = v[j] - v[i]
+            L2 = du * du + dv * dv
+            if L2 <= 0.0:
+                continue
+            t = ((bu - u[i]) * du + (bv - v[i]) * dv) / L2
+            if t <= 0.0 or t >= 1.0:
+                continue
+            qu = u[i] + t * du
+            qv = v[i] + t * dv
+            d2 = (qu - bu) ** 2 + (qv - bv) ** 2
+            if d2 < best:
+                best = d2
+                wi = i
+                wj = j
+                wt = t
+                pu = qu
+                pv = qv
+    dist = np.sqrt(best)
+    # b is in the hull iff no line through p separates it from the points: if b is outside,
+    # p is its projection and every point has (a_k - p).n <= 0; if b is inside at distance
+    # dist > 0 from p (any point of the segments), b = sum lambda_k a_k gives
+    # max_k (a_k - p).n >= (b - p).n = dist. (Equivalent to Caratheodory's "b lies in some
+    # triangle of the points", which is only evaluated for the fallback witness: O(N) here
+    # instead of O(N^3).)
+    inside = dist <= _GEOM_TOL
+    if not inside:
+        nu = (bu - pu) / dist
+        nv = (bv - pv) / dist
+        mx = -np.inf
+        for j in range(n):
+            mx = max(mx, (u[j] - pu) * nu + (v[j] - pv) * nv)
+        inside = mx > 0.5 * dist
+    on_boundary = dist <= _GEOM_TOL
+
+    m = 0
+    if inside:
+        pu = bu
+        pv = bv
+        for j in range(n):
+            cand[m] = j
+            m += 1
+    else:
+        nu = (bu - pu) / dist
+        nv = (bv - pv) / dist
+        for j in range(n):
+            if (u[j] - pu) * nu + (v[j] - pv) * nv >= -_GEOM_TOL:
+                cand[m] = j
+                m += 1
+        # fast paths: the optimum is unique
+        if m <= 1:
+            for j in range(n):
+                w[j] = 0.0
+            w[wi if m == 0 else cand[0]] = 1.0
+            return 0
+        if m == 2:
+            i = cand[0]
+            j = cand[1]
+            du = u[j] - u[i]
+            dv = v[j] - v[i]
+            L2 = du * du + dv * dv
+            if np.sqrt(L2) > _GEOM_TOL:
+                t = ((pu - u[i]) * du + (pv - v[i]) * dv) / L2
+                t = min(1.0, max(0.0, t))
+                for k in range(n):
+                    w[k] = 0.0
+                w[i] = 1.0 - t
+                w[j] = t
+                return 0
+
+    # minimum-norm solution over all candidates; optimal if already non-negative
+    for t in range(m):
+        idx[t] = cand[t]
+    ok, _ = _min_norm_on_support(u, v, idx, m, pu, pv, wtmp)
+    if ok:
+        for j in range(n):
+            w[j] = wtmp[j]
+        _clip_normalise(w)
+        return 1
+
+    # enumerate supports S subset of candidates
+    best_norm = np.inf
+    for mask in range(1, 1 << m):
+        k = 0
+        for t in range(m):
+            if (mask >> t) & 1:
+                idx[k] = cand[t]
+                k += 1
+        ok, nrm = _min_norm_on_support(u, v, idx, k, pu, pv, wtmp)
+        if ok and nrm < best_norm:
+            best_norm = nrm
+            for j in range(n):
+                wbest[j] = wtmp[j]
+    if best_norm < np.inf:
+        for j in range(n):
+            w[j] = wbest[j]
+        _clip_normalise(w)
+        return 2
+
+    # numerical fallback: the geometric witness (always optimal, maybe not min-norm)
+    for j in range(n):
+        w[j] = 0.0
+    tri = False
+    if inside and not on_boundary:
+        tri, ti, tj, tk, l1, l2, l3 = _triangle_witness(u, v, bu, bv)
+    if tri:
+        w[ti] = l1
+        w[tj] = l2
+        w[tk] = l3
+    else:
+        w[wi] += 1.0 - wt
+        w[wj] += wt
+    _clip_normalise(w)
+    return 3
+
+
+@njit(parallel=True, cache=True)
+def _exact_kernel(ya, yb, xa, xb):
+    """ya, yb: (P, N); xa, xb: (P,). Returns weights (P, N) and path codes (P,)."""
+    P, n = ya.shape
+    out = np.empty((P, n))
+    codes = np.empty(P, np.int8)
+    nchunks = (P + _CHUNK - 1) // _CHUNK
+    for c in prange(nchunks):
+        w = np.empty(n)
+        u = np.empty(n)
+        v = np.empty(n)
+        cand = np.empty(n, np.int64)
+        idx = np.empty(n, np.int64)
+        wtmp = np.empty(n)
+        wbest = np.empty(n)
+        for p in range(c * _CHUNK, min(P, (c + 1) * _CHUNK)):
+            codes[p] = _exact_one(ya[p], yb[p], xa[p], xb[p], w, u, v, cand, idx, wtmp, wbest)
+            for j in range(n):
+                out[p, j] = w[j]
+    return out, codes
+
+
+# ---------------------------------------------------------------------------------------
+# public API
+# ---------------------------------------------------------------------------------------
+def _check_finite(named: dict) -> None:
+    bad = {}
+    for name, arr in named.items():
+        finite = np.isfinite(arr)
+        # collapse everything but the pixel axes (H, W): leading N and trailing C
+        if arr.ndim == 4:
+            finite = finite.all(axis=0)
+        count = int((~finite.reshape(finite.shape[0], finite.shape[1], -1).all(axis=2)).sum())
+        if count:
+            bad[name] = count
+    if bad:
+        detail = ", ".join(f"{k}: {c}" for k, c in bad.items())
+        raise ValueError(f"non-finite (NaN/Inf) values in {sum(bad.values())} pixel(s) "
+                         f"of the ensemble inputs ({detail})")
+
+
+def _prepare(color_a, color_b, denoised_a, denoised_b):
+    xa = np.asarray(color_a, np.float64)
+    xb = np.asarray(color_b, np.float64)
+    ya = np.asarray(denoised_a, np.float64)
+    yb = np.asarray(denoised_b, np.float64)
+    if xa.ndim != 3 or xa.shape != xb.shape:
+        raise ValueError(f"color_a {xa.shape} and color_b {xb.shape} must both be (H, W, C)")
+    if ya.ndim != 4 or ya.shape != yb.shape or ya.shape[1:] != xa.shape or ya.shape[0] < 1:
+        raise ValueError(f"denoised_a {ya.shape} and denoised_b {yb.shape} must both be "
+                         f"(N, H, W, C) with N >= 1 and (H, W, C) = {xa.shape}")
+    _check_finite({"color_a": xa, "color_b": xb, "denoised_a": ya, "denoised_b": yb})
+    n = ya.shape[0]
+    # (P, N) contiguous per pixel-channel
+    ya_p = np.ascontiguousarray(ya.reshape(n, -1).T)
+    yb_p = np.ascontiguousarray(yb.reshape(n, -1).T)
+    return xa.ravel(), xb.ravel(), ya_p, yb_p, ya.shape
+
+
+def _seed_state(seed) -> np.uint64:
+    return np.uint64(int(seed) % (1 << 64))
+
+
+def solve_weights(color_a, color_b, denoised_a, denoised_b, solver="iterative", seed=0,
+                  max_iterations=1024, tolerance=1e-9, return_info=False):
+    """Per-pixel, per-channel ensemble weights minimising Eq. 13 (with <M> from Eq. 11-12).
+
+    Parameters
+    ----------
+    color_a, color_b : (H, W, C) noisy half buffers x^A, x^B (linear radiance).
+    denoised_a, denoised_b : (N, H, W, C) base denoisers' half-buffer outputs y_i^A, y_i^B.
+    solver : ``"iterative"`` (Sec. 4.1, Eq. 29-31) or ``"exact"`` (projection onto the convex
+        hull, minimum-norm tie-break; see the module docstring).
+    seed : int, seeds the iterative solver's counter-based generator (ignored by "exact").
+    max_iterations : int, iteration limit of the iterative solver (paper: 1024).
+    tolerance : float, the iterative solver stops once no weight changed by more than this
+        over a whole cycle of N iterations.
+    return_info : if True also return per pixel-channel (H, W, C) diagnostics: iteration
+        counts (iterative) or path codes (exact: 0 unique, 1 min-norm over candidates,
+        2 support enumeration, 3 geometric fallback).
+
+    Returns
+    -------
+    (N, H, W, C) float64 weights, each pixel-channel on the simplex (w >= 0, sum 1).
+
+    Raises
+    ------
+    ValueError on shape mismatch, unknown solver, or NaN/Inf in any input (the message
+    gives the number of bad pixels).
+    """
+    if solver not in SOLVERS:
+        raise ValueError(f"unknown ensemble solver '{solver}'; choose one of {SOLVERS}")
+    xa, xb, ya_p, yb_p, shape = _prepare(color_a, color_b, denoised_a, denoised_b)
+    n = shape[0]
+    if solver == "iterative":
+        if int(max_iterations) < 1:
+            raise ValueError(f"max_iterations must be >= 1, got {max_iterations}")
+        w, info = _iterative_kernel(ya_p, yb_p, xa, xb, _seed_state(seed),
+                                    int(max_iterations), float(tolerance))
+    else:
+        if n > MAX_EXACT_N:
+            raise ValueError(f"exact solver supports N <= {MAX_EXACT_N} denoisers, got {n}")
+        w, info = _exact_kernel(ya_p, yb_p, xa, xb)
+    weights = np.ascontiguousarray(w.T).reshape(shape)
+    if return_info:
+        return weights, info.reshape(shape[1:])
+    return weights
+
+
+def combine_with(weights, denoised) -> np.ndarray:
+    """Eq. 3 / 35: sum_i w_i y_i per pixel-channel. (N, H, W, C) x (N, H, W, C) -> (H, W, C)."""
+    return np.einsum("nhwc,nhwc->hwc", np.asarray(weights, np.float64),
+                     np.asarray(denoised, np.float64))
+
+
+def filter_weights(weights, denoised_full, denoised_a, denoised_b, albedo, normal, radius=7,
+                   sigma_spatial=3.0, sigma_color=2.0, sigma_albedo=0.25, sigma_normal=0.15):
+    """Cross-bilateral filter of the raw weight maps (Sec. 4.2, Eq. 32-34).
+
+    weights, denoised_full, denoised_a, denoised_b : (N, H, W, C); albedo, normal (H, W, 3).
+    The guide is the raw combined image z = sum w y_i with Var[z] ~ (z^A - z^B)^2 / 2; all
+    N x C maps share one kernel per pixel. Defaults are the paper's (radius 7 px,
+    sigma_s 3, sigma_z 2, sigma_albedo 0.25, sigma_normal 0.15).
+    Returns (N, H, W, C) float64 weights on the simplex.
+    """
+    w = np.asarray(weights, np.float64)
+    n, h, wd, c = w.shape
+    z = combine_with(w, denoised_full)
+    za = combine_with(w, denoised_a)
+    zb = combine_with(w, denoised_b)
+    var = 0.5 * (za - zb) ** 2
+    values = np.moveaxis(w, 3, 1).reshape(n * c, h, wd)  # (N*C, H, W)
+    out = cross_bilateral_filter(values, z, var, [albedo, normal],
+                                 [sigma_albedo, sigma_normal], sigma_spatial, sigma_color,
+                                 radius)
+    out = np.moveaxis(out.reshape(n, c, h, wd), 1, 3)
+    total = out.sum(axis=0)
+    assert np.all(np.abs(total - 1.0) < 1e-6), "filtered weights left the simplex"
+    out = np.maximum(out, 0.0)
+    return np.ascontiguousarray(out / out.sum(axis=0, keepdims=True))
+
+
+def combine(buffers: RenderBuffers, inputs: list[Denoised], solver="iterative", seed=0,
+            max_iterations=1024, tolerance=1e-9, filter=True, radius=7, sigma_spatial=3.0,
+            sigma_color=2.0, sigma_albedo=0.25, sigma_normal=0.15) -> Denoised:
+    """Ensemble of the ``inputs`` (Sec. 4): solve raw weights from the half buffers, filter
+    them (unless ``filter=False``, an ablation), and combine (Eq. 35).
+
+    Returns Denoised(full, a, b, extras) with float32 images; ``extras`` holds
+    ``weights_raw_{i}`` and ``weights_filtered_{i}`` (H, W, 3) per input i (with
+    ``filter=False`` the filtered maps equal the raw ones).
+    """
+    if not inputs:
+        raise ValueError("the ensemble needs at least one input")
+    y_full = np.stack([np.asarray(d.full, np.float64) for d in inputs])
+    y_a = np.stack([np.asarray(d.a, np.float64) for d in inputs])
+    y_b = np.stack([np.asarray(d.b, np.float64) for d in inputs])
+    _check_finite({"denoised_full": y_full})
+    raw = solve_weights(buffers.color_a, buffers.color_b, y_a, y_b, solver=solver, seed=seed,
+                        max_iterations=max_iterations, tolerance=tolerance)
+    if filter:
+        filt = filter_weights(raw, y_full, y_a, y_b, buffers.albedo, buffers.normal,
+                              radius=radius, sigma_spatial=sigma_spatial,
+                              sigma_color=sigma_color, sigma_albedo=sigma_albedo,
+                              sigma_normal=sigma_normal)
+    else:
+        filt = raw
+    extras = {}
+    for i in range(len(inputs)):
+        extras[f"weights_raw_{i}"] = raw[i].astype(np.float32)
+    for i in range(len(inputs)):
+        extras[f"weights_filtered_{i}"] = filt[i].astype(np.float32)
+    return Denoised(full=combine_with(filt, y_full).astype(np.float32),
+                    a=combine_with(filt, y_a).astype(np.float32),
+                    b=combine_with(filt, y_b).astype(np.float32),
+                    extras=extras)
