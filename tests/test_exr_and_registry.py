@@ -1,0 +1,89 @@
+"""EXR I/O round trips, bad-input errors that name the file or key, and the method registry."""
+
+import numpy as np
+import pytest
+
+from mcbench.buffers import REQUIRED_LAYERS, RenderBuffers
+from mcbench.exr import ExrError, NonFiniteError, read_layers, read_metadata, write_layers
+from methods import UnknownMethodError, available_methods, load_method
+
+
+def _render_layers(shape=(6, 7)):
+    rng = np.random.default_rng(0)
+    layers = {}
+    for name in REQUIRED_LAYERS:
+        layers[name] = rng.random(shape if name == "depth" else shape + (3,)).astype(np.float32)
+    return layers
+
+
+def test_round_trip_preserves_layers_and_metadata(tmp_path):
+    path = tmp_path / "r.exr"
+    layers = _render_layers()
+    write_layers(path, layers, metadata={"spp": 16, "scene": "box"})
+    back = read_layers(path)
+    assert set(back) == set(layers)
+    for name in layers:
+        np.testing.assert_array_equal(back[name], layers[name])
+    assert read_metadata(path) == {"spp": "16", "scene": "box"}
+    assert RenderBuffers.load(path).spp == 16
+    assert not list(tmp_path.glob(".*tmp*")), "atomic write left a temporary file"
+
+
+def test_missing_file_names_the_path(tmp_path):
+    with pytest.raises(ExrError, match="nope.exr.*missing"):
+        read_layers(tmp_path / "nope.exr")
+
+
+def test_corrupt_file_names_the_path(tmp_path):
+    path = tmp_path / "corrupt.exr"
+    write_layers(path, _render_layers())
+    data = path.read_bytes()
+    path.write_bytes(data[: len(data) // 3])  # truncated mid-file
+    with pytest.raises(ExrError, match="corrupt.exr"):
+        RenderBuffers.load(path)
+    path.write_bytes(b"not an exr at all")
+    with pytest.raises(ExrError, match="corrupt.exr"):
+        read_layers(path)
+
+
+def test_nan_render_is_refused_with_count(tmp_path):
+    layers = _render_layers()
+    layers["color_b"][0, 0, 1] = np.nan
+    layers["color_b"][2, 3, :] = np.inf
+    path = tmp_path / "nan.exr"
+    write_layers(path, layers)
+    with pytest.raises(NonFiniteError, match=r"nan.exr.*color_b.*2 pixel"):
+        RenderBuffers.load(path)
+
+
+def test_missing_layer_is_named(tmp_path):
+    layers = _render_layers()
+    del layers["variance_a"]
+    path = tmp_path / "partial.exr"
+    write_layers(path, layers)
+    with pytest.raises(ExrError, match="partial.exr.*variance_a"):
+        RenderBuffers.load(path)
+
+
+def test_mismatched_layer_shapes_are_refused(tmp_path):
+    with pytest.raises(ValueError, match="bad.exr.*'b'"):
+        write_layers(tmp_path / "bad.exr", {"a": np.zeros((4, 4, 3)), "b": np.zeros((4, 5, 3))})
+
+
+def test_registry_finds_methods_and_names_bad_keys():
+    assert {"oidn", "jbf", "ensemble"} <= set(available_methods())
+    assert load_method("oidn", kind="denoiser").KIND == "denoiser"
+    with pytest.raises(UnknownMethodError, match=r"denoisers\[3\].*'oidm'"):
+        load_method("oidm", config_key="denoisers[3]")
+    with pytest.raises(UnknownMethodError, match="combiners.*not a combiner"):
+        load_method("oidn", kind="combiner", config_key="combiners[0]")
+
+
+def test_half_buffer_view_uses_its_own_features():
+    layers = _render_layers()
+    layers["albedo_a"] = np.full_like(layers["albedo"], 0.25)
+    buffers = RenderBuffers(layers=layers, spp=8)
+    a = buffers.image("a")
+    assert np.all(a.albedo == 0.25) and a.spp == 4
+    np.testing.assert_array_equal(a.color, layers["color_a"])
+    np.testing.assert_array_equal(buffers.image("b").albedo, layers["albedo"])  # falls back to full

@@ -1,0 +1,104 @@
+# Helpers shared by the rules: config validation, the method table, input functions.
+
+import sys
+from pathlib import Path
+
+from snakemake.utils import validate
+
+sys.path.insert(0, str(Path(workflow.basedir)))  # methods/, scenes/, mcbench/ from a checkout
+
+from mcbench import BenchError  # noqa: E402
+
+
+validate(config, schema="../schemas/config.schema.yaml")
+
+RESULTS = "results"
+REFERENCE_CHUNK_SPP = None  # set below
+
+
+def _method_table(config):
+    """Ordered {candidate name: {kind, module, params, inputs, label}} from the config.
+
+    Every module name is checked against methods/ here, so a typo stops the run before any
+    job starts, with an error naming the config key.
+    """
+    from methods import load_method
+
+    table = {}
+    for index, entry in enumerate(config["denoisers"]):
+        entry = {"name": entry} if isinstance(entry, str) else dict(entry)
+        key = f"denoisers[{index}]"
+        method_module = load_method(entry.get("method", entry["name"]), kind="denoiser", config_key=key)
+        if entry["name"] in table:
+            raise BenchError(f"{key}: duplicate method name '{entry['name']}'")
+        table[entry["name"]] = {"kind": "denoiser", "module": method_module.__name__.split(".")[-1],
+                                "params": entry.get("params", {}), "inputs": [],
+                                "label": entry.get("label", method_module.LABEL)}
+    for index, entry in enumerate(config.get("combiners", [])):
+        key = f"combiners[{index}]"
+        method_module = load_method(entry["method"], kind="combiner", config_key=key)
+        if entry["name"] in table:
+            raise BenchError(f"{key}: duplicate method name '{entry['name']}'")
+        for position, name in enumerate(entry["inputs"]):
+            if name not in table:
+                raise BenchError(f"{key}.inputs[{position}]: '{name}' is not a denoiser or an "
+                                 f"earlier combiner in config.yaml")
+        table[entry["name"]] = {"kind": "combiner", "module": method_module.__name__.split(".")[-1],
+                                "params": entry.get("params", {}), "inputs": list(entry["inputs"]),
+                                "label": entry.get("label", f"{method_module.LABEL} ({'+'.join(entry['inputs'])})")}
+    return table
+
+
+def _check_scenes(config):
+    from scenes import load_scene
+
+    for index, name in enumerate(config["scenes"]):
+        load_scene(name, config_key=f"scenes[{index}]")
+
+
+METHODS = _method_table(config)
+_check_scenes(config)
+SCENES = list(config["scenes"])
+SPPS = sorted(config["spp"])
+CANDIDATES = list(METHODS)
+LABELS = {name: spec["label"] for name, spec in METHODS.items()}
+LABELS["noisy"] = "Noisy input"
+if config["reference"]["spp"] % config["reference"]["chunks"]:
+    raise BenchError(f"reference.spp ({config['reference']['spp']}) must be a multiple of "
+                     f"reference.chunks ({config['reference']['chunks']})")
+REFERENCE_CHUNK_SPP = config["reference"]["spp"] // config["reference"]["chunks"]
+
+
+wildcard_constraints:
+    scene="[A-Za-z][A-Za-z0-9_]*",
+    method="[A-Za-z][A-Za-z0-9_]*",
+    spp=r"\d+",
+    chunk=r"\d+",
+    metric="relmse|smape|dssim",
+
+
+def render_path(scene, spp):
+    return f"{RESULTS}/renders/{scene}/spp{spp}.exr"
+
+
+def output_path(scene, spp, method):
+    return f"{RESULTS}/outputs/{scene}/spp{spp}/{method}.exr"
+
+
+def method_inputs(wildcards):
+    """Outputs of the methods a combiner takes (empty for a base denoiser)."""
+    spec = METHODS[wildcards.method]
+    return [output_path(wildcards.scene, wildcards.spp, name) for name in spec["inputs"]]
+
+
+def case_outputs(wildcards):
+    return {name: output_path(wildcards.scene, wildcards.spp, name) for name in CANDIDATES}
+
+
+def all_timing_records(wildcards=None):
+    return [f"{RESULTS}/outputs/{scene}/spp{spp}/{method}.json"
+            for scene in SCENES for spp in SPPS for method in CANDIDATES]
+
+
+def all_case_metrics(wildcards=None):
+    return [f"{RESULTS}/metrics/{scene}/spp{spp}.csv" for scene in SCENES for spp in SPPS]

@@ -1,0 +1,54 @@
+# Rendering: noisy full/half buffers per (scene, spp) and chunked high-spp references.
+
+
+rule render_noisy:
+    output:
+        f"{RESULTS}/renders/{{scene}}/spp{{spp}}.exr",
+    params:
+        resolution=config.get("resolution"),
+        variant=config.get("variant", "auto"),
+        seed=config.get("seed", 0),
+    threads: config.get("render_threads", 2)
+    conda:
+        "../envs/mcbench.yaml"
+    log:
+        f"{RESULTS}/logs/render_noisy/{{scene}}_spp{{spp}}.log",
+    benchmark:
+        f"{RESULTS}/benchmarks/render_noisy/{{scene}}_spp{{spp}}.tsv"
+    script:
+        "../scripts/render_noisy.py"
+
+
+rule render_reference_chunk:
+    output:
+        temp(f"{RESULTS}/references/{{scene}}/chunk{{chunk}}.exr"),
+    params:
+        spp=REFERENCE_CHUNK_SPP,
+        resolution=config.get("resolution"),
+        variant=config.get("variant", "auto"),
+        seed=config.get("seed", 0),
+    threads: config.get("render_threads", 2)
+    conda:
+        "../envs/mcbench.yaml"
+    log:
+        f"{RESULTS}/logs/render_reference/{{scene}}_chunk{{chunk}}.log",
+    benchmark:
+        f"{RESULTS}/benchmarks/render_reference/{{scene}}_chunk{{chunk}}.tsv"
+    script:
+        "../scripts/render_reference_chunk.py"
+
+
+rule merge_reference:
+    input:
+        expand(
+            f"{RESULTS}/references/{{{{scene}}}}/chunk{{chunk}}.exr",
+            chunk=range(config["reference"]["chunks"]),
+        ),
+    output:
+        f"{RESULTS}/references/{{scene}}.exr",
+    conda:
+        "../envs/mcbench.yaml"
+    log:
+        f"{RESULTS}/logs/merge_reference/{{scene}}.log",
+    script:
+        "../scripts/merge_reference.py"
