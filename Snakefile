@@ -24,4 +24,6 @@ rule all:
         expand(f"{RESULTS}/tables/ranking_{{metric}}.{{ext}}", metric=config["metrics"], ext=["csv", "md"]),
         f"{RESULTS}/metrics.csv",
         f"{RESULTS}/timings.csv",
+        f"{RESULTS}/tables/scenes.md",
+        f"{RESULTS}/figures/gallery.png",
     default_target: True

@@ -116,7 +116,8 @@ def find_libllvm() -> tuple[str | None, str]:
 def pick_variant(requested: str = "auto") -> str:
     """Set the Mitsuba variant once per process and return its name.
 
-    ``"auto"`` gives ``llvm_ad_rgb`` when a libLLVM >= 19 is usable (``DRJIT_LIBLLVM_PATH`` is
+    ``"auto"`` gives ``cuda_ad_rgb`` when Dr.Jit finds a CUDA GPU (cluster/GPU runs of the
+    paper-scale config), else ``llvm_ad_rgb`` when a libLLVM >= 19 is usable (``DRJIT_LIBLLVM_PATH`` is
     then set to it), else ``scalar_rgb`` with one line on stderr saying why. An explicit
     variant is honoured; a variant Mitsuba lacks raises :class:`BenchError` naming the config
     key ``variant``. Asking for a different variant after one was set raises too.
@@ -129,7 +130,9 @@ def pick_variant(requested: str = "auto") -> str:
             return _active_variant
         raise BenchError(f"config key 'variant': this process already renders with "
                          f"'{_active_variant}' and cannot switch to '{requested}'")
-    if requested == "auto":
+    if requested == "auto" and _cuda_usable():
+        variant = "cuda_ad_rgb"
+    elif requested == "auto":
         library, reason = find_libllvm()
         variant = "scalar_rgb"
         if library is not None:
@@ -155,6 +158,17 @@ def pick_variant(requested: str = "auto") -> str:
     mi.set_variant(variant)
     _active_variant = variant
     return variant
+
+
+def _cuda_usable() -> bool:
+    """True when Mitsuba has ``cuda_ad_rgb`` and Dr.Jit can initialise its CUDA backend."""
+    import drjit as dr
+    import mitsuba as mi
+
+    try:
+        return "cuda_ad_rgb" in mi.variants() and bool(dr.has_backend(dr.JitBackend.CUDA))
+    except Exception:  # no driver, no device: fall through to the CPU variants
+        return False
 
 
 def set_threads(threads: int | None) -> None:
@@ -517,5 +531,6 @@ def merge_reference_chunks(chunks: list[tuple[dict, dict]]) -> tuple[dict[str, n
         "variant": str(first.get("variant", "")), "resolution": str(first.get("resolution", "")),
         "mitsuba": str(first.get("mitsuba", "")), "seed": str(first.get("seed", "")),
         "seeds": ",".join(str(meta.get("seeds", "")) for _, meta in chunks),
+        "seconds": f"{sum(float(meta.get('seconds', 0.0)) for _, meta in chunks):.3f}",
     }
     return out, metadata

@@ -15,7 +15,7 @@ import pandas as pd
 
 from mcbench import BenchError
 from mcbench.buffers import Denoised, RenderBuffers
-from mcbench.exr import check_finite, read_layers, write_layers
+from mcbench.exr import check_finite, read_layers, read_metadata, write_layers
 from mcbench.io import read_json, write_csv, write_json, write_text
 from mcbench.metrics import METRICS
 
@@ -145,7 +145,6 @@ def render_reference_chunk(scene: str, spp: int, chunk: int, output_path: str, *
 
 def merge_reference(chunk_paths: list[str], output_path: str) -> None:
     """Merge reference chunks (spp-weighted, float64) into the reference with its own variance."""
-    from mcbench.exr import read_metadata
     from mcbench.render import merge_reference_chunks
 
     chunks = []
@@ -163,3 +162,57 @@ def _resolution(resolution):
     if isinstance(resolution, int):
         return (resolution, resolution)
     return tuple(int(v) for v in resolution)
+
+
+def _benchmark_cpu_hours(paths: list[Path]) -> float:
+    """Sum of Snakemake benchmark ``cpu_time`` (seconds) over existing TSVs, in hours."""
+    total = 0.0
+    for path in paths:
+        if path.exists():
+            frame = pd.read_csv(path, sep="\t")
+            if "cpu_time" in frame and len(frame):
+                total += float(frame["cpu_time"].iloc[-1])
+    return total / 3600.0
+
+
+def write_scene_table(metrics_csv: str, reference_paths: dict[str, str], reference_spp: dict[str, int],
+                      benchmarks_dir: str, csv_path: str, md_path: str) -> pd.DataFrame:
+    """Scene table with reference noise floors (issue: trustworthy references) and render costs.
+
+    Render costs come from the Snakemake ``benchmark:`` records of the render and reference jobs
+    under ``benchmarks_dir`` (read, not declared as inputs: they are side records of those jobs).
+    """
+    from mcbench.reports import reference_relmse_floor, scene_markdown, scene_rows
+    from scenes import load_scene
+
+    metrics = pd.read_csv(metrics_csv)
+    floors, info, costs = {}, {}, {}
+    bench = Path(benchmarks_dir)
+    for scene, path in reference_paths.items():
+        layers = read_layers(path, ["color", "variance"])
+        check_finite(path, layers)
+        floors[scene] = reference_relmse_floor(layers["color"], layers["variance"])
+        module = load_scene(scene)
+        meta = read_metadata(path)
+        info[scene] = {"category": module.CATEGORY, "description": module.DESCRIPTION,
+                       "resolution": meta.get("resolution", ""), "reference_spp": reference_spp[scene]}
+        costs[scene] = {
+            "render_cpu_hours": _benchmark_cpu_hours(sorted(bench.glob(f"render_noisy/{scene}_spp*.tsv"))),
+            "reference_cpu_hours": _benchmark_cpu_hours(sorted(bench.glob(f"render_reference/{scene}_chunk*.tsv"))),
+        }
+    table = scene_rows(metrics, floors, info, costs)
+    write_csv(csv_path, table, float_format="%.6g")
+    write_text(md_path, scene_markdown(table))
+    return table
+
+
+def write_gallery(reference_paths: dict[str, str], png_path: str) -> None:
+    """Gallery of all references with their names (Fig. 3 of Zheng et al.)."""
+    from mcbench.reports import gallery_figure
+
+    references = {}
+    for scene, path in reference_paths.items():
+        layers = read_layers(path, ["color"])
+        check_finite(path, layers)
+        references[scene] = layers["color"]
+    gallery_figure(references, png_path)

@@ -13,7 +13,6 @@ from mcbench import BenchError  # noqa: E402
 validate(config, schema="../schemas/config.schema.yaml")
 
 RESULTS = "results"
-REFERENCE_CHUNK_SPP = None  # set below
 
 
 def _method_table(config):
@@ -63,10 +62,33 @@ SPPS = sorted(config["spp"])
 CANDIDATES = list(METHODS)
 LABELS = {name: spec["label"] for name, spec in METHODS.items()}
 LABELS["noisy"] = "Noisy input"
-if config["reference"]["spp"] % config["reference"]["chunks"]:
-    raise BenchError(f"reference.spp ({config['reference']['spp']}) must be a multiple of "
-                     f"reference.chunks ({config['reference']['chunks']})")
-REFERENCE_CHUNK_SPP = config["reference"]["spp"] // config["reference"]["chunks"]
+REFERENCE_CHUNKS = config["reference"]["chunks"]
+
+
+def _reference_spp_table(config):
+    """Reference spp per scene: ``reference.scene_spp[scene]`` or ``reference.spp``."""
+    per_scene = config["reference"].get("scene_spp", {})
+    for name in per_scene:
+        if name not in SCENES:
+            raise BenchError(f"reference.scene_spp: '{name}' is not one of the configured scenes")
+    table = {scene: int(per_scene.get(scene, config["reference"]["spp"])) for scene in SCENES}
+    for scene, spp in table.items():
+        key = f"reference.scene_spp.{scene}" if scene in per_scene else "reference.spp"
+        if spp % REFERENCE_CHUNKS or (spp // REFERENCE_CHUNKS) % 2:
+            raise BenchError(f"{key}: {spp} spp must split into {REFERENCE_CHUNKS} chunks (reference.chunks) "
+                             f"of an even spp each")
+    return table
+
+
+REFERENCE_SPP = _reference_spp_table(config)
+
+
+def reference_chunk_spp(wildcards):
+    return REFERENCE_SPP[wildcards.scene] // REFERENCE_CHUNKS
+
+
+def reference_path(scene):
+    return f"{RESULTS}/references/{scene}.exr"
 
 
 wildcard_constraints:

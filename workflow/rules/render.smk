@@ -23,7 +23,7 @@ rule render_reference_chunk:
     output:
         temp(f"{RESULTS}/references/{{scene}}/chunk{{chunk}}.exr"),
     params:
-        spp=REFERENCE_CHUNK_SPP,
+        spp=reference_chunk_spp,
         resolution=config.get("resolution"),
         variant=config.get("variant", "auto"),
         seed=config.get("seed", 0),
@@ -42,7 +42,7 @@ rule merge_reference:
     input:
         expand(
             f"{RESULTS}/references/{{{{scene}}}}/chunk{{chunk}}.exr",
-            chunk=range(config["reference"]["chunks"]),
+            chunk=range(REFERENCE_CHUNKS),
         ),
     output:
         f"{RESULTS}/references/{{scene}}.exr",

@@ -1,0 +1,116 @@
+"""Scene-level reports: the reference noise floor, the scene table and the gallery figure.
+
+Reference noise floor. A reference r̂ rendered with n samples has per-pixel variance of the
+mean Var[r̂] (stored in the reference EXR). Measured against it, any candidate's relMSE carries
+an extra E[(r̂ - r)²] / (r² + 0.01) ≈ Var[r̂] / (r̂² + 0.01) per pixel-channel; its mean over
+the image, :func:`reference_relmse_floor`, is the reference's estimated relMSE. A ranking is
+trustworthy when the best candidate's relMSE at the highest spp is at least 10× above it.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from mcbench.metrics import RELMSE_EPSILON, tonemap
+
+FLOOR_RATIO_REQUIRED = 10.0
+
+
+class ReferenceNoiseWarning(UserWarning):
+    """A reference is too noisy to rank candidates at the highest spp."""
+
+
+def reference_relmse_floor(color: np.ndarray, variance: np.ndarray) -> float:
+    """Estimated relMSE of a reference from its variance of the mean: mean of Var / (r² + 0.01).
+
+    color, variance: (H, W, 3) linear radiance and its per-pixel, per-channel variance.
+    """
+    color = np.asarray(color, dtype=np.float64)
+    variance = np.maximum(np.asarray(variance, dtype=np.float64), 0.0)
+    return float(np.mean(variance / (color * color + RELMSE_EPSILON)))
+
+
+def scene_rows(metrics: pd.DataFrame, floors: dict[str, float], scenes_info: dict[str, dict],
+               costs: dict[str, dict], noisy: str = "noisy") -> pd.DataFrame:
+    """One row per scene: category, description, reference spp and noise floor, the noisy and
+    best candidate's relMSE at the highest spp, their ratio to the floor, and render costs.
+
+    ``costs[scene]`` holds ``render_cpu_hours`` and ``reference_cpu_hours``.
+    """
+    relmse = metrics[metrics["metric"] == "relmse"]
+    rows = []
+    for scene, info in scenes_info.items():
+        cases = relmse[relmse["scene"] == scene]
+        top_spp = int(cases["spp"].max())
+        top = cases[cases["spp"] == top_spp].set_index("candidate")["value"]
+        candidates = top.drop(index=noisy, errors="ignore")
+        best = candidates.idxmin()
+        floor = floors[scene]
+        ratio = float(candidates.min()) / floor if floor > 0 else math.inf
+        rows.append({
+            "scene": scene, "category": info.get("category", ""), "description": info.get("description", ""),
+            "resolution": info.get("resolution", ""), "integrator": info.get("integrator", ""),
+            "reference_spp": info.get("reference_spp", ""), "reference_relmse": floor,
+            "top_spp": top_spp, "noisy_relmse": float(top.get(noisy, np.nan)),
+            "best_candidate": best, "best_relmse": float(candidates.min()), "floor_ratio": ratio,
+            "floor_ok": ratio >= FLOOR_RATIO_REQUIRED,
+            "render_cpu_hours": costs.get(scene, {}).get("render_cpu_hours", np.nan),
+            "reference_cpu_hours": costs.get(scene, {}).get("reference_cpu_hours", np.nan),
+        })
+    table = pd.DataFrame(rows)
+    for row in table[~table["floor_ok"]].itertuples():
+        warnings.warn(f"scene '{row.scene}': reference noise floor (relMSE {row.reference_relmse:.3g}) is only "
+                      f"{row.floor_ratio:.1f}x below the best candidate at {row.top_spp} spp "
+                      f"({row.best_candidate}, {row.best_relmse:.3g}); render the reference with more spp",
+                      ReferenceNoiseWarning, stacklevel=2)
+    return table
+
+
+def scene_markdown(table: pd.DataFrame) -> str:
+    """The scene table as Markdown, saying plainly which references are too noisy."""
+    shown = table[["scene", "category", "reference_spp", "reference_relmse", "noisy_relmse", "best_candidate",
+                   "best_relmse", "floor_ratio", "render_cpu_hours", "reference_cpu_hours", "description"]].copy()
+    shown["floor_ratio"] = [f"{r:.1f}" + ("" if r >= FLOOR_RATIO_REQUIRED else " ⚠ <10×") for r in table["floor_ratio"]]
+    for column in ("reference_relmse", "noisy_relmse", "best_relmse"):
+        shown[column] = [f"{v:.3g}" for v in table[column]]
+    for column in ("render_cpu_hours", "reference_cpu_hours"):
+        shown[column] = [f"{v:.4f}" for v in table[column]]
+    top = int(table["top_spp"].max()) if len(table) else 0
+    bad = table[~table["floor_ok"]]["scene"].tolist()
+    verdict = ("Every reference's noise floor is at least 10× below the best candidate's relMSE."
+               if not bad else f"**Too noisy to rank at the highest spp: {', '.join(bad)}** "
+                               f"(reference floor within 10× of the best candidate's relMSE).")
+    return (f"# Scenes\n\n`reference_relmse` is the reference's own estimated relMSE (mean of Var/(r²+0.01) "
+            f"from its stored variance); `noisy_relmse` and `best_relmse` are measured at {top} spp; "
+            f"`floor_ratio` = best_relmse / reference_relmse. CPU-hours are Snakemake's measured CPU time "
+            f"of the render jobs (all spp levels) and of the reference chunks.\n\n{verdict}\n\n"
+            + shown.to_markdown(index=False) + "\n")
+
+
+def gallery_figure(references: dict[str, np.ndarray], path: str | Path, columns: int = 6) -> None:
+    """A grid of tone-mapped references with their names (like Fig. 3 of Zheng et al.)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names = list(references)
+    columns = max(1, min(columns, len(names)))
+    rows = math.ceil(len(names) / columns)
+    figure, axes = plt.subplots(rows, columns, figsize=(2.2 * columns, 2.4 * rows), squeeze=False)
+    for axis in axes.ravel():
+        axis.axis("off")
+    for axis, name in zip(axes.ravel(), names):
+        axis.imshow(tonemap(references[name]), interpolation="nearest")
+        axis.set_title(name.replace("_", " "), fontsize=8)
+    figure.tight_layout()
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(path).with_name(f".{Path(path).name}.tmp.png")
+    figure.savefig(tmp, dpi=100)
+    plt.close(figure)
+    tmp.replace(path)

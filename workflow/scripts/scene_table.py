@@ -1,0 +1,6 @@
+from mcbench.logs import run_logged
+from mcbench.steps import write_scene_table
+
+run_logged(snakemake.log[0], write_scene_table, snakemake.input.metrics, dict(snakemake.params.references),
+           dict(snakemake.params.reference_spp), snakemake.params.benchmarks, snakemake.output.csv,
+           snakemake.output.md)
