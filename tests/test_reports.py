@@ -1,0 +1,48 @@
+"""Scene report: the reference noise floor against a closed form and a simulation, the
+warning when a reference is too noisy, and the gallery figure."""
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from mcbench.metrics import relmse
+from mcbench.reports import ReferenceNoiseWarning, gallery_figure, reference_relmse_floor, scene_rows
+
+
+def test_floor_closed_form():
+    color = np.full((4, 4, 3), 1.0)
+    variance = np.full((4, 4, 3), 0.0202)
+    assert reference_relmse_floor(color, variance) == pytest.approx(0.0202 / 1.01)
+
+
+def test_floor_predicts_relmse_of_a_noisy_reference_against_the_truth():
+    rng = np.random.default_rng(5)
+    truth = rng.gamma(2.0, 0.5, size=(64, 64, 3))
+    sigma = 0.05 * truth + 0.01
+    reference = truth + rng.normal(size=truth.shape) * sigma
+    predicted = reference_relmse_floor(reference, sigma ** 2)
+    assert relmse(reference, truth) == pytest.approx(predicted, rel=0.1)
+
+
+def _metrics(best_value):
+    rows = [("s", 1024, "noisy", "relmse", 1e-2), ("s", 1024, "a", "relmse", best_value),
+            ("s", 1024, "b", "relmse", 1.0), ("s", 4, "a", "relmse", 1e-6)]
+    return pd.DataFrame(rows, columns=["scene", "spp", "candidate", "metric", "value"])
+
+
+def test_scene_rows_ratio_and_warning():
+    info = {"s": {"category": "diffuse", "description": "d", "reference_spp": 1024}}
+    with pytest.warns(ReferenceNoiseWarning, match="scene 's'.*1024 spp"):
+        table = scene_rows(_metrics(5e-4), {"s": 1e-4}, info, {})
+    row = table.iloc[0]
+    assert row.best_candidate == "a" and row.top_spp == 1024
+    assert row.floor_ratio == pytest.approx(5.0) and not row.floor_ok
+    table = scene_rows(_metrics(2e-3), {"s": 1e-4}, info, {})
+    assert table.iloc[0].floor_ok
+
+
+def test_gallery_writes_png(tmp_path):
+    images = {f"scene_{i}": np.full((8, 8, 3), i / 3) for i in range(4)}
+    path = tmp_path / "gallery.png"
+    gallery_figure(images, path, columns=3)
+    assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
