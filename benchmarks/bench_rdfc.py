@@ -1,0 +1,86 @@
+"""Timing benchmark of RDFC (methods/rdfc.py) on synthetic buffers. A script, not a test:
+
+    python benchmarks/bench_rdfc.py [--sizes 128 256 512] [--repeats 1]
+
+Synthetic data: smooth colour with a piecewise-constant albedo (two regions), Gaussian
+half-buffer noise of known variance, noise-free normal/depth. Every timing is taken after a
+warm-up call (numba compilation) on a 32^2 image. Reported per size: total seconds per image
+(full + both half buffers, i.e. one ``denoise`` call), the stages (feature prefiltering; one
+candidate-filter kernel call, 3 candidates, r = 10; one select-and-blend), and the ratio of
+the total to the 128^2 total next to the pixel-count ratio.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from mcbench.buffers import RenderBuffers  # noqa: E402
+from methods import rdfc  # noqa: E402
+
+
+def synthetic(size: int, seed: int = 0, half_variance: float = 0.02) -> RenderBuffers:
+    rng = np.random.default_rng(seed)
+    yy, xx = np.mgrid[0:size, 0:size] / size
+    region = (np.sin(9 * xx) * np.cos(7 * yy)) > 0
+    truth = np.stack([0.5 + 0.3 * xx, 0.3 + 0.4 * yy, 0.4 + 0.2 * xx * yy], -1)
+    albedo = np.where(region[..., None], [0.8, 0.3, 0.5], [0.2, 0.6, 0.1])
+    truth = truth * albedo
+    layers = {}
+    for s in ("_a", "_b"):
+        layers["color" + s] = (truth + rng.normal(size=truth.shape) * np.sqrt(half_variance)).astype(np.float32)
+        layers["variance" + s] = np.full(truth.shape, half_variance, np.float32)
+    layers["color"] = (layers["color_a"] + layers["color_b"]) / 2
+    layers["variance"] = layers["variance_a"] / 2
+    normal = np.zeros(truth.shape, np.float32)
+    normal[..., 2] = 1
+    for s in ("", "_a", "_b"):
+        layers["albedo" + s] = albedo.astype(np.float32)
+        layers["normal" + s] = normal
+        layers["depth" + s] = np.ones((size, size), np.float32)
+    return RenderBuffers(layers=layers, spp=8)
+
+
+def timed(fn, repeats):
+    best, out = np.inf, None
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        out = fn()
+        best = min(best, time.perf_counter() - t0)
+    return best, out
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--sizes", type=int, nargs="+", default=[128, 256, 512])
+    parser.add_argument("--repeats", type=int, default=1)
+    args = parser.parse_args(argv)
+
+    rdfc.denoise(synthetic(32))   # warm-up (numba compile / cache load)
+    base = None
+    print(f"{'size':>6} {'total_s':>8} {'prefilt_s':>9} {'kernel_s':>8} {'select_s':>8} "
+          f"{'x128_time':>9} {'x128_pixels':>11}")
+    for size in args.sizes:
+        buffers = synthetic(size)
+        t_total, _ = timed(lambda: rdfc.denoise(buffers), args.repeats)
+        t_pre, feats = timed(lambda: rdfc.prefilter_features(buffers), args.repeats)
+        y = np.asarray(buffers.color_a, np.float64)
+        v = np.asarray(buffers.variance_a, np.float64)
+        t_kernel, (filt, deriv, ovar) = timed(lambda: rdfc.candidate_filters(y, v, *feats["a"]),
+                                              args.repeats)
+        errors = rdfc.sure(filt, deriv, y, v).sum(axis=3)
+        t_sel, _ = timed(lambda: rdfc.select_and_blend(filt, ovar, errors, y, v), args.repeats)
+        if base is None:
+            base = (t_total, size * size)
+        print(f"{size:>4}^2 {t_total:8.3f} {t_pre:9.3f} {t_kernel:8.3f} {t_sel:8.3f} "
+              f"{t_total / base[0]:9.2f} {size * size / base[1]:11.2f}", flush=True)
+
+
+if __name__ == "__main__":
+    main()

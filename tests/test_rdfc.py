@@ -1,0 +1,172 @@
+"""RDFC (methods/rdfc.py): denoising gain, identity on noise-free input, SURE unbiasedness,
+analytic derivative vs finite differences, consistency with spp on a render, robustness."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from mcbench.buffers import Denoised, RenderBuffers
+from methods import load_method, rdfc
+
+SMALL_RADIUS = 4   # window radius for the kernel-level tests (fast; the math is radius-independent)
+
+
+def piecewise_smooth(h=64, w=64):
+    """Two smooth colour regions split by a slanted edge; albedo marks the regions."""
+    yy, xx = np.mgrid[0:h, 0:w] / max(h, w)
+    region = xx + 0.3 * yy > 0.6
+    truth = np.where(region[..., None],
+                     np.stack([0.8 * xx + 0.1, 0.3 + 0.4 * yy, 0.5 + 0 * xx], -1),
+                     np.stack([0.2 + 0.1 * yy, 0.6 + 0 * xx, 0.1 + 0.5 * xx], -1))
+    albedo = np.where(region[..., None], [0.8, 0.3, 0.5], [0.2, 0.6, 0.1])
+    return truth, albedo
+
+
+def make_buffers(truth, albedo, half_variance, rng, spp=4):
+    """RenderBuffers with independent Gaussian half buffers of known variance of the mean."""
+    h, w = truth.shape[:2]
+    layers = {}
+    for s in ("_a", "_b"):
+        noise = rng.normal(size=truth.shape) * np.sqrt(half_variance) if half_variance > 0 else 0.0
+        layers["color" + s] = (truth + noise).astype(np.float32)
+        layers["variance" + s] = np.full((h, w, 3), half_variance, np.float32)
+    layers["color"] = ((layers["color_a"] + layers["color_b"]) / 2).astype(np.float32)
+    layers["variance"] = (layers["variance_a"] / 2).astype(np.float32)
+    normal = np.zeros((h, w, 3), np.float32)
+    normal[..., 2] = 1.0
+    for s in ("", "_a", "_b"):
+        layers["albedo" + s] = albedo.astype(np.float32)
+        layers["normal" + s] = normal
+        layers["depth" + s] = np.ones((h, w), np.float32)
+    return RenderBuffers(layers=layers, spp=spp)
+
+
+def test_registered_and_interface():
+    module = load_method("rdfc", "denoiser")
+    assert module.LABEL == "#8 RDFC"
+
+
+def test_denoises_synthetic_image_5x():
+    truth, albedo = piecewise_smooth()
+    buffers = make_buffers(truth, albedo, 0.02, np.random.default_rng(1))
+    out = rdfc.denoise(buffers)
+    assert isinstance(out, Denoised)
+    for image in (out.full, out.a, out.b):
+        assert image.shape == truth.shape and image.dtype == np.float32
+        assert np.all(np.isfinite(image))
+    mse_noisy = np.mean((buffers.color - truth) ** 2)
+    mse_out = np.mean((out.full - truth) ** 2)
+    assert mse_out * 5 < mse_noisy, (mse_out, mse_noisy)
+    for which in ("a", "b"):
+        assert np.mean((getattr(out, which) - truth) ** 2) * 5 < np.mean((getattr(buffers, "color_" + which) - truth) ** 2)
+    np.testing.assert_allclose(out.full, (out.a.astype(np.float64) + out.b) / 2, rtol=1e-6, atol=1e-7)
+
+
+def test_noise_free_input_is_returned():
+    truth, albedo = piecewise_smooth(40, 40)
+    buffers = make_buffers(truth, albedo, 0.0, np.random.default_rng(0))
+    out = rdfc.denoise(buffers)
+    for image in (out.full, out.a, out.b):
+        np.testing.assert_allclose(image, truth, rtol=1e-4, atol=1e-6)
+
+
+@pytest.mark.parametrize("guided", [False, True])
+def test_sure_matches_true_mse(guided):
+    """Mean SURE over pixels and realisations equals the mean true squared error of each
+    candidate, self-guided (pass 1, weights depend on y) and guided by an independent image."""
+    truth, albedo = piecewise_smooth(32, 32)
+    sigma2 = 0.01
+    rng = np.random.default_rng(7)
+    variance = np.full(truth.shape, sigma2)
+    estimates, trues = [], []
+    for _ in range(80):
+        y = truth + rng.normal(size=truth.shape) * np.sqrt(sigma2)
+        kwargs = {}
+        if guided:
+            kwargs = dict(guide=truth + rng.normal(size=truth.shape) * 0.05,
+                          guide_variance=np.full(truth.shape, 0.0025))
+        filtered, deriv, _ = rdfc.candidate_filters(y, variance, [albedo], [np.zeros(truth.shape[:2])],
+                                                    radius=SMALL_RADIUS, **kwargs)
+        estimates.append(rdfc.sure(filtered, deriv, y, variance).mean(axis=(1, 2, 3)))
+        trues.append(((filtered - truth) ** 2).mean(axis=(1, 2, 3)))
+    diffs = np.array(estimates) - np.array(trues)      # (realisations, candidates)
+    true = np.mean(trues, axis=0)
+    assert np.all(true < sigma2 / 5)                    # every candidate denoises
+    mean, se = diffs.mean(axis=0), diffs.std(axis=0, ddof=1) / np.sqrt(len(diffs))
+    assert np.all(se < 0.1 * true)                      # the test has power
+    assert np.all(np.abs(mean) < 4 * se), (mean, se, true)
+
+
+def test_derivative_matches_finite_difference():
+    rng = np.random.default_rng(3)
+    truth, albedo = piecewise_smooth(20, 20)
+    y = truth + rng.normal(size=truth.shape) * 0.1
+    variance = np.full(truth.shape, 0.01)
+    feats, fvars = [albedo, np.ones((20, 20))], [np.zeros((20, 20)), np.zeros((20, 20))]
+    _, deriv, _ = rdfc.candidate_filters(y, variance, feats, fvars, radius=3)
+    step = 1e-6
+    for py, px, c in [(0, 0, 0), (5, 7, 1), (10, 10, 2), (19, 3, 0), (12, 19, 1)]:
+        up, down = y.copy(), y.copy()
+        up[py, px, c] += step
+        down[py, px, c] -= step
+        f_up = rdfc.candidate_filters(up, variance, feats, fvars, radius=3)[0]
+        f_down = rdfc.candidate_filters(down, variance, feats, fvars, radius=3)[0]
+        numeric = (f_up - f_down)[:, py, px, c] / (2 * step)
+        np.testing.assert_allclose(deriv[:, py, px, c], numeric, rtol=1e-4, atol=1e-7)
+
+
+def test_flat_black_and_fireflies_stay_finite():
+    h = w = 32
+    layers = {}
+    for s in ("", "_a", "_b"):
+        layers["color" + s] = np.zeros((h, w, 3), np.float32)
+        layers["variance" + s] = np.zeros((h, w, 3), np.float32)
+        layers["albedo" + s] = np.zeros((h, w, 3), np.float32)
+        layers["normal" + s] = np.zeros((h, w, 3), np.float32)
+        layers["depth" + s] = np.zeros((h, w), np.float32)
+    layers["color_a"][5, 5] = 1e4
+    layers["variance_a"][5, 5] = 1e8
+    layers["color_b"][20, 9, 1] = 1e4            # firefly with (wrongly) zero variance
+    layers["color"] = (layers["color_a"] + layers["color_b"]) / 2
+    out = rdfc.denoise(RenderBuffers(layers=layers, spp=2))
+    for image in (out.full, out.a, out.b):
+        assert image.shape == (h, w, 3) and image.dtype == np.float32
+        assert np.all(np.isfinite(image))
+        assert np.abs(image).max() <= 1e4
+    # beyond the filter window (r = 10) plus the selection filter (r = 3), black stays black;
+    # nearer, the second pass (guided by the other, firefly-free buffer) may spread a firefly
+    assert np.abs(out.full[:, 25:]).max() == 0.0
+
+
+@pytest.fixture(scope="module")
+def cornell_series():
+    from mcbench.render import merge_reference_chunks, render_buffers, render_reference_chunk
+    resolution = (48, 48)
+    reference, _ = merge_reference_chunks([render_reference_chunk("cornell_box", 4096, chunk, resolution=resolution)
+                                           for chunk in range(2)])
+    renders = {spp: RenderBuffers(layers=render_buffers("cornell_box", spp, resolution=resolution)[0], spp=spp)
+               for spp in (16, 64, 256, 1024)}
+    return reference["color"], renders
+
+
+def test_consistency_relmse_decreases_with_spp(cornell_series):
+    from mcbench.metrics import relmse
+    reference, renders = cornell_series
+    errors = {spp: relmse(rdfc.denoise(b).full, reference) for spp, b in renders.items()}
+    noisy = {spp: relmse(b.color, reference) for spp, b in renders.items()}
+    spps = sorted(errors)
+    assert all(errors[a] > errors[b] for a, b in zip(spps, spps[1:])), errors
+    assert errors[16] < noisy[16], (errors, noisy)
+
+
+def test_tiling_is_exact():
+    rng = np.random.default_rng(5)
+    truth, albedo = piecewise_smooth(45, 38)
+    y = truth + rng.normal(size=truth.shape) * 0.1
+    variance = np.full(truth.shape, 0.01)
+    args = (y, variance, [albedo], [np.zeros(truth.shape[:2])])
+    whole = rdfc.candidate_filters(*args, radius=3, tile=None)
+    tiled = rdfc.candidate_filters(*args, radius=3, tile=16)
+    for a, b in zip(whole, tiled):
+        np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-15)
