@@ -17,6 +17,7 @@ include: "workflow/rules/render.smk"
 include: "workflow/rules/methods.smk"
 include: "workflow/rules/metrics.smk"
 include: "workflow/rules/report.smk"
+include: "workflow/rules/training.smk"
 
 
 rule all:

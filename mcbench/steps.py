@@ -216,3 +216,17 @@ def write_gallery(reference_paths: dict[str, str], png_path: str) -> None:
         check_finite(path, layers)
         references[scene] = layers["color"]
     gallery_figure(references, png_path)
+
+
+def write_training_example(seed: int, output_paths: list[str], *, spp_levels, target_spp: int, resolution,
+                           crop_size: int, variant: str = "auto", threads: int | None = None) -> None:
+    """Render training scene ``seed`` (mcbench.training) and write one EXR per crop."""
+    from mcbench.render import set_threads
+    from mcbench.training import training_example
+
+    set_threads(threads)
+    crops = training_example(seed, list(spp_levels), target_spp, _resolution(resolution), crop_size,
+                             len(output_paths), variant=variant)
+    for path, (layers, metadata) in zip(output_paths, crops):
+        check_finite(f"{path} (training scene {seed})", layers)
+        write_layers(path, layers, metadata=metadata)

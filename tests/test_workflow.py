@@ -164,3 +164,28 @@ def test_notebook_runs_on_results(smoke_run, monkeypatch):
         if cell["cell_type"] == "code":
             exec(compile("".join(cell["source"]), "explore.ipynb", "exec"), namespace)
     assert {"metrics", "timings", "joined"} <= set(namespace)
+
+
+def test_training_data_target_writes_reproducible_disjoint_crops(tmp_path):
+    from mcbench.exr import read_layers, read_metadata
+
+    training = {"first_seed": 3, "count": 2, "resolution": [32, 24], "crop": 12, "crops": 2,
+                "spp": [4, 16], "target_spp": 64}
+    workdir = tmp_path / "training"
+    write_config(workdir, training=training)
+    snakemake(workdir, "training_data")
+    paths = sorted((workdir / "results/training").glob("example_*.exr"))
+    assert [p.name for p in paths] == ["example_3_0.exr", "example_3_1.exr", "example_4_0.exr", "example_4_1.exr"]
+    boxes = []
+    for path in paths[:2]:
+        layers = read_layers(path)
+        assert {"color_spp4", "color_a_spp16", "target", "target_variance"} <= set(layers)
+        assert layers["target"].shape == (12, 12, 3)
+        assert all(np.isfinite(v).all() for v in layers.values())
+        boxes.append([int(v) for v in read_metadata(path)["crop_box"].split(",")])
+    (x0, y0, x1, y1), (u0, v0, u1, v1) = boxes
+    assert x1 <= u0 or u1 <= x0 or y1 <= v0 or v1 <= y0, "crops of one image overlap"
+    first = read_layers(paths[0])["color_spp4"]
+    (workdir / "results/training" / paths[0].name).unlink()
+    snakemake(workdir, "training_data")
+    np.testing.assert_array_equal(read_layers(paths[0])["color_spp4"], first)

@@ -96,6 +96,7 @@ wildcard_constraints:
     method="[A-Za-z][A-Za-z0-9_]*",
     spp=r"\d+",
     chunk=r"\d+",
+    seed=r"\d+",
     metric="relmse|smape|dssim",
 
 

@@ -1,0 +1,171 @@
+"""Procedural training scenes (mcbench.training): reproducible, finite, disjoint crops, targets
+much less noisy than the inputs, scenes distinct from each other and from every test scene, and
+render seeds disjoint from the test renders' seeds."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from mcbench import BenchError
+from mcbench.buffers import ALL_LAYERS
+from mcbench.render import decode_seed, pick_variant, render_buffers, render_seed
+from mcbench.training import (TRAINING_BASE_SEED, crop_boxes, decode_training_seed, forget,
+                              main, random_scene, render_dict_buffers, scene_fingerprint,
+                              training_example, training_render_seed,
+                              training_scene_fingerprint)
+from scenes import available_scenes, load_scene
+
+REPO = Path(__file__).resolve().parents[1]
+LEVELS = (4, 16)
+TARGET_SPP = 256
+RESOLUTION = (32, 24)
+CROP = 12
+
+
+@pytest.fixture(scope="module")
+def example_3():
+    return training_example(3, LEVELS, TARGET_SPP, RESOLUTION, CROP, 2)
+
+
+def test_same_seed_same_layers_other_seed_other_layers(example_3):
+    again = training_example(3, LEVELS, TARGET_SPP, RESOLUTION, CROP, 2)
+    for (layers, meta), (layers2, meta2) in zip(example_3, again):
+        assert meta["crop_box"] == meta2["crop_box"] and meta["fingerprint"] == meta2["fingerprint"]
+        assert layers.keys() == layers2.keys()
+        for name in layers:
+            np.testing.assert_array_equal(layers[name], layers2[name], err_msg=name)
+    other = training_example(4, LEVELS, TARGET_SPP, RESOLUTION, CROP, 2)
+    assert other[0][1]["fingerprint"] != example_3[0][1]["fingerprint"]
+    assert not np.array_equal(other[0][0]["target"], example_3[0][0]["target"])
+
+
+def test_layers_names_shapes_finite_and_variances(example_3):
+    expected = {f"{name}_spp{spp}" for name in ALL_LAYERS for spp in LEVELS} | {"target",
+                                                                                 "target_variance"}
+    for layers, meta in example_3:
+        assert set(layers) == expected
+        for name, layer in layers.items():
+            assert layer.dtype == np.float32
+            assert layer.shape[:2] == (CROP, CROP), name
+            assert layer.ndim == (2 if name.startswith("depth") and "variance" not in name
+                                  or name.startswith("depth_variance") else 3), name
+            assert np.all(np.isfinite(layer)), name
+        assert layers["target_variance"].min() >= 0
+        assert layers["target"].min() >= 0
+        # 64x the samples: the target variance is ~1/64 of the 4-spp one (allow heavy tails).
+        assert layers["target_variance"].mean() < 0.1 * layers["variance_spp4"].mean() + 1e-12
+        np.testing.assert_array_equal(layers["color_spp4"],
+                                      (layers["color_a_spp4"] + layers["color_b_spp4"]) / np.float32(2))
+        assert meta["spp_levels"] == "4,16" and meta["target_spp"] == str(TARGET_SPP)
+        assert meta["variant"] and meta["mitsuba"] and meta["seed"] == "3"
+
+
+def test_crops_inside_image_and_disjoint(example_3):
+    width, height = RESOLUTION
+    for seed in range(40):
+        for size, count in ((CROP, 2), (8, 6), (12, 4), (16, 2)):
+            boxes = crop_boxes(seed, width, height, size, count)
+            assert len(boxes) == count
+            for x0, y0, x1, y1 in boxes:
+                assert 0 <= x0 and x1 <= width and 0 <= y0 and y1 <= height
+                assert (x1 - x0, y1 - y0) == (size, size)
+            for i, a in enumerate(boxes):
+                for b in boxes[i + 1:]:
+                    assert a[2] <= b[0] or b[2] <= a[0] or a[3] <= b[1] or b[3] <= a[1], (a, b)
+    assert crop_boxes(5, 128, 128, 64, 2) == crop_boxes(5, 128, 128, 64, 2)
+    boxes = [tuple(int(v) for v in meta["crop_box"].split(",")) for _, meta in example_3]
+    assert boxes == crop_boxes(3, *RESOLUTION, CROP, 2)
+    with pytest.raises(BenchError):
+        crop_boxes(0, 32, 24, 16, 3)
+
+
+def test_dict_renderer_matches_render_buffers():
+    """The scene-dict path reproduces render_buffers bit for bit given the same seeds."""
+    reference, _ = render_buffers("cornell_box", 4, resolution=(8, 6))
+    desc = load_scene("cornell_box").build(8, 6)
+    layers, _ = render_dict_buffers(
+        desc, 4, lambda half, p: render_seed("noisy", spp=4, half=half, pass_index=p),
+        key="test-cornell")
+    forget("test-cornell")
+    for name in ALL_LAYERS:
+        np.testing.assert_array_equal(layers[name], reference[name], err_msg=name)
+
+
+def test_same_seed_same_dict():
+    assert scene_fingerprint(random_scene(11, 16, 12)) == scene_fingerprint(random_scene(11, 16, 12))
+    # the film size is not part of the fingerprint
+    assert scene_fingerprint(random_scene(11, 16, 12)) == scene_fingerprint(random_scene(11, 40, 30))
+
+
+def test_training_fingerprints_distinct_and_not_test_scenes():
+    pick_variant("auto")
+    training = [training_scene_fingerprint(seed) for seed in range(100)]
+    assert len(set(training)) == 100
+    tests = {scene_fingerprint(load_scene(name).build(16, 12)) for name in available_scenes()}
+    assert len(tests) == len(available_scenes())
+    assert not tests & set(training)
+
+
+def test_generator_imports_only_scene_helpers():
+    source = (REPO / "mcbench" / "training.py").read_text()
+    imported = {line.split()[1] for line in source.splitlines()
+                if line.strip().startswith(("from scenes", "import scenes"))}
+    assert imported <= {"scenes", "scenes._geometry"}, imported
+    for line in source.splitlines():
+        if line.strip().startswith("from scenes import"):
+            assert line.split("import", 1)[1].split() == ["perspective_sensor"], line
+
+
+def test_training_seeds_disjoint_from_test_render_seeds():
+    # Every config's global seed stays below the base seed reserved for training.
+    for config in ("config.yaml", "workflow/configs/smoke.yaml", "workflow/configs/paper.yaml"):
+        path = REPO / config
+        if path.exists():
+            seed = int((yaml.safe_load(path.read_text()) or {}).get("seed", 0))
+            assert 0 <= seed < TRAINING_BASE_SEED, f"{config}: seed {seed} collides with training"
+    seeds = set()
+    for scene_seed in (0, 1, 77, 65535):
+        for spp in (2, 4, 16, 64, 256, 4096):
+            for half in (0, 1):
+                for p in (0, 1, 127):
+                    seeds.add(training_render_seed(scene_seed, "noisy", spp, half, p))
+        for p in (0, 15, 4095):
+            seeds.add(training_render_seed(scene_seed, "target", pass_index=p))
+    assert len(seeds) == 4 * (6 * 2 * 3 + 3)                         # injective
+    for s in seeds:
+        assert 0 <= s < 2 ** 32
+        assert decode_seed(s)["base_seed"] == TRAINING_BASE_SEED      # never a test render's
+        decoded = decode_training_seed(s)
+        again = (training_render_seed(decoded["scene_seed"], "noisy", decoded["spp"],
+                                      decoded["half"], decoded["pass_index"])
+                 if decoded["kind"] == "noisy" else
+                 training_render_seed(decoded["scene_seed"], "target",
+                                      pass_index=decoded["pass_index"]))
+        assert again == s
+    # Test renders with any config seed 0..6 (noisy and reference) never decode as training.
+    for base in range(TRAINING_BASE_SEED):
+        for s in (render_seed("noisy", spp=4, half=1, pass_index=3, base_seed=base),
+                  render_seed("reference", chunk=4095, pass_index=65535, base_seed=base)):
+            assert s not in seeds
+            with pytest.raises(ValueError):
+                decode_training_seed(s)
+    with pytest.raises(BenchError):
+        training_render_seed(65536, "target")
+    with pytest.raises(BenchError):
+        training_render_seed(0, "noisy", 12, 0)      # not a power of two
+
+
+def test_cli_writes_one_exr_per_crop(tmp_path):
+    from mcbench.exr import read_layers, read_metadata
+
+    rc = main(["--out", str(tmp_path), "--first-seed", "8", "--count", "1", "--resolution", "24",
+               "16", "--crop", "8", "--crops", "2", "--spp", "4", "--target-spp", "32"])
+    assert rc == 0
+    files = sorted(p.name for p in tmp_path.iterdir())
+    assert files == ["example_8_0.exr", "example_8_1.exr"]
+    layers = read_layers(tmp_path / "example_8_1.exr")
+    assert layers["target"].shape == (8, 8, 3) and "depth_b_spp4" in layers
+    meta = read_metadata(tmp_path / "example_8_1.exr")
+    assert meta["seed"] == "8" and meta["crop"] == "1"
