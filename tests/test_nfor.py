@@ -1,0 +1,148 @@
+"""NFOR (methods/nfor.py) against independent truths: brute-force kernels, synthetic images
+with known noise, noise-free input, spp consistency on renders, degenerate inputs."""
+
+import numpy as np
+import pytest
+
+from mcbench.buffers import RenderBuffers
+from mcbench.metrics import relmse
+from mcbench.nlmeans import nl_means_weight_maps
+from methods import load_method, nfor
+
+
+def synthetic_scene(h=64, w=64):
+    """Noise-free piecewise-smooth colour and the features explaining its edges.
+
+    Two albedo regions (vertical edge at x = w/2) and a disk with a different normal; shading is
+    a smooth gradient in position, colour = albedo * shading.
+    """
+    y, x = np.mgrid[0:h, 0:w].astype(np.float64)
+    albedo = np.where((x < w // 2)[..., None], [0.8, 0.3, 0.2], [0.2, 0.5, 0.9])
+    disk = (x - 0.6 * w) ** 2 + (y - 0.4 * h) ** 2 < (0.22 * w) ** 2
+    normal = np.zeros((h, w, 3))
+    normal[..., 2] = 1.0
+    normal[disk] = [0.6, 0.0, 0.8]
+    shading = 0.3 + 0.7 * (x / w) * (1.0 - 0.5 * y / h)
+    shading = np.where(disk, 1.5 * shading + 0.2, shading)
+    depth = np.where(disk, 2.0, 5.0 + y / h)
+    color = albedo * shading[..., None]
+    return color, albedo, normal, depth
+
+
+def make_buffers(color, albedo, normal, depth, sigma_half, seed=0, spp=16):
+    """RenderBuffers with independent Gaussian noise of std ``sigma_half`` in each half buffer."""
+    rng = np.random.default_rng(seed)
+    f32 = lambda a: np.asarray(a, dtype=np.float32)
+    a = color + sigma_half * rng.standard_normal(color.shape)
+    b = color + sigma_half * rng.standard_normal(color.shape)
+    var_half = np.full(color.shape, sigma_half ** 2)
+    layers = {"color": f32((a + b) / 2), "color_a": f32(a), "color_b": f32(b),
+              "variance": f32(var_half / 2), "variance_a": f32(var_half), "variance_b": f32(var_half)}
+    for s in ("", "_a", "_b"):
+        layers["albedo" + s] = f32(albedo)
+        layers["normal" + s] = f32(normal)
+        layers["depth" + s] = f32(depth)
+    return RenderBuffers(layers=layers, spp=spp)
+
+
+def mse(x, y):
+    return float(np.mean((np.asarray(x, np.float64) - y) ** 2))
+
+
+def test_registry_interface():
+    module = load_method("nfor", kind="denoiser")
+    assert module.KIND == "denoiser" and module.LABEL == "#4 NFOR"
+
+
+def test_weights_match_mcbench_nlmeans():
+    rng = np.random.default_rng(1)
+    guide, variance = rng.random((10, 12, 3)), rng.random((10, 12, 3)) * 0.05
+    weights = nfor._weights_block(guide, variance, 0, 10, 3, 2, 0.7, 1.0, 1e-10, 1e4)
+    for dy, dx, expected, _ in nl_means_weight_maps(guide, variance, 3, 2, 0.7):
+        np.testing.assert_allclose(weights[(dy + 3) * 7 + dx + 3], expected, atol=1e-12)
+    # a row block gives the same weights as the whole image
+    np.testing.assert_allclose(nfor._weights_block(guide, variance, 3, 7, 3, 2, 0.7, 1.0, 1e-10, 1e4),
+                               weights[:, 3:7], atol=0)
+
+
+def test_regression_matches_brute_force_lstsq():
+    rng = np.random.default_rng(2)
+    h, w, r = 9, 11, 2
+    guide, variance = rng.random((h, w, 3)), rng.random((h, w, 3)) * 0.05
+    color, feat = rng.random((h, w, 3)), rng.random((h, w, 2))
+    feat[..., 1] = 0.25  # a constant feature: rank-deficient normal equations
+    got = nfor.collaborative_regression(color, guide, variance, feat, radius=r, patch_radius=1, k=0.7)
+    weights = nfor._weights_block(guide, variance, 0, h, r, 1, 0.7, 1.0, 1e-10, 1e4)
+    num, den = np.zeros((h, w, 3)), np.zeros((h, w))
+    for y in range(h):
+        for x in range(w):
+            qs = [(qy, qx) for qy in range(max(0, y - r), min(h, y + r + 1))
+                  for qx in range(max(0, x - r), min(w, x + r + 1))]
+            wq = np.array([weights[(qy - y + r) * (2 * r + 1) + qx - x + r, y, x] for qy, qx in qs])
+            design = np.array([[1.0, qx - x, qy - y, *(feat[qy, qx] - feat[y, x])] for qy, qx in qs])
+            target = np.array([color[qy, qx] for qy, qx in qs])
+            sw = np.sqrt(wq)[:, None]
+            beta = np.linalg.lstsq(design * sw, target * sw, rcond=None)[0]
+            for (qy, qx), wt, pred in zip(qs, wq, design @ beta):
+                num[qy, qx] += wt * pred
+                den[qy, qx] += wt
+    np.testing.assert_allclose(got, num / den[..., None], atol=1e-10)
+
+
+def test_synthetic_mse_five_times_below_noisy():
+    truth, albedo, normal, depth = synthetic_scene()
+    buffers = make_buffers(truth, albedo, normal, depth, sigma_half=0.1)
+    out = nfor.denoise(buffers)
+    noisy = mse(buffers.color, truth)
+    for name, image, reference_noisy in (("full", out.full, noisy),
+                                         ("a", out.a, mse(buffers.color_a, truth)),
+                                         ("b", out.b, mse(buffers.color_b, truth))):
+        assert image.shape == truth.shape and image.dtype == np.float32
+        assert np.isfinite(image).all()
+        assert mse(image, truth) * 5 < reference_noisy, (name, mse(image, truth), reference_noisy)
+    assert mse(out.full, truth) * 10 < noisy
+    sel = out.extras["selection"]
+    assert sel.shape == truth.shape and (sel >= 0).all() and (sel <= 1).all()
+
+
+def test_noise_free_input_is_returned_unchanged():
+    truth, albedo, normal, depth = synthetic_scene(32, 40)
+    buffers = make_buffers(truth, albedo, normal, depth, sigma_half=0.0)
+    out = nfor.denoise(buffers)
+    for image in (out.full, out.a, out.b):
+        np.testing.assert_allclose(image, truth, rtol=1e-4, atol=1e-7)
+
+
+def test_flat_black_and_fireflies_stay_finite():
+    truth, albedo, normal, depth = synthetic_scene(40, 40)
+    truth[:, :12] = 0.0
+    buffers = make_buffers(truth, albedo, normal, depth, sigma_half=0.05, seed=3)
+    layers = dict(buffers.layers)
+    for name in ("color", "color_a", "color_b", "variance", "variance_a", "variance_b"):
+        layers[name] = layers[name].copy()
+        layers[name][:, :12] = 0.0                      # flat black, zero variance
+    layers["color_a"][20, 30] = 1e4                     # isolated fireflies
+    layers["color_b"][5, 25] = 1e4
+    layers["variance_a"][20, 30] = 1e7
+    layers["color"] = (layers["color_a"] + layers["color_b"]) / 2
+    layers["normal"][:, :12] = layers["normal_a"][:, :12] = layers["normal_b"][:, :12] = 0.0
+    out = nfor.denoise(RenderBuffers(layers=layers, spp=16))
+    for image in (out.full, out.a, out.b):
+        assert np.isfinite(image).all()
+        assert np.abs(image[:, :8]).max() < 1e-6      # black stays black away from the edge
+
+
+def test_consistency_on_renders():
+    """relMSE against a high-spp reference falls as spp grows."""
+    from mcbench.render import merge_reference_chunks, render_buffers, render_reference_chunk
+
+    resolution = (40, 40)
+    reference, _ = merge_reference_chunks(
+        [render_reference_chunk("cornell_box", 4096, c, resolution=resolution) for c in range(2)])
+    errors = []
+    for spp in (16, 64, 256, 1024):
+        layers, _ = render_buffers("cornell_box", spp, resolution=resolution)
+        out = nfor.denoise(RenderBuffers(layers=layers, spp=spp))
+        assert np.isfinite(out.full).all()
+        errors.append(relmse(out.full, reference["color"]))
+    assert all(e1 < e0 for e0, e1 in zip(errors, errors[1:])), errors
