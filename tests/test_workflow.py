@@ -189,3 +189,19 @@ def test_training_data_target_writes_reproducible_disjoint_crops(tmp_path):
     (workdir / "results/training" / paths[0].name).unlink()
     snakemake(workdir, "training_data")
     np.testing.assert_array_equal(read_layers(paths[0])["color_spp4"], first)
+
+
+def test_paper_config_dry_runs_with_all_30_scenes(tmp_path):
+    workdir = tmp_path / "paper"
+    workdir.mkdir()
+    (workdir / "config.yaml").write_text((REPO / "workflow/configs/paper.yaml").read_text())
+    result = snakemake(workdir, "-n")
+    text = result.stdout + result.stderr
+    scenes = yaml.safe_load((REPO / "workflow/configs/paper.yaml").read_text())["scenes"]
+    assert len(scenes) == 30
+    for scene in scenes:
+        assert f"results/references/{scene}.exr" in text
+    counts = {line.split()[0]: int(line.split()[1]) for line in text.splitlines()
+              if len(line.split()) == 2 and line.split()[1].isdigit()}
+    assert counts["render_noisy"] == 30 * 9
+    assert counts["merge_reference"] == 30
