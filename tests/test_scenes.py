@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import yaml
 
-from mcbench.render import render_buffers
+from mcbench.render import pick_variant, render_buffers
 from scenes import available_scenes, load_scene
 
 REPO = Path(__file__).resolve().parents[1]
@@ -28,6 +28,7 @@ def test_scene_declares_contract(scene):
 def test_scene_renders_finite_at_every_spp(scene):
     """All of the paper's spp levels (and 2, one sample per half buffer) at 16x12 pixels."""
     module = load_scene(scene)
+    pick_variant("auto")
     described = repr(module.build(16, 12))
     uses_medium = "'homogeneous'" in described or "'heterogeneous'" in described
     for spp in (2, 4, 8, 16, 32, 64, 128, 256, 512, 1024):
