@@ -53,7 +53,7 @@ from mcbench.buffers import ALL_LAYERS
 
 __all__ = ["RenderError", "pick_variant", "render_seed", "decode_seed", "mitsuba_seed",
            "passes_for", "render_buffers", "render_reference_chunk", "merge_reference_chunks",
-           "moments_to_mean_variance", "MAX_WAVEFRONT"]
+           "moments_to_mean_variance", "buffers_from_moment_sums", "MAX_WAVEFRONT"]
 
 MAX_WAVEFRONT = 2 ** 22          # samples per mi.render call in vectorised variants (W*H*spp_pass)
 MIN_LLVM_MAJOR = 19              # older libLLVM versions crash Dr.Jit 1.5 on this machine
@@ -401,16 +401,37 @@ def render_buffers(scene: str, spp: int, *, resolution: tuple[int, int] | None =
     scene_object, integrator = _load(scene, module, width, height, variant)
     half_spp = spp // 2
     pass_spp = passes_for(half_spp, width, height, variant)
-    layers, seeds, sums = {}, {}, {}
+    seeds, sums = {}, {}
     for half, suffix in ((0, "_a"), (1, "_b")):
         seeds[suffix] = [render_seed("noisy", spp=spp, half=half, pass_index=p, base_seed=seed)
                          for p in range(len(pass_spp))]
         sums[suffix] = _render_sums(scene, scene_object, pass_spp, seeds[suffix], variant,
                                     width, height, spp)
+    layers = buffers_from_moment_sums(sums["_a"], sums["_b"], half_spp)
+    seconds = time.perf_counter() - start
+    metadata = {
+        "scene": scene, "spp": str(spp), "variant": variant, "seed": str(seed),
+        "seeds_a": ",".join(map(str, seeds["_a"])), "seeds_b": ",".join(map(str, seeds["_b"])),
+        "mitsuba": _mitsuba_version(), "seconds": f"{seconds:.3f}",
+        "resolution": f"{width}x{height}", "integrator": _describe(integrator),
+        "passes": str(len(pass_spp)),
+    }
+    return layers, metadata
+
+
+def buffers_from_moment_sums(sums_a: dict, sums_b: dict, half_spp: int) -> dict[str, np.ndarray]:
+    """Float32 layers of :data:`ALL_LAYERS` from the per-half moment sums.
+
+    ``sums_a[q]``/``sums_b[q]`` = (sum of m1·n, sum of m2·n) over the passes of one half buffer
+    of ``half_spp`` samples, for every quantity q of :data:`CHANNELS`. Means and variances of the
+    mean for A, B and the pooled full image (``2 * half_spp`` samples).
+    """
+    sums = {"_a": sums_a, "_b": sums_b}
+    layers = {}
     pooled = {q: (sums["_a"][q][0] + sums["_b"][q][0], sums["_a"][q][1] + sums["_b"][q][1])
               for q in CHANNELS}
     for suffix, n, moments in (("_a", half_spp, sums["_a"]), ("_b", half_spp, sums["_b"]),
-                               ("", spp, pooled)):
+                               ("", 2 * half_spp, pooled)):
         for quantity in CHANNELS:
             if n >= 2:
                 mean, variance = moments_to_mean_variance(*moments[quantity], n)
@@ -432,16 +453,7 @@ def render_buffers(scene: str, spp: int, *, resolution: tuple[int, int] | None =
     # albedo variances stay those of the raw samples).
     for suffix in ("", "_a", "_b"):
         layers["albedo" + suffix] = np.clip(layers["albedo" + suffix], 0.0, 1.0)
-    layers = {name: np.ascontiguousarray(layers[name], dtype=np.float32) for name in ALL_LAYERS}
-    seconds = time.perf_counter() - start
-    metadata = {
-        "scene": scene, "spp": str(spp), "variant": variant, "seed": str(seed),
-        "seeds_a": ",".join(map(str, seeds["_a"])), "seeds_b": ",".join(map(str, seeds["_b"])),
-        "mitsuba": _mitsuba_version(), "seconds": f"{seconds:.3f}",
-        "resolution": f"{width}x{height}", "integrator": _describe(integrator),
-        "passes": str(len(pass_spp)),
-    }
-    return layers, metadata
+    return {name: np.ascontiguousarray(layers[name], dtype=np.float32) for name in ALL_LAYERS}
 
 
 def _describe(integrator: dict) -> str:

@@ -606,7 +606,7 @@ def render_dict_buffers(desc: dict, spp: int, seed_of, *, key: str, variant: str
     in error messages and in render.py's scene cache (drop it with :func:`forget`). Returns
     the float32 layers of :data:`ALL_LAYERS` and the list of seeds used (A then B).
     """
-    from mcbench.render import CHANNELS, moments_to_mean_variance, pick_variant
+    from mcbench.render import buffers_from_moment_sums, pick_variant
 
     variant = pick_variant(variant)
     width, height = _film_size(desc)
@@ -617,27 +617,7 @@ def render_dict_buffers(desc: dict, spp: int, seed_of, *, key: str, variant: str
                                                    lambda p, half=half: seed_of(half, p),
                                                    variant, width, height, spp)
         used += seeds
-    # Same assembly as render_buffers.
-    layers = {}
-    pooled = {q: (sums["_a"][q][0] + sums["_b"][q][0], sums["_a"][q][1] + sums["_b"][q][1])
-              for q in CHANNELS}
-    for suffix, n, moments in (("_a", half_spp, sums["_a"]), ("_b", half_spp, sums["_b"]),
-                               ("", 2 * half_spp, pooled)):
-        for quantity in CHANNELS:
-            if n >= 2:
-                mean, variance = moments_to_mean_variance(*moments[quantity], n)
-            else:
-                mean = moments[quantity][0]
-                diff = sums["_a"][quantity][0] - sums["_b"][quantity][0]
-                variance = 0.5 * diff * diff
-            name_var = ("variance" if quantity == "color" else quantity + "_variance") + suffix
-            layers[quantity + suffix] = _squeeze(mean).astype(np.float32)
-            layers[name_var] = _squeeze(variance).astype(np.float32)
-    for quantity in CHANNELS:
-        layers[quantity] = (layers[quantity + "_a"] + layers[quantity + "_b"]) / np.float32(2)
-    for suffix in ("", "_a", "_b"):
-        layers["albedo" + suffix] = np.clip(layers["albedo" + suffix], 0.0, 1.0)
-    layers = {name: np.ascontiguousarray(layers[name], dtype=np.float32) for name in ALL_LAYERS}
+    layers = buffers_from_moment_sums(sums["_a"], sums["_b"], half_spp)
     return layers, used
 
 
