@@ -642,10 +642,6 @@ def forget(key: str) -> None:
         del render._scene_cache[cache_key]
 
 
-def _squeeze(array: np.ndarray) -> np.ndarray:
-    return array[..., 0] if array.shape[-1] == 1 else array
-
-
 # --------------------------------------------------------------------------- examples
 
 def crop_boxes(seed: int, width: int, height: int, crop_size: int, count: int
