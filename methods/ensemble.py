@@ -124,6 +124,22 @@ def objective(weights, color_a, color_b, denoised_a, denoised_b) -> np.ndarray:
 # iterative solver (Sec. 4.1)
 # ---------------------------------------------------------------------------------------
 @njit(cache=True)
+def _clip_normalise(w):
+    n = w.shape[0]
+    total = 0.0
+    for j in range(n):
+        if w[j] < 0.0:
+            w[j] = 0.0
+        total += w[j]
+    if total > 0.0:
+        for j in range(n):
+            w[j] /= total
+    else:
+        for j in range(n):
+            w[j] = 1.0 / n
+
+
+@njit(cache=True)
 def _iterative_one(ya, yb, xa, xb, w, order, state, max_iterations, tolerance):
     n = ya.shape[0]
     # random start in [0, 1]^N, normalised (Sec. 4.1.2)
@@ -186,17 +202,7 @@ def _iterative_one(ya, yb, xa, xb, w, order, state, max_iterations, tolerance):
             it += 1
         if max_change <= tolerance:
             break
-    total = 0.0
-    for j in range(n):
-        if w[j] < 0.0:
-            w[j] = 0.0
-        total += w[j]
-    if total > 0.0:
-        for j in range(n):
-            w[j] /= total
-    else:
-        for j in range(n):
-            w[j] = 1.0 / n
+    _clip_normalise(w)
     return it
 
 
@@ -309,22 +315,6 @@ def _min_norm_on_support(u, v, idx, m, px, py, wtmp):
         if np.sqrt((ressu - px) ** 2 + (ressv - py) ** 2) > _RES_TOL:
             ok = False
     return ok, norm2
-
-
-@njit(cache=True)
-def _clip_normalise(w):
-    n = w.shape[0]
-    total = 0.0
-    for j in range(n):
-        if w[j] < 0.0:
-            w[j] = 0.0
-        total += w[j]
-    if total > 0.0:
-        for j in range(n):
-            w[j] /= total
-    else:
-        for j in range(n):
-            w[j] = 1.0 / n
 
 
 @njit(cache=True)
