@@ -205,3 +205,35 @@ def test_paper_config_dry_runs_with_all_30_scenes(tmp_path):
               if len(line.split()) == 2 and line.split()[1].isdigit()}
     assert counts["render_noisy"] == 30 * 9
     assert counts["merge_reference"] == 30
+
+
+def test_train_rule_trains_missing_weights_and_the_main_job_never_retrains(tmp_path):
+    import json
+
+    import torch
+
+    weights = tmp_path / "weights"
+    training = {"first_seed": 6, "count": 2, "resolution": [32, 24], "crop": 12, "crops": 2, "spp": [4, 16],
+                "target_spp": 64,
+                "networks": {"wskpn": {"steps": 3, "batch_size": 2, "patch": 12, "validate_every": 3,
+                                       "checkpoint_every": 3}}}
+    workdir = tmp_path / "train"
+    write_config(workdir, training=training, weights_dir=str(weights), denoisers=["oidn", "jbf", "wskpn"])
+    snakemake(workdir, "train_wskpn")
+    blob = torch.load(weights / "wskpn.pt", weights_only=True)
+    assert set(blob) == {"arch", "state_dict"}
+    record = json.loads((weights / "wskpn.json").read_text())
+    assert record["settings"]["steps"] == 3 and record["data"]["training_scenes"] == [6]
+    assert record["data"]["validation_scenes"] == [7]
+    assert (workdir / "results/logs/training/train_wskpn.log").exists()
+    # Newer training data does not make the main job retrain: it uses the weights as they are.
+    for crop in (workdir / "results/training").glob("*.exr"):
+        os.utime(crop, (time.time() + 60, time.time() + 60))
+    text = "".join(snakemake(workdir, "-n").stdout.splitlines(keepends=True))
+    assert "train_network" not in text and "run_method" in text
+    snakemake(workdir, "results/outputs/cornell_box/spp4/wskpn.exr")
+    timing = json.loads((workdir / "results/outputs/cornell_box/spp4/wskpn.json").read_text())
+    assert timing["method"] == "wskpn" and timing["seconds"] > 0
+    # Without weights, the train rule is part of the plan again.
+    (weights / "wskpn.pt").unlink()
+    assert "train_network" in snakemake(workdir, "-n", "results/outputs/cornell_box/spp64/wskpn.exr").stdout

@@ -1,5 +1,6 @@
 # Helpers shared by the rules: config validation, the method table, input functions.
 
+import os
 import sys
 from pathlib import Path
 
@@ -13,6 +14,9 @@ from mcbench import BenchError  # noqa: E402
 validate(config, schema="../schemas/config.schema.yaml")
 
 RESULTS = "results"
+# Learned methods' weights: the committed methods/weights of this checkout unless the config
+# names another folder (relative to the working directory).
+WEIGHTS_DIR = config.get("weights_dir") or str(Path(workflow.basedir) / "methods" / "weights")
 
 
 def _method_table(config):
@@ -22,6 +26,7 @@ def _method_table(config):
     job starts, with an error naming the config key.
     """
     from methods import load_method
+    from mcbench.nn.train import is_learned_method
 
     table = {}
     for index, entry in enumerate(config["denoisers"]):
@@ -30,9 +35,11 @@ def _method_table(config):
         method_module = load_method(entry.get("method", entry["name"]), kind="denoiser", config_key=key)
         if entry["name"] in table:
             raise BenchError(f"{key}: duplicate method name '{entry['name']}'")
-        table[entry["name"]] = {"kind": "denoiser", "module": method_module.__name__.split(".")[-1],
+        module_name = method_module.__name__.split(".")[-1]
+        table[entry["name"]] = {"kind": "denoiser", "module": module_name,
                                 "params": entry.get("params", {}), "inputs": [],
-                                "label": entry.get("label", method_module.LABEL)}
+                                "label": entry.get("label", method_module.LABEL),
+                                "learned": is_learned_method(method_module)}
     for index, entry in enumerate(config.get("combiners", [])):
         key = f"combiners[{index}]"
         method_module = load_method(entry["method"], kind="combiner", config_key=key)
@@ -44,7 +51,8 @@ def _method_table(config):
                                  f"earlier combiner in config.yaml")
         table[entry["name"]] = {"kind": "combiner", "module": method_module.__name__.split(".")[-1],
                                 "params": entry.get("params", {}), "inputs": list(entry["inputs"]),
-                                "label": entry.get("label", f"{method_module.LABEL} ({'+'.join(entry['inputs'])})")}
+                                "label": entry.get("label", f"{method_module.LABEL} ({'+'.join(entry['inputs'])})"),
+                                "learned": False}
     return table
 
 
@@ -114,6 +122,16 @@ def method_inputs(wildcards):
     return [output_path(wildcards.scene, wildcards.spp, name) for name in spec["inputs"]]
 
 
+def weights_file(network):
+    return f"{WEIGHTS_DIR}/{network}.pt"
+
+
+def method_weights(wildcards):
+    """A learned method's weights; ancient(): the main job uses them as they are, never retrains."""
+    spec = METHODS[wildcards.method]
+    return [ancient(weights_file(spec["module"]))] if spec["learned"] else []
+
+
 def case_outputs(wildcards):
     return {name: output_path(wildcards.scene, wildcards.spp, name) for name in CANDIDATES}
 
@@ -125,3 +143,38 @@ def all_timing_records(wildcards=None):
 
 def all_case_metrics(wildcards=None):
     return [f"{RESULTS}/metrics/{scene}/spp{spp}.csv" for scene in SCENES for spp in SPPS]
+
+
+# Training data and learned methods (rules in training.smk).
+
+TRAINING = {
+    "first_seed": 0,
+    "count": 64,
+    "resolution": [128, 128],
+    "crop": 64,
+    "crops": 2,
+    "spp": [4, 16, 64, 256],
+    "target_spp": 4096,
+    **{key: value for key, value in config.get("training", {}).items() if key != "networks"},
+}
+TRAINING_OVERRIDES = config.get("training", {}).get("networks", {})
+TRAINING_SEEDS = range(TRAINING["first_seed"], TRAINING["first_seed"] + TRAINING["count"])
+
+
+def training_crop_files():
+    return [f"{RESULTS}/training/example_{seed}_{k}.exr" for seed in TRAINING_SEEDS for k in range(TRAINING["crops"])]
+
+
+def _learned_networks():
+    """Every learned method module in methods/ (those declaring NETWORK, TRAINING, build_network)."""
+    from methods import available_methods, load_method
+    from mcbench.nn.train import is_learned_method
+
+    modules = {name: load_method(name) for name in available_methods()}
+    return sorted(name for name, module in modules.items() if is_learned_method(module))
+
+
+NETWORKS = _learned_networks()
+for _name in TRAINING_OVERRIDES:
+    if _name not in NETWORKS:
+        raise BenchError(f"training.networks: '{_name}' is not a learned method; learned: {', '.join(NETWORKS)}")

@@ -1,18 +1,9 @@
 # Training crops from the seeded procedural scene generator (mcbench.training), disjoint from
-# the test scenes. Not part of `all`: `snakemake --cores 2 training_data`.
-
-TRAINING = {
-    "first_seed": 0,
-    "count": 64,
-    "resolution": [128, 128],
-    "crop": 64,
-    "crops": 2,
-    "spp": [4, 16, 64, 256],
-    "target_spp": 4096,
-    **config.get("training", {}),
-}
-TRAINING_SEEDS = range(TRAINING["first_seed"], TRAINING["first_seed"] + TRAINING["count"])
-
+# the test scenes, and the learned denoisers trained on them (mcbench.nn). Not part of `all`:
+#   snakemake --cores 2 training_data     # render the crops
+#   snakemake --cores 2 train_kpcn        # train one network when its weights are missing
+# The weights in methods/weights are committed, so the main job never trains; to retrain one,
+# delete its .pt or add `--forcerun train_network` (a killed training resumes from its checkpoint).
 
 rule training_example:
     output:
@@ -33,5 +24,38 @@ rule training_example:
 
 rule training_data:
     input:
-        [f"{RESULTS}/training/example_{seed}_{k}.exr" for seed in TRAINING_SEEDS for k in range(TRAINING["crops"])],
+        training_crop_files(),
     default_target: False
+
+
+rule train_network:
+    input:
+        ancient(training_crop_files()),
+    output:
+        weights=f"{WEIGHTS_DIR}/{{network}}.pt",
+        record=f"{WEIGHTS_DIR}/{{network}}.json",
+    params:
+        overrides=lambda wildcards: TRAINING_OVERRIDES.get(wildcards.network, {}),
+        checkpoint=f"{RESULTS}/training/checkpoints/{{network}}.ckpt",
+        weights_dir=lambda wildcards, output: os.path.dirname(output.weights),
+    wildcard_constraints:
+        network="|".join(NETWORKS),
+    threads: config.get("render_threads", 2)
+    conda:
+        "../envs/mcbench.yaml"
+    log:
+        f"{RESULTS}/logs/training/train_{{network}}.log",
+    benchmark:
+        f"{RESULTS}/benchmarks/training/train_{{network}}.tsv"
+    script:
+        "../scripts/train_network.py"
+
+
+for _network in NETWORKS:
+
+    rule:
+        name:
+            f"train_{_network}"
+        input:
+            weights_file(_network),
+        default_target: False

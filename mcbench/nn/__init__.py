@@ -1,0 +1,20 @@
+"""The training pipeline shared by every learned method (PyTorch, CPU build).
+
+* :mod:`mcbench.nn.features` -- input transforms the papers use (log(1+x) radiance, albedo
+  demodulation, delta-method noise level, normalised depth, feature gradients);
+* :mod:`mcbench.nn.kernels` -- applying per-pixel kernels (KPCN) and weight-shared kernels
+  (Fan et al. 2021);
+* :mod:`mcbench.nn.losses` -- the training losses (L1 in log space, SMAPE, gradient L1);
+* :mod:`mcbench.nn.data` -- training crops from :mod:`mcbench.training` as tensors, the
+  train/validation split, seeded augmented batches;
+* :mod:`mcbench.nn.train` -- the seeded, resumable training loop with checkpoints, the optional
+  adversarial critic, validation, and the weights + record it writes;
+* :mod:`mcbench.nn.inference` -- loading committed weights (``weights_only=True``) and running a
+  network on one image, deterministically.
+
+A learned method is one module in ``methods/`` that declares ``NETWORK`` (architecture
+hyperparameters), ``TRAINING`` (training settings) and ``build_network(**NETWORK)``; the network's
+``forward`` takes a dict of raw buffers (see :data:`mcbench.nn.data.BUFFER_KEYS`) and returns
+linear HDR radiance (N, 3, H, W). Its weights live in ``methods/weights/<name>.pt`` with a record
+``methods/weights/<name>.json``.
+"""

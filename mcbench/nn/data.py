@@ -1,0 +1,186 @@
+"""Training crops (from :mod:`mcbench.training`) as arrays, the train/validation split and
+seeded, augmented batches.
+
+A crop file ``example_<seed>_<k>.exr`` holds, for every noisy level N, the layers
+``<layer>_spp<N>`` of the full buffer and of the half buffers A and B, plus ``target`` (the
+high-spp mean). Every (crop, level, buffer) is one training input: the half buffers are
+independent renders at N/2 spp of the same crop, so one level gives inputs at N and N/2 spp,
+exactly what the denoisers see at test time (full image and halves).
+
+Split: training scenes with ``seed % VALIDATION_MODULUS == VALIDATION_REMAINDER`` (every 8th)
+are the validation set; all crops of a scene go to the same side.
+
+Batches: step ``s`` of a run seeded ``seed`` draws from ``numpy.random.default_rng([seed, s])``
+crop, level, buffer, patch position and one of the 8 rotations/flips of the square patch, so a
+resumed run sees exactly the batches an uninterrupted one would. Normals and depth are not
+rotated with the image (world-space normals bear no fixed relation to screen axes anyway).
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from mcbench import BenchError
+from mcbench.exr import check_finite, read_layers, read_metadata
+
+# Raw buffers a network receives: name -> channels (layout of the (13, H, W) input arrays).
+BUFFER_KEYS = {"color": 3, "variance": 3, "albedo": 3, "normal": 3, "depth": 1}
+BUFFER_CHANNELS = sum(BUFFER_KEYS.values())
+HALVES = ("", "_a", "_b")   # full, A, B
+VALIDATION_MODULUS = 8
+VALIDATION_REMAINDER = 7
+_EXAMPLE = re.compile(r"example_(\d+)_(\d+)\.exr$")
+
+
+def is_validation_seed(seed: int) -> bool:
+    """Whether training scene ``seed`` belongs to the validation set."""
+    return int(seed) % VALIDATION_MODULUS == VALIDATION_REMAINDER
+
+
+@dataclass
+class CropSet:
+    """Crops as arrays.
+
+    inputs  (n, L, 3, 13, H, W) float32 -- per crop, level and buffer (full, A, B) the raw
+            buffers in :data:`BUFFER_KEYS` order
+    targets (n, 3, H, W) float32 -- high-spp reference radiance
+    spp     (L, 3) float -- samples behind each level's full, A and B buffer
+    seeds   (n,) int -- training scene seed of each crop
+    info    render settings of the crops (resolution, target spp, crop size, crops per scene,
+            variant), from their metadata
+    """
+
+    inputs: np.ndarray
+    targets: np.ndarray
+    spp: np.ndarray
+    seeds: np.ndarray
+    info: dict = field(default_factory=dict)
+
+    def __len__(self) -> int:
+        return len(self.targets)
+
+    def subset(self, mask: np.ndarray) -> "CropSet":
+        return CropSet(self.inputs[mask], self.targets[mask], self.spp, self.seeds[mask], self.info)
+
+    def split(self) -> tuple["CropSet", "CropSet"]:
+        """(training, validation) by scene seed."""
+        validation = np.array([is_validation_seed(s) for s in self.seeds], dtype=bool)
+        return self.subset(~validation), self.subset(validation)
+
+    @classmethod
+    def from_layers(cls, crops: list[tuple[dict, dict]], source: str = "<memory>") -> "CropSet":
+        """Build from ``(layers, metadata)`` pairs as :func:`mcbench.training.training_example` returns."""
+        if not crops:
+            raise BenchError(f"{source}: no training crops")
+        levels = None
+        inputs, targets, seeds = [], [], []
+        for layers, meta in crops:
+            crop_levels = [int(v) for v in str(meta["spp_levels"]).split(",")]
+            if levels is None:
+                levels = crop_levels
+            elif crop_levels != levels:
+                raise BenchError(f"{source}: crops have different spp levels ({levels} vs {crop_levels}); "
+                                 f"render the training data with one setting")
+            per_level = []
+            for level in levels:
+                per_buffer = []
+                for half in HALVES:
+                    channels = []
+                    for key in BUFFER_KEYS:
+                        name = f"{key}{half}_spp{level}"
+                        if name not in layers:
+                            raise BenchError(f"{source}: training crop lacks layer '{name}'")
+                        array = layers[name]
+                        channels.append(array[None] if array.ndim == 2 else np.moveaxis(array, 2, 0))
+                    per_buffer.append(np.concatenate(channels, axis=0))
+                per_level.append(np.stack(per_buffer))
+            inputs.append(np.stack(per_level))
+            targets.append(np.moveaxis(layers["target"], 2, 0))
+            seeds.append(int(meta["seed"]))
+        spp = np.array([[level, level / 2, level / 2] for level in levels], dtype=np.float64)
+        first = crops[0][1]
+        info = {"spp_levels": levels, "crop_size": int(targets[0].shape[-1]),
+                "crops_per_scene": max(seeds.count(s) for s in seeds),
+                **{key: str(first[key]) for key in ("resolution", "target_spp", "variant", "mitsuba")
+                   if key in first}}
+        return cls(np.ascontiguousarray(np.stack(inputs), dtype=np.float32),
+                   np.ascontiguousarray(np.stack(targets), dtype=np.float32), spp, np.array(seeds), info)
+
+
+def crop_paths(folder: str | Path) -> list[Path]:
+    """Training crop files in ``folder``, ordered by (seed, crop)."""
+    paths = [p for p in Path(folder).glob("example_*.exr") if _EXAMPLE.search(p.name)]
+    return sorted(paths, key=lambda p: tuple(int(v) for v in _EXAMPLE.search(p.name).groups()))
+
+
+def load_crops(paths: list[str | Path]) -> CropSet:
+    """Read training crop EXRs (errors name the file: missing, corrupt, NaN/Inf, wrong layers)."""
+    if not paths:
+        raise BenchError("no training crops given: run `snakemake --cores 2 training_data` first")
+    crops = []
+    for path in paths:
+        meta = read_metadata(path)
+        if "spp_levels" not in meta or "seed" not in meta:
+            raise BenchError(f"{path}: not a training crop (no spp_levels/seed metadata)")
+        levels = [int(v) for v in meta["spp_levels"].split(",")]
+        names = [f"{key}{half}_spp{level}" for level in levels for half in HALVES for key in BUFFER_KEYS]
+        layers = read_layers(path, names + ["target"])
+        check_finite(path, layers)
+        crops.append((layers, meta))
+    return CropSet.from_layers(crops, source=str(Path(paths[0]).parent))
+
+
+def to_buffers(inputs: np.ndarray | torch.Tensor) -> dict[str, torch.Tensor]:
+    """(B, 13, H, W) input array -> dict of (B, C, H, W) float32 tensors by :data:`BUFFER_KEYS`."""
+    tensor = torch.as_tensor(np.ascontiguousarray(inputs), dtype=torch.float32)
+    out, start = {}, 0
+    for key, channels in BUFFER_KEYS.items():
+        out[key] = tensor[:, start:start + channels]
+        start += channels
+    return out
+
+
+def dihedral(array: np.ndarray, transform: int) -> np.ndarray:
+    """One of the 8 rotations/flips (``transform`` in 0..7) of the last two axes of ``array``."""
+    out = np.rot90(array, k=transform % 4, axes=(-2, -1))
+    if transform >= 4:
+        out = out[..., ::-1]
+    return out
+
+
+def sample_batch(crops: CropSet, seed: int, step: int, batch_size: int, patch: int
+                 ) -> tuple[dict[str, torch.Tensor], torch.Tensor]:
+    """Batch ``step`` of a run seeded ``seed``: raw buffers (dict of (B, C, P, P)) and targets (B, 3, P, P)."""
+    n, levels, buffers, _, height, width = crops.inputs.shape
+    if patch > min(height, width):
+        raise BenchError(f"training patch {patch} is larger than the {width}x{height} crops")
+    rng = np.random.default_rng([int(seed), int(step)])
+    inputs = np.empty((batch_size, BUFFER_CHANNELS, patch, patch), dtype=np.float32)
+    targets = np.empty((batch_size, 3, patch, patch), dtype=np.float32)
+    for i in range(batch_size):
+        c, l, b = rng.integers(n), rng.integers(levels), rng.integers(buffers)
+        y, x = rng.integers(height - patch + 1), rng.integers(width - patch + 1)
+        transform = int(rng.integers(8))
+        inputs[i] = dihedral(crops.inputs[c, l, b, :, y:y + patch, x:x + patch], transform)
+        targets[i] = dihedral(crops.targets[c, :, y:y + patch, x:x + patch], transform)
+    return to_buffers(inputs), torch.from_numpy(targets)
+
+
+def validation_batches(crops: CropSet, batch_size: int = 16, buffer: int = 0):
+    """Every (crop, level) of ``crops`` for one buffer (0 full, 1 A, 2 B), in a fixed order.
+
+    Yields ``(buffers, targets, seeds, spp)`` with the scene seed and spp of each item.
+    """
+    n, levels = crops.inputs.shape[:2]
+    items = [(c, l) for c in range(n) for l in range(levels)]
+    for start in range(0, len(items), batch_size):
+        chunk = items[start:start + batch_size]
+        inputs = np.stack([crops.inputs[c, l, buffer] for c, l in chunk])
+        targets = np.stack([crops.targets[c] for c, _ in chunk])
+        yield (to_buffers(inputs), torch.from_numpy(targets), np.array([crops.seeds[c] for c, _ in chunk]),
+               np.array([crops.spp[l, buffer] for _, l in chunk]))

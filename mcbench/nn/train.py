@@ -1,0 +1,357 @@
+"""One training loop for every learned method: seeded, resumable, checkpointed.
+
+``train_network(name, crop_files, weights_path, record_path, checkpoint_path)`` trains the
+network of ``methods/<name>.py`` on training crops (:mod:`mcbench.nn.data`) and writes
+
+* ``weights_path`` -- ``{"arch": NETWORK, "state_dict": ...}``, loadable with
+  ``torch.load(..., weights_only=True)``;
+* ``record_path`` -- JSON: data, settings, loss, validation loss (overall and per validation
+  scene), loss history, wall time, machine, torch version.
+
+Settings (a method's ``TRAINING`` dict, overridable from ``config.yaml``):
+
+``steps``, ``batch_size``, ``patch`` (square training patches, pixels), ``learning_rate``
+(Adam; cosine-decayed to ``learning_rate * final_lr_fraction`` over the run), ``loss`` (a name
+in :data:`mcbench.nn.losses.LOSSES`), ``grad_clip`` (global gradient-norm clip; HDR fireflies
+make rare huge gradients), ``seed``, ``validate_every``, ``checkpoint_every``, ``threads``, and
+for adversarial training (a method that also defines ``build_critic``): ``adversarial_weight``,
+``gradient_penalty``, ``critic_learning_rate``.
+
+Determinism and resuming: weights are initialised from ``torch.manual_seed(seed)``; batch
+``s`` is drawn from ``default_rng([seed, s])`` and the gradient-penalty mixing from a torch
+generator seeded ``(seed, s)``; the learning rate is a function of the step. A checkpoint holds
+the network, critic and optimiser states and the history, written atomically every
+``checkpoint_every`` steps, so a killed run resumes from its last checkpoint and continues with
+the batches an uninterrupted run would have drawn.
+
+Adversarial training (MCGAN, Xu et al. 2019) uses a WGAN-GP critic (Gulrajani et al. 2017):
+critic loss ``D(fake) - D(real) + λ_GP (‖∇D(mix)‖ - 1)²``, generator loss
+``loss + adversarial_weight · (-D(fake))``; one critic step per generator step (the usual five
+is more than our CPU budget allows).
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import math
+import os
+import platform
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from mcbench import BenchError
+from mcbench.io import read_json, write_json
+from mcbench.nn.data import CropSet, crop_paths, load_crops, sample_batch, validation_batches
+from mcbench.nn.losses import LOSSES
+
+DEFAULT_SETTINGS = {
+    "steps": 4000,
+    "batch_size": 8,
+    "patch": 64,
+    "learning_rate": 5e-4,
+    "final_lr_fraction": 0.05,
+    "loss": "l1_log",
+    "grad_clip": 1.0,
+    "seed": 0,
+    "validate_every": 1000,
+    "checkpoint_every": 250,
+    "threads": 2,
+    "adversarial_weight": 0.0,
+    "gradient_penalty": 10.0,
+    "critic_learning_rate": 1e-4,
+}
+COMMITTED_WEIGHTS = Path(__file__).resolve().parents[2] / "methods" / "weights"
+# Settings that may change between a run and its resumption without changing the result's meaning.
+RESUMABLE_CHANGES = ("threads", "validate_every", "checkpoint_every")
+
+
+def weights_dir() -> Path:
+    """Folder of learned weights: ``$MCBENCH_WEIGHTS_DIR`` if set (the workflow sets it from the
+    config key ``weights_dir``), else the committed ``methods/weights``."""
+    folder = os.environ.get("MCBENCH_WEIGHTS_DIR")
+    return Path(folder) if folder else COMMITTED_WEIGHTS
+
+
+def weights_path(name: str) -> Path:
+    """Weights of learned method ``name``: ``<weights_dir>/<name>.pt``."""
+    return weights_dir() / f"{name}.pt"
+
+
+def record_path(name: str) -> Path:
+    """Training record of learned method ``name``: ``<weights_dir>/<name>.json``."""
+    return weights_dir() / f"{name}.json"
+
+
+def learned_method(name: str):
+    """The module ``methods.<name>``, checked to be a learned method (``NETWORK``, ``TRAINING``,
+    ``build_network``)."""
+    from methods import load_method
+
+    module = load_method(name, kind="denoiser", config_key=f"network '{name}'")
+    for attribute in ("NETWORK", "TRAINING", "build_network"):
+        if not hasattr(module, attribute):
+            raise BenchError(f"methods/{name}.py is not a learned method: it lacks {attribute}")
+    return module
+
+
+def is_learned_method(module) -> bool:
+    return all(hasattr(module, a) for a in ("NETWORK", "TRAINING", "build_network"))
+
+
+def training_settings(module, overrides: dict | None = None) -> dict:
+    """DEFAULT_SETTINGS < the method's TRAINING < ``overrides`` (unknown keys are refused)."""
+    settings = dict(DEFAULT_SETTINGS)
+    for source, values in (("TRAINING", module.TRAINING), ("config", overrides or {})):
+        unknown = sorted(set(values) - set(DEFAULT_SETTINGS))
+        if unknown:
+            raise BenchError(f"{source} of '{module.__name__}': unknown training setting(s) {unknown}; "
+                             f"known: {sorted(DEFAULT_SETTINGS)}")
+        settings.update(values)
+    if settings["loss"] not in LOSSES:
+        raise BenchError(f"'{module.__name__}': unknown loss '{settings['loss']}'; known: {sorted(LOSSES)}")
+    return settings
+
+
+def learning_rate(settings: dict, step: int, key: str = "learning_rate") -> float:
+    """Cosine decay from the initial rate to ``final_lr_fraction`` of it at the last step."""
+    base = settings[key]
+    progress = min(max(step / max(settings["steps"] - 1, 1), 0.0), 1.0)
+    floor = settings["final_lr_fraction"]
+    return base * (floor + (1.0 - floor) * 0.5 * (1.0 + math.cos(math.pi * progress)))
+
+
+def _save_atomic(obj, path: Path) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    os.close(fd)
+    try:
+        torch.save(obj, tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def count_parameters(network: torch.nn.Module) -> int:
+    return int(sum(p.numel() for p in network.parameters()))
+
+
+@torch.no_grad()
+def evaluate(network: torch.nn.Module, crops: CropSet, loss: str, batch_size: int = 16) -> dict:
+    """Mean ``loss`` and relMSE of ``network`` over every (crop, level) full buffer of ``crops``.
+
+    Returns ``{"loss", "relmse", "items", "per_scene": {seed: loss}, "per_spp": {spp: {"loss",
+    "relmse", "noisy_loss", "noisy_relmse"}}}``; every item (one crop at one level) weighs the
+    same; ``noisy_*`` are the errors of the noisy input itself, for comparison.
+    """
+    loss_fn, relmse_fn = LOSSES[loss], LOSSES["relmse"]
+    was_training = network.training
+    network.eval()
+    rows = []
+    for buffers, targets, batch_seeds, batch_spp in validation_batches(crops, batch_size):
+        prediction = network(buffers)
+        for i in range(len(targets)):
+            y, t, x = prediction[i:i + 1], targets[i:i + 1], buffers["color"][i:i + 1]
+            rows.append((int(batch_seeds[i]), int(batch_spp[i]), float(loss_fn(y, t)), float(relmse_fn(y, t)),
+                         float(loss_fn(x, t)), float(relmse_fn(x, t))))
+    network.train(was_training)
+    table = np.array(rows, dtype=np.float64)
+    seeds, spp = table[:, 0].astype(int), table[:, 1].astype(int)
+    per_scene = {str(s): float(table[seeds == s, 2].mean()) for s in np.unique(seeds)}
+    per_spp = {str(n): dict(zip(("loss", "relmse", "noisy_loss", "noisy_relmse"),
+                                (float(v) for v in table[spp == n, 2:].mean(axis=0)))) for n in np.unique(spp)}
+    return {"loss": float(table[:, 2].mean()), "relmse": float(table[:, 3].mean()), "items": int(len(table)),
+            "per_scene": per_scene, "per_spp": per_spp}
+
+
+def _gradient_penalty(critic, real, fake, buffers, generator: torch.Generator) -> torch.Tensor:
+    mix = torch.rand(real.shape[0], 1, 1, 1, generator=generator)
+    mixed = (mix * real + (1 - mix) * fake).requires_grad_(True)
+    scores = critic(mixed, buffers)
+    (gradient,) = torch.autograd.grad(scores.sum(), mixed, create_graph=True)
+    return ((gradient.flatten(1).norm(dim=1) - 1.0) ** 2).mean()
+
+
+def train_network(name: str, crop_files: list[str | Path], weights_out: str | Path, record_out: str | Path,
+                  checkpoint: str | Path, overrides: dict | None = None, log=print) -> dict:
+    """Train ``methods/<name>.py``'s network (resuming from ``checkpoint`` if present); returns the record."""
+    module = learned_method(name)
+    settings = training_settings(module, overrides)
+    torch.set_num_threads(int(settings["threads"]))
+    checkpoint = Path(checkpoint)
+    crops = load_crops(list(crop_files))
+    train_set, validation_set = crops.split()
+    if not len(train_set) or not len(validation_set):
+        raise BenchError(f"training data has {len(train_set)} training and {len(validation_set)} validation "
+                         f"crops; need both (validation scenes: seed % 8 == 7)")
+    log(f"{name}: {len(train_set)} training crops, {len(validation_set)} validation crops, "
+        f"levels {crops.spp[:, 0].astype(int).tolist()}, settings {settings}")
+
+    torch.manual_seed(int(settings["seed"]))
+    network = module.build_network(**module.NETWORK)
+    optimizer = torch.optim.Adam(network.parameters(), lr=settings["learning_rate"])
+    adversarial = settings["adversarial_weight"] > 0
+    critic = critic_optimizer = None
+    if adversarial:
+        if not hasattr(module, "build_critic"):
+            raise BenchError(f"methods/{name}.py sets adversarial_weight but has no build_critic")
+        critic = module.build_critic(**getattr(module, "CRITIC", {}))
+        critic_optimizer = torch.optim.Adam(critic.parameters(), lr=settings["critic_learning_rate"],
+                                            betas=(0.5, 0.9))
+    loss_fn = LOSSES[settings["loss"]]
+    history, start_step, elapsed = [], 0, 0.0
+    if checkpoint.exists():
+        state = torch.load(checkpoint, weights_only=True, map_location="cpu")
+        fixed = {k: v for k, v in settings.items() if k not in RESUMABLE_CHANGES}
+        if state["arch"] != module.NETWORK or {k: v for k, v in state["settings"].items()
+                                               if k not in RESUMABLE_CHANGES} != fixed:
+            raise BenchError(f"{checkpoint}: checkpoint of other architecture or settings; delete it to "
+                             f"train from scratch")
+        network.load_state_dict(state["network"])
+        optimizer.load_state_dict(state["optimizer"])
+        if adversarial:
+            critic.load_state_dict(state["critic"])
+            critic_optimizer.load_state_dict(state["critic_optimizer"])
+        history, start_step, elapsed = list(state["history"]), int(state["step"]), float(state["seconds"])
+        log(f"{name}: resuming from {checkpoint} at step {start_step}")
+
+    def save_checkpoint(step: int, seconds: float) -> None:
+        state = {"arch": module.NETWORK, "settings": settings, "step": step, "seconds": seconds,
+                 "network": network.state_dict(), "optimizer": optimizer.state_dict(), "history": history}
+        if adversarial:
+            state.update(critic=critic.state_dict(), critic_optimizer=critic_optimizer.state_dict())
+        _save_atomic(state, checkpoint)
+
+    network.train()
+    started = time.perf_counter() - elapsed
+    running = []
+    for step in range(start_step, int(settings["steps"])):
+        for group in optimizer.param_groups:
+            group["lr"] = learning_rate(settings, step)
+        buffers, targets = sample_batch(train_set, settings["seed"], step, settings["batch_size"],
+                                        settings["patch"])
+        if adversarial:
+            for group in critic_optimizer.param_groups:
+                group["lr"] = learning_rate(settings, step, "critic_learning_rate")
+            with torch.no_grad():
+                fake = network(buffers)
+            generator = torch.Generator().manual_seed(int(settings["seed"]) * 1_000_003 + step)
+            critic_loss = (critic(fake, buffers).mean() - critic(targets, buffers).mean()
+                           + settings["gradient_penalty"] * _gradient_penalty(critic, targets, fake, buffers,
+                                                                              generator))
+            critic_optimizer.zero_grad()
+            critic_loss.backward()
+            critic_optimizer.step()
+        prediction = network(buffers)
+        loss = loss_fn(prediction, targets)
+        total = loss
+        if adversarial:
+            for p in critic.parameters():
+                p.requires_grad_(False)
+            total = loss - settings["adversarial_weight"] * critic(prediction, buffers).mean()
+            for p in critic.parameters():
+                p.requires_grad_(True)
+        optimizer.zero_grad()
+        total.backward()
+        if settings["grad_clip"]:
+            torch.nn.utils.clip_grad_norm_(network.parameters(), settings["grad_clip"])
+        optimizer.step()
+        loss_value = loss.item()
+        if not math.isfinite(loss_value):
+            raise BenchError(f"{name}: training loss became {loss_value} at step {step}; lower learning_rate")
+        running.append(loss_value)
+        done = step + 1
+        if done % 50 == 0:
+            log(f"{name}: step {done}/{settings['steps']} loss {np.mean(running[-50:]):.5f} "
+                f"lr {learning_rate(settings, step):.2e} {time.perf_counter() - started:.0f} s")
+        if done % settings["validate_every"] == 0 or done == settings["steps"]:
+            result = evaluate(network, validation_set, settings["loss"])
+            history.append({"step": done, "train_loss": float(np.mean(running[-settings["validate_every"]:])),
+                            "validation_loss": result["loss"], "validation_relmse": result["relmse"],
+                            "seconds": time.perf_counter() - started})
+            log(f"{name}: step {done} validation {settings['loss']} {result['loss']:.5f} "
+                f"relMSE {result['relmse']:.5f}")
+        if done % settings["checkpoint_every"] == 0 or done == settings["steps"]:
+            save_checkpoint(done, time.perf_counter() - started)
+    seconds = time.perf_counter() - started
+
+    network.eval()
+    final = evaluate(network, validation_set, settings["loss"])
+    record = {
+        "network": name,
+        "label": module.LABEL,
+        "arch": module.NETWORK,
+        "parameters": count_parameters(network),
+        "settings": settings,
+        "data": {
+            **crops.info,
+            "crops": len(crops), "training_crops": len(train_set), "validation_crops": len(validation_set),
+            "training_scenes": sorted(int(s) for s in set(train_set.seeds.tolist())),
+            "validation_scenes": sorted(int(s) for s in set(validation_set.seeds.tolist())),
+            "folder": str(Path(crop_files[0]).parent),
+            "source": "procedural training scenes of mcbench.training (no test scene)",
+        },
+        "loss": settings["loss"],
+        # one epoch = every (training crop, level, buffer) once, as a full crop
+        "epochs": settings["steps"] * settings["batch_size"] * settings["patch"] ** 2
+                  / (train_set.inputs[:, :, :, 0].size),
+        "validation": final,
+        "history": history,
+        "seconds": seconds,
+        "machine": f"{platform.node()} {platform.machine()} {platform.processor() or ''}".strip(),
+        "cpu_count": os.cpu_count(),
+        "threads": int(settings["threads"]),
+        "torch": torch.__version__,
+        "finished": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+    }
+    _save_atomic({"arch": module.NETWORK, "state_dict": network.state_dict()}, Path(weights_out))
+    write_json(record_out, record)
+    log(f"{name}: done in {seconds:.0f} s, validation {settings['loss']} {final['loss']:.5f}")
+    return record
+
+
+def evaluate_committed(name: str, crops: CropSet) -> dict:
+    """Validation loss of the committed weights of ``name`` on ``crops`` (its validation scenes)."""
+    from mcbench.nn.inference import load_network
+
+    record = read_json(record_path(name))
+    network = load_network(name)
+    _, validation_set = crops.split()
+    return evaluate(network, validation_set if len(validation_set) else crops, record["loss"])
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m mcbench.nn.train",
+                                     description="Train a learned denoiser, or evaluate its committed weights.")
+    parser.add_argument("command", choices=["train", "evaluate"])
+    parser.add_argument("name", help="method module in methods/ (kpcn, mcgan, optix_ae, wskpn, ...)")
+    parser.add_argument("--data", default="results/training", help="folder of training crops")
+    parser.add_argument("--steps", type=int, default=None, help="override TRAINING['steps']")
+    parser.add_argument("--checkpoint", default=None)
+    args = parser.parse_args(argv)
+    try:
+        files = crop_paths(args.data)
+        if args.command == "train":
+            overrides = {"steps": args.steps} if args.steps else {}
+            checkpoint = args.checkpoint or f"results/training/checkpoints/{args.name}.ckpt"
+            train_network(args.name, files, weights_path(args.name), record_path(args.name), checkpoint,
+                          overrides, log=lambda m: print(m, file=sys.stderr, flush=True))
+        else:
+            result = evaluate_committed(args.name, load_crops(files))
+            recorded = read_json(record_path(args.name))["validation"]["loss"]
+            print(f"{args.name}: validation loss {result['loss']:.6f} (recorded {recorded:.6f}, "
+                  f"ratio {result['loss'] / recorded:.4f}), relMSE {result['relmse']:.6f}")
+    except BenchError as exc:
+        print(f"mcbench.nn.train: {exc}", file=sys.stderr)
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

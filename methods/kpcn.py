@@ -1,0 +1,80 @@
+"""KPCN, the kernel-predicting convolutional network (#1 KPCN in Zheng et al. 2021; Bako et al.
+2017), scaled to a 2-core CPU and trained by us on our procedural scenes (no published weights
+can be downloaded here). Weights: ``methods/weights/kpcn.pt``, training record ``kpcn.json``.
+
+Network (Bako et al. Sec. 4): a stack of convolutions with ReLU predicts, per pixel, the k² logits
+of a k×k kernel; the softmax of the logits filters the noisy (demodulated) colour
+(:func:`mcbench.nn.kernels.apply_pixel_kernels`, Eq. 5-6 of Bako et al.), then the albedo is
+multiplied back.
+
+Inputs (31 channels): log(1 + irradiance) (3), its x/y gradients (6), the delta-method noise
+level of log irradiance (1), albedo (3), normal (3), normalised depth (1) and the x/y gradients of
+albedo, normal and depth (14) -- Bako et al.'s diffuse-branch inputs with relative variance
+replaced by the log-space noise level.
+
+Scaling against the published architecture (what and why):
+
+=====================  ===========================  ==================================
+                       Bako et al. 2017             ours
+=====================  ===========================  ==================================
+branches               diffuse + specular networks  one network on albedo-demodulated
+                                                    colour (our renders have no
+                                                    diffuse/specular split)
+conv layers            9 × 5×5, 100 channels        9 × 3×3, 48 channels (last 1×1)
+kernel size            21×21                        13×13
+loss                   L1 (per branch)              L1 on log(1+x) of the final colour
+training data          600 production frames,       our 112 procedural scenes, 2-1024
+                       128 spp, 1.8M patches        spp (full and half buffers)
+=====================  ===========================  ==================================
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import nn
+
+from mcbench.nn.features import guide_features, irradiance_inputs, remodulate, spatial_gradients
+from mcbench.nn.inference import denoise_with_network
+from mcbench.nn.kernels import apply_pixel_kernels
+
+KIND = "denoiser"
+LABEL = "#1 KPCN† (ours, scaled, trained on our scenes)"
+
+NETWORK = {"channels": 48, "layers": 9, "kernel_size": 13}
+TRAINING = {"steps": 6000, "batch_size": 8, "patch": 64, "learning_rate": 5e-4, "loss": "l1_log"}
+INPUT_CHANNELS = 31
+
+
+def network_inputs(buffers: dict[str, torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor]:
+    """(irradiance (N, 3, H, W), network input (N, 31, H, W))."""
+    irradiance, colour_inputs = irradiance_inputs(buffers)
+    guides = guide_features(buffers)
+    inputs = torch.cat([colour_inputs[:, :3], spatial_gradients(colour_inputs[:, :3]), colour_inputs[:, 3:],
+                        guides, spatial_gradients(guides)], dim=1)
+    return irradiance, inputs
+
+
+class KernelPredictingNetwork(nn.Module):
+    def __init__(self, channels: int = 48, layers: int = 9, kernel_size: int = 13):
+        super().__init__()
+        self.kernel_size = kernel_size
+        convs, width = [], INPUT_CHANNELS
+        for _ in range(layers - 1):
+            convs += [nn.Conv2d(width, channels, 3, padding=1), nn.ReLU(inplace=True)]
+            width = channels
+        convs.append(nn.Conv2d(width, kernel_size * kernel_size, 1))
+        self.body = nn.Sequential(*convs)
+
+    def forward(self, buffers: dict[str, torch.Tensor]) -> torch.Tensor:
+        irradiance, inputs = network_inputs(buffers)
+        logits = self.body(inputs)
+        return remodulate(apply_pixel_kernels(irradiance, logits, self.kernel_size), buffers["albedo"])
+
+
+def build_network(**arch) -> nn.Module:
+    return KernelPredictingNetwork(**arch)
+
+
+def denoise(buffers):
+    """KPCN on the full buffer and on each half buffer (three inferences, as Zheng et al. ran it)."""
+    return denoise_with_network("kpcn", buffers)

@@ -1,0 +1,130 @@
+"""Weight-sharing kernel prediction network (Fan et al. 2021,
+``../shared/papers/weight-sharing-kpn-fan2021.md``), an extra learned base denoiser, trained by
+us on our procedural scenes. Weights: ``methods/weights/wskpn.pt``, record ``wskpn.json``.
+
+* **ImportanceNet** (Sec. 4.1): six RepVGG blocks (Ding et al. 2021). In training each block sums
+  a 1×1, a 3×3 and a 5×5 convolution and, where input and output widths agree, the identity,
+  then applies ReLU; :meth:`WeightSharingKPN.fuse` re-parameterises every block into the single
+  5×5 convolution it equals (done once after loading weights, Sec. 4.1 "equivalently
+  transformed"; tested). Our blocks have no batch normalisation (the paper's "variant" is not
+  specified; without BN the conversion is exact). The sixth block is linear (no ReLU): it outputs
+  M importance maps and M fusion logits.
+* **Kernel construction** (Sec. 4.2, Eq. 3-4): kernel of size k_i built from importance map i by
+  unfold + softmax, here computed exactly as a ratio of two box filters
+  (:func:`mcbench.nn.kernels.apply_shared_kernels`); importance bounded to ±10 by a scaled tanh.
+* **Kernel fusion** (Eq. 5): M = 6 kernels of sizes 3, 5, ..., 13 (k_b = 3, k_s = 2, as for the
+  BMFR data), fused by per-pixel softmax weights α_i.
+* Filtering runs on the HDR irradiance (colour / (albedo + ε)); the albedo is multiplied back
+  (Fig. 1).
+* Inputs (Sec. 5.1): tone-mapped colour (irradiance, x/(1+x) then gamma 1/2.2), albedo, normal
+  scaled to [0, 1], depth scaled to [0, 1] -- the paper's 10 channels -- plus one channel the
+  paper lacks: the log-space noise level, because our inputs range over 2-1024 spp rather than
+  the paper's fixed 1 spp (or 64 spp).
+* Loss: SMAPE (Eq. 6); Adam, learning rate 1e-3 as in Sec. 5.3 (cosine-decayed).
+
+Scaling: hidden width 32 for all blocks (the widths of the paper's Fig. 2 did not survive
+extraction); no temporal accumulation (single frames); batch 8 of 64² patches instead of 64 of
+128²; a few thousand steps instead of 500 epochs on a GPU.
+"""
+
+from __future__ import annotations
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from mcbench.nn.features import demodulate, demodulated_variance, log_noise_level, normalized_depth, remodulate
+from mcbench.nn.inference import denoise_with_network
+from mcbench.nn.kernels import apply_shared_kernels, bound_importance
+
+KIND = "denoiser"
+LABEL = "WSKPN† (Fan et al. 2021; ours, trained on our scenes)"
+
+NETWORK = {"channels": 32, "blocks": 6, "kernel_sizes": [3, 5, 7, 9, 11, 13]}
+TRAINING = {"steps": 6000, "batch_size": 8, "patch": 64, "learning_rate": 1e-3, "loss": "smape"}
+INPUT_CHANNELS = 11
+
+
+def network_inputs(buffers: dict[str, torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor]:
+    """(irradiance (N, 3, H, W), ImportanceNet input (N, 11, H, W))."""
+    irradiance = demodulate(buffers["color"], buffers["albedo"])
+    tone_mapped = (irradiance / (1.0 + irradiance)) ** (1.0 / 2.2)
+    noise = log_noise_level(irradiance, demodulated_variance(buffers["variance"], buffers["albedo"]))
+    inputs = torch.cat([tone_mapped, torch.clamp(buffers["albedo"], 0.0, 1.0),
+                        0.5 * (torch.clamp(buffers["normal"], -1.0, 1.0) + 1.0),
+                        normalized_depth(buffers["depth"]), noise], dim=1)
+    return irradiance, inputs
+
+
+class RepVGGBlock(nn.Module):
+    """Σ of 1×1, 3×3, 5×5 convolutions (+ identity when widths agree), then ReLU (optional)."""
+
+    def __init__(self, in_channels: int, out_channels: int, activation: bool = True):
+        super().__init__()
+        self.branches = nn.ModuleList(nn.Conv2d(in_channels, out_channels, k, padding=k // 2) for k in (1, 3, 5))
+        self.identity = in_channels == out_channels
+        self.activation = activation
+        self.fused: nn.Conv2d | None = None
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        if self.fused is not None:
+            y = self.fused(x)
+        else:
+            y = sum(branch(x) for branch in self.branches)
+            if self.identity:
+                y = y + x
+        return F.relu(y) if self.activation else y
+
+    def fused_parameters(self) -> tuple[torch.Tensor, torch.Tensor]:
+        """Weight (out, in, 5, 5) and bias (out,) of the single 5×5 convolution equal to the branches."""
+        one, three, five = self.branches
+        weight = five.weight.detach().clone()
+        weight += F.pad(three.weight.detach(), (1, 1, 1, 1))
+        weight += F.pad(one.weight.detach(), (2, 2, 2, 2))
+        if self.identity:
+            for c in range(weight.shape[0]):
+                weight[c, c, 2, 2] += 1.0
+        bias = one.bias.detach() + three.bias.detach() + five.bias.detach()
+        return weight, bias
+
+    def fuse(self) -> None:
+        weight, bias = self.fused_parameters()
+        conv = nn.Conv2d(weight.shape[1], weight.shape[0], 5, padding=2)
+        conv.weight.data.copy_(weight)
+        conv.bias.data.copy_(bias)
+        self.fused = conv
+
+
+class WeightSharingKPN(nn.Module):
+    def __init__(self, channels: int = 32, blocks: int = 6, kernel_sizes=(3, 5, 7, 9, 11, 13)):
+        super().__init__()
+        self.kernel_sizes = [int(k) for k in kernel_sizes]
+        m = len(self.kernel_sizes)
+        widths = [INPUT_CHANNELS] + [channels] * (blocks - 1)
+        layers = [RepVGGBlock(widths[i], widths[i + 1]) for i in range(blocks - 1)]
+        layers.append(RepVGGBlock(widths[-1], 2 * m, activation=False))
+        self.importance_net = nn.Sequential(*layers)
+
+    def fuse(self) -> None:
+        """Re-parameterise every RepVGG block into one 5×5 convolution (inference form)."""
+        for block in self.importance_net:
+            block.fuse()
+
+    def forward(self, buffers: dict[str, torch.Tensor]) -> torch.Tensor:
+        irradiance, inputs = network_inputs(buffers)
+        out = self.importance_net(inputs)
+        m = len(self.kernel_sizes)
+        importance = bound_importance(out[:, :m])
+        alpha = torch.softmax(out[:, m:], dim=1)                     # Eq. 5 fusion weights
+        fused = sum(alpha[:, i:i + 1] * apply_shared_kernels(irradiance, importance[:, i:i + 1], k)
+                    for i, k in enumerate(self.kernel_sizes))
+        return remodulate(fused, buffers["albedo"])
+
+
+def build_network(**arch) -> nn.Module:
+    return WeightSharingKPN(**arch)
+
+
+def denoise(buffers):
+    """WSKPN on the full buffer and on each half buffer."""
+    return denoise_with_network("wskpn", buffers)

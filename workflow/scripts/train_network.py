@@ -1,0 +1,11 @@
+import os
+
+os.environ["MCBENCH_WEIGHTS_DIR"] = os.path.abspath(snakemake.params.weights_dir)
+
+from mcbench.logs import run_logged  # noqa: E402
+from mcbench.nn.train import train_network  # noqa: E402
+
+run_logged(snakemake.log[0], train_network, snakemake.wildcards.network, list(snakemake.input),
+           snakemake.output.weights, snakemake.output.record, snakemake.params.checkpoint,
+           {**snakemake.params.overrides, "threads": snakemake.threads},
+           log=lambda message: print(message, flush=True))
