@@ -35,7 +35,7 @@ KIND = "denoiser"
 LABEL = "OptiX† (our autoencoder)"
 
 NETWORK = {"widths": [32, 48, 64, 80], "bottleneck": 96}
-TRAINING = {"steps": 6000, "batch_size": 8, "patch": 64, "learning_rate": 5e-4, "loss": "l1_log_gradient"}
+TRAINING = {"steps": 10000, "batch_size": 8, "patch": 64, "learning_rate": 5e-4, "loss": "l1_log_gradient"}
 INPUT_CHANNELS = 11
 
 

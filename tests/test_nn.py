@@ -95,7 +95,12 @@ def test_shared_kernels_extreme_importance_finite_and_convex():
 def test_demodulation_round_trip_and_log_inverse():
     color = torch.rand(2, 3, 4, 5) * 10
     albedo = torch.rand(2, 3, 4, 5)
+    albedo[0, :, 0, 0] = 0.0                        # environment: no albedo
+    albedo[0, :, 1, 1] = torch.tensor([0.5, 0.0, 0.0])
     torch.testing.assert_close(features.remodulate(features.demodulate(color, albedo), albedo), color)
+    irradiance = features.demodulate(color, albedo)
+    torch.testing.assert_close(irradiance[0, :, 0, 0], color[0, :, 0, 0])          # not demodulated
+    torch.testing.assert_close(irradiance[0, :, 1, 1], color[0, :, 1, 1] / torch.tensor([0.50316, 0.00316, 0.00316]))
     torch.testing.assert_close(features.exp_radiance(features.log_radiance(color)), color, rtol=1e-5, atol=1e-5)
     assert float(features.log_radiance(torch.tensor(-3.0))) == 0.0
 

@@ -7,7 +7,11 @@ variance of the pixel mean (:mod:`mcbench.buffers`).
   (Bako et al. 2017, Sec. 4.1) and of Chaitanya et al. 2017 (Sec. 5.1).
 * :func:`demodulate` / :func:`remodulate` -- divide by ``albedo + ALBEDO_EPS`` before filtering and
   multiply back after (KPCN's diffuse branch, Fan et al. 2021 Sec. 4.2, Chaitanya et al.); our
-  renders have no diffuse/specular split, so the whole colour is demodulated.
+  renders have no diffuse/specular split, so the whole colour is demodulated. Pixels without a
+  meaningful albedo (every channel below ``NO_ALBEDO`` = 0.01: the environment, emitters, delta
+  BSDFs, black surfaces -- a quarter of our training pixels) are not demodulated (factor 1, our
+  choice): dividing them by ε would scale their colour by up to 316 and any kernel weight a
+  neighbour puts on them would leak that much light into the neighbour.
 * :func:`log_noise_level` -- the per-pixel standard deviation of ``log(1 + x)`` by the delta
   method, ``sqrt(Var x) / (1 + x)``, averaged over RGB: the noise-level input of every network.
 * :func:`normalized_depth` -- depth divided by the image's largest depth, in [0, 1] (Fan et al.
@@ -21,6 +25,8 @@ import torch
 
 # KPCN's demodulation epsilon (Bako et al. 2017): irradiance = colour / (albedo + 0.00316).
 ALBEDO_EPS = 0.00316
+# Below this albedo in every channel a pixel is not demodulated (see the module docstring).
+NO_ALBEDO = 0.01
 
 
 def log_radiance(color: torch.Tensor) -> torch.Tensor:
@@ -33,19 +39,27 @@ def exp_radiance(log_color: torch.Tensor) -> torch.Tensor:
     return torch.expm1(torch.clamp(log_color, min=0.0, max=30.0))
 
 
+def demodulation_factor(albedo: torch.Tensor) -> torch.Tensor:
+    """``albedo + ALBEDO_EPS`` (albedo clipped to [0, 1]), or 1 where every channel of the albedo
+    is below ``NO_ALBEDO``; (N, 3, H, W), always ≥ ALBEDO_EPS."""
+    albedo = torch.clamp(albedo, 0.0, 1.0)
+    has_albedo = albedo.amax(dim=1, keepdim=True) >= NO_ALBEDO
+    return torch.where(has_albedo, albedo + ALBEDO_EPS, torch.ones_like(albedo))
+
+
 def demodulate(color: torch.Tensor, albedo: torch.Tensor) -> torch.Tensor:
-    """Irradiance ``color / (albedo + ALBEDO_EPS)`` (N, 3, H, W); albedo clipped to [0, 1]."""
-    return torch.clamp(color, min=0.0) / (torch.clamp(albedo, 0.0, 1.0) + ALBEDO_EPS)
+    """Irradiance ``color / demodulation_factor(albedo)`` (N, 3, H, W), colour clamped to ≥ 0."""
+    return torch.clamp(color, min=0.0) / demodulation_factor(albedo)
 
 
 def remodulate(irradiance: torch.Tensor, albedo: torch.Tensor) -> torch.Tensor:
-    """Inverse of :func:`demodulate`: ``irradiance * (albedo + ALBEDO_EPS)``."""
-    return irradiance * (torch.clamp(albedo, 0.0, 1.0) + ALBEDO_EPS)
+    """Inverse of :func:`demodulate`: ``irradiance * demodulation_factor(albedo)``."""
+    return irradiance * demodulation_factor(albedo)
 
 
 def demodulated_variance(variance: torch.Tensor, albedo: torch.Tensor) -> torch.Tensor:
-    """Variance of the irradiance: ``Var x / (albedo + ALBEDO_EPS)²``."""
-    return torch.clamp(variance, min=0.0) / (torch.clamp(albedo, 0.0, 1.0) + ALBEDO_EPS) ** 2
+    """Variance of the irradiance: ``Var x / demodulation_factor(albedo)²``."""
+    return torch.clamp(variance, min=0.0) / demodulation_factor(albedo) ** 2
 
 
 def log_noise_level(value: torch.Tensor, variance: torch.Tensor) -> torch.Tensor:
