@@ -38,7 +38,7 @@ LABEL = "#3 MCGAN† (ours, scaled, trained on our scenes)"
 
 NETWORK = {"channels": 32, "blocks": 6, "condition_channels": 32}
 CRITIC = {"channels": 32}
-TRAINING = {"steps": 6000, "batch_size": 8, "patch": 64, "learning_rate": 5e-4, "loss": "l1_log",
+TRAINING = {"steps": 5000, "batch_size": 8, "patch": 64, "learning_rate": 5e-4, "loss": "l1_log",
             "adversarial_weight": 0.005, "gradient_penalty": 10.0, "critic_learning_rate": 1e-4}
 
 

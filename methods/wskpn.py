@@ -3,12 +3,14 @@
 us on our procedural scenes. Weights: ``methods/weights/wskpn.pt``, record ``wskpn.json``.
 
 * **ImportanceNet** (Sec. 4.1): six RepVGG blocks (Ding et al. 2021). In training each block sums
-  a 1×1, a 3×3 and a 5×5 convolution and, where input and output widths agree, the identity,
-  then applies ReLU; :meth:`WeightSharingKPN.fuse` re-parameterises every block into the single
-  5×5 convolution it equals (done once after loading weights, Sec. 4.1 "equivalently
-  transformed"; tested). Our blocks have no batch normalisation (the paper's "variant" is not
-  specified; without BN the conversion is exact). The sixth block is linear (no ReLU): it outputs
-  M importance maps and M fusion logits.
+  a 1×1, a 3×3 and a 5×5 convolution, each followed by batch normalisation, and, where input and
+  output widths agree, a batch-normalised identity, then applies ReLU;
+  :meth:`WeightSharingKPN.fuse` folds the batch norms and re-parameterises every block into the
+  single 5×5 convolution it equals (done once after loading weights, Sec. 4.1 "equivalently
+  transformed"; tested). The batch norms are RepVGG's own and are needed: a first version without
+  them summed four branches per block, its activations grew ~3× per block and after 1000 steps the
+  fusion softmax and the importance tanh saturated with zero gradients. The sixth block is linear
+  (no ReLU): it outputs M importance maps and M fusion logits.
 * **Kernel construction** (Sec. 4.2, Eq. 3-4): kernel of size k_i built from importance map i by
   unfold + softmax, here computed exactly as a ratio of two box filters
   (:func:`mcbench.nn.kernels.apply_shared_kernels`); importance bounded to ±10 by a scaled tanh.
@@ -61,12 +63,19 @@ def network_inputs(buffers: dict[str, torch.Tensor]) -> tuple[torch.Tensor, torc
 
 
 class RepVGGBlock(nn.Module):
-    """Σ of 1×1, 3×3, 5×5 convolutions (+ identity when widths agree), then ReLU (optional)."""
+    """RepVGG block (Ding et al. 2021): Σ of 1×1, 3×3 and 5×5 convolution + batch-norm branches and,
+    when widths agree, a batch-norm identity branch; then ReLU (optional).
+
+    :meth:`fuse` folds the (eval-mode) batch norms into the convolutions and sums the branches into
+    one 5×5 convolution with bias, exactly.
+    """
 
     def __init__(self, in_channels: int, out_channels: int, activation: bool = True):
         super().__init__()
-        self.branches = nn.ModuleList(nn.Conv2d(in_channels, out_channels, k, padding=k // 2) for k in (1, 3, 5))
-        self.identity = in_channels == out_channels
+        self.branches = nn.ModuleList(
+            nn.Sequential(nn.Conv2d(in_channels, out_channels, k, padding=k // 2, bias=False),
+                          nn.BatchNorm2d(out_channels)) for k in (1, 3, 5))
+        self.identity = nn.BatchNorm2d(out_channels) if in_channels == out_channels else None
         self.activation = activation
         self.fused: nn.Conv2d | None = None
 
@@ -75,20 +84,34 @@ class RepVGGBlock(nn.Module):
             y = self.fused(x)
         else:
             y = sum(branch(x) for branch in self.branches)
-            if self.identity:
-                y = y + x
+            if self.identity is not None:
+                y = y + self.identity(x)
         return F.relu(y) if self.activation else y
 
+    @staticmethod
+    def _fold(weight: torch.Tensor, norm: nn.BatchNorm2d) -> tuple[torch.Tensor, torch.Tensor]:
+        """Eval-mode ``norm(conv(x))`` as one convolution: scale the weight, shift the bias."""
+        scale = norm.weight.detach() / torch.sqrt(norm.running_var + norm.eps)
+        return weight * scale.view(-1, 1, 1, 1), norm.bias.detach() - norm.running_mean * scale
+
     def fused_parameters(self) -> tuple[torch.Tensor, torch.Tensor]:
-        """Weight (out, in, 5, 5) and bias (out,) of the single 5×5 convolution equal to the branches."""
-        one, three, five = self.branches
-        weight = five.weight.detach().clone()
-        weight += F.pad(three.weight.detach(), (1, 1, 1, 1))
-        weight += F.pad(one.weight.detach(), (2, 2, 2, 2))
-        if self.identity:
-            for c in range(weight.shape[0]):
-                weight[c, c, 2, 2] += 1.0
-        bias = one.bias.detach() + three.bias.detach() + five.bias.detach()
+        """Weight (out, in, 5, 5) and bias (out,) of the single 5×5 convolution equal to the
+        eval-mode block before its activation."""
+        out_channels = self.branches[0][1].num_features
+        in_channels = self.branches[0][0].in_channels
+        weight = torch.zeros(out_channels, in_channels, 5, 5)
+        bias = torch.zeros(out_channels)
+        for conv, norm in self.branches:
+            pad = (5 - conv.kernel_size[0]) // 2
+            w, b = self._fold(F.pad(conv.weight.detach(), (pad, pad, pad, pad)), norm)
+            weight += w
+            bias += b
+        if self.identity is not None:
+            eye = torch.zeros(out_channels, in_channels, 5, 5)
+            eye[torch.arange(out_channels), torch.arange(out_channels), 2, 2] = 1.0
+            w, b = self._fold(eye, self.identity)
+            weight += w
+            bias += b
         return weight, bias
 
     def fuse(self) -> None:
