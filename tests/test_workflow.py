@@ -51,11 +51,11 @@ def test_tables_exist_and_ensemble_beats_noisy(smoke_run):
     workdir, config = smoke_run
     for metric in ("relmse", "smape", "dssim"):
         table = pd.read_csv(workdir / f"results/tables/ranking_{metric}.csv")
-        assert set(table["candidate"]) == {"noisy", "oidn", "jbf", "ensemble", "ensemble_exact"}
+        assert set(table["candidate"]) == {"noisy", "oidn", "jbf", "kpcn", "ensemble", "ensemble_exact"}
         assert list(table.columns) == ["candidate", "4", "64", "Avg."]
         assert (workdir / f"results/tables/ranking_{metric}.md").read_text().startswith("# Ranking")
     metrics = pd.read_csv(workdir / "results/metrics.csv")
-    assert len(metrics) == 3 * 2 * 5 * 3  # scenes × spp × (candidates + noisy) × metrics
+    assert len(metrics) == 3 * 2 * 6 * 3  # scenes × spp × (candidates + noisy) × metrics
     assert np.isfinite(metrics["value"]).all()
     relmse = metrics[metrics.metric == "relmse"].pivot_table(index=["scene", "spp"], columns="candidate", values="value")
     # At 32x32 the denoisers' blur of the Cornell box's light edge can cost more relMSE than
@@ -67,7 +67,7 @@ def test_tables_exist_and_ensemble_beats_noisy(smoke_run):
     # the ensemble is never worse than its worst base denoiser, case by case
     assert (relmse["ensemble"] <= relmse[["oidn", "jbf"]].max(axis=1)).all(), relmse
     timings = pd.read_csv(workdir / "results/timings.csv")
-    assert set(timings["method"]) == {"oidn", "jbf", "ensemble", "ensemble_exact"}
+    assert set(timings["method"]) == {"oidn", "jbf", "kpcn", "ensemble", "ensemble_exact"}
     assert (timings["seconds"] > 0).all()
     assert list((workdir / "results/benchmarks/methods").glob("*.tsv"))
 
