@@ -234,6 +234,17 @@ def test_train_rule_trains_missing_weights_and_the_main_job_never_retrains(tmp_p
     snakemake(workdir, "results/outputs/cornell_box/spp4/wskpn.exr")
     timing = json.loads((workdir / "results/outputs/cornell_box/spp4/wskpn.json").read_text())
     assert timing["method"] == "wskpn" and timing["seconds"] > 0
+    # Nor does a checkout without training data (a clean clone): no crops, no training planned;
+    # and an explicit train_<name> with the weights present has nothing to do.
+    shutil.rmtree(workdir / "results/training")
+    text = snakemake(workdir, "-n").stdout
+    assert "training_example" not in text and "train_network" not in text and "run_method" in text
+    assert "train_network" not in snakemake(workdir, "-n", "train_wskpn").stdout
+    # New weights rerun the method (their digest is a parameter), still without training.
+    torch.save(blob | {"state_dict": {k: v + 0.01 if v.is_floating_point() else v
+                                      for k, v in blob["state_dict"].items()}}, weights / "wskpn.pt")
+    text = snakemake(workdir, "-n", "results/outputs/cornell_box/spp4/wskpn.exr").stdout
+    assert "run_method" in text and "train_network" not in text
     # Without weights, the train rule is part of the plan again.
     (weights / "wskpn.pt").unlink()
     assert "train_network" in snakemake(workdir, "-n", "results/outputs/cornell_box/spp64/wskpn.exr").stdout

@@ -1,5 +1,6 @@
 # Helpers shared by the rules: config validation, the method table, input functions.
 
+import functools
 import os
 import sys
 from pathlib import Path
@@ -127,9 +128,45 @@ def weights_file(network):
 
 
 def method_weights(wildcards):
-    """A learned method's weights; ancient(): the main job uses them as they are, never retrains."""
+    """A learned method's weights as an input only while they are missing (then the train rule
+    makes them). Present weights are not an input, so nothing of the training part of the DAG
+    (crops, train rule) is ever planned by the main job, even on a clean checkout without
+    training data; a change of the weights reruns the method through `weights_digest`."""
     spec = METHODS[wildcards.method]
-    return [ancient(weights_file(spec["module"]))] if spec["learned"] else []
+    return missing_weights(spec["module"]) if spec["learned"] else []
+
+
+def weights_digest(wildcards):
+    """SHA-256 of a learned method's present weights ("" otherwise): a params entry, so the
+    provenance trigger reruns the method when its weights change."""
+    spec = METHODS[wildcards.method]
+    path = Path(weights_file(spec["module"]))
+    if not spec["learned"] or not path.exists():
+        return ""
+    return _file_digest(str(path), path.stat().st_mtime_ns)
+
+
+@functools.lru_cache(maxsize=None)
+def _file_digest(path, mtime_ns):
+    """SHA-256 of a file, cached per (path, modification time) while the DAG is built."""
+    import hashlib
+
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+def missing_weights(network):
+    """The weights file of ``network`` if it is missing, else nothing: `train_<name>` trains
+    only what is missing (the train rule's provenance triggers never retrain present weights)."""
+    path = weights_file(network)
+    return [] if Path(path).exists() else [path]
+
+
+def train_network_inputs(wildcards):
+    """Training crops of a network whose weights are missing; none once the weights exist, so
+    an explicit `train_<name>` with committed weights has nothing to do."""
+    if Path(weights_file(wildcards.network)).exists():
+        return []
+    return ancient(training_crop_files())
 
 
 def case_outputs(wildcards):

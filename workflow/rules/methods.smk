@@ -15,6 +15,7 @@ rule run_method:
     params:
         spec=lambda wildcards: METHODS[wildcards.method],
         weights_dir=WEIGHTS_DIR,
+        weights_digest=weights_digest,
     threads: 1
     conda:
         "../envs/mcbench.yaml"

@@ -2,8 +2,8 @@
 # the test scenes, and the learned denoisers trained on them (mcbench.nn). Not part of `all`:
 #   snakemake --cores 2 training_data     # render the crops
 #   snakemake --cores 2 train_kpcn        # train one network when its weights are missing
-# The weights in methods/weights are committed, so the main job never trains; to retrain one,
-# delete its .pt or add `--forcerun train_network` (a killed training resumes from its checkpoint).
+# The weights in methods/weights are committed, so the main job never trains (nor renders
+# crops); to retrain one, delete its .pt (a killed training resumes from its checkpoint).
 
 rule training_example:
     output:
@@ -30,7 +30,7 @@ rule training_data:
 
 rule train_network:
     input:
-        ancient(training_crop_files()),
+        train_network_inputs,
     output:
         weights=f"{WEIGHTS_DIR}/{{network}}.pt",
         record=f"{WEIGHTS_DIR}/{{network}}.json",
@@ -57,5 +57,5 @@ for _network in NETWORKS:
         name:
             f"train_{_network}"
         input:
-            weights_file(_network),
+            missing_weights(_network),
         default_target: False
