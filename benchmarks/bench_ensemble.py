@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -27,6 +26,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from methods import ensemble as E  # noqa: E402
+from timing import timed  # noqa: E402
 
 
 def synthetic(size: int, n: int, seed: int = 0):
@@ -58,16 +58,6 @@ def synthetic(size: int, n: int, seed: int = 0):
     normal[..., 2] = 1.0
     normal[:, W // 2:] = [0.0, 1.0, 0.0]
     return xa, xb, np.stack(ys["full"]), np.stack(ys["a"]), np.stack(ys["b"]), albedo, normal
-
-
-def timed(fn, repeats=1):
-    best = np.inf
-    out = None
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        out = fn()
-        best = min(best, time.perf_counter() - t0)
-    return best, out
 
 
 def run(sizes, ns, repeats):

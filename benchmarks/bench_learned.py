@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -25,17 +24,9 @@ from mcbench.buffers import RenderBuffers  # noqa: E402
 from mcbench.nn.inference import load_network, run_network  # noqa: E402
 from mcbench.render import render_buffers  # noqa: E402
 from methods import oidn  # noqa: E402
+from timing import timed  # noqa: E402
 
 NETWORKS = ["kpcn", "mcgan", "optix_ae", "wskpn"]
-
-
-def best_time(function, repeats: int) -> float:
-    best = float("inf")
-    for _ in range(repeats):
-        start = time.perf_counter()
-        function()
-        best = min(best, time.perf_counter() - start)
-    return best
 
 
 def main() -> None:
@@ -55,10 +46,10 @@ def main() -> None:
         for threads in args.threads:
             torch.set_num_threads(threads)
             run_network(networks["kpcn"], image)  # warm-up of oneDNN primitives
-            baseline = best_time(lambda: oidn.denoise_image(image), args.repeats)
+            baseline, _ = timed(lambda: oidn.denoise_image(image), args.repeats)
             print(f"{size:>5} {threads:>7} {'oidn':>9} {baseline:>9.3f} {1.0:>8.2f}", flush=True)
             for name, network in networks.items():
-                seconds = best_time(lambda: run_network(network, image), args.repeats)
+                seconds, _ = timed(lambda: run_network(network, image), args.repeats)
                 print(f"{size:>5} {threads:>7} {name:>9} {seconds:>9.3f} {seconds / baseline:>8.2f}", flush=True)
 
 

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -22,6 +21,7 @@ sys.path.insert(0, str(ROOT / "tests"))
 from test_nfor import make_buffers, synthetic_scene  # noqa: E402
 
 from methods import nfor  # noqa: E402
+from timing import timed  # noqa: E402
 
 
 def main() -> None:
@@ -35,11 +35,7 @@ def main() -> None:
     print(f"{'size':>6} {'pixels':>8} {'seconds':>9} {'ratio':>7} {'pixel ratio':>11}")
     for size in args.sizes:
         buffers = make_buffers(*synthetic_scene(size, size), sigma_half=0.1)
-        best = float("inf")
-        for _ in range(args.repeats):
-            start = time.perf_counter()
-            nfor.denoise(buffers)
-            best = min(best, time.perf_counter() - start)
+        best, _ = timed(lambda: nfor.denoise(buffers), args.repeats)
         if base is None:
             base = (best, size * size)
         print(f"{size:>6} {size * size:>8} {best:>9.2f} {best / base[0]:>7.2f} "

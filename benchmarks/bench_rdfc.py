@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -23,6 +22,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from mcbench.buffers import RenderBuffers  # noqa: E402
 from methods import rdfc  # noqa: E402
+from timing import timed  # noqa: E402
 
 
 def synthetic(size: int, seed: int = 0, half_variance: float = 0.02) -> RenderBuffers:
@@ -45,15 +45,6 @@ def synthetic(size: int, seed: int = 0, half_variance: float = 0.02) -> RenderBu
         layers["normal" + s] = normal
         layers["depth" + s] = np.ones((size, size), np.float32)
     return RenderBuffers(layers=layers, spp=8)
-
-
-def timed(fn, repeats):
-    best, out = np.inf, None
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        out = fn()
-        best = min(best, time.perf_counter() - t0)
-    return best, out
 
 
 def main(argv=None):

@@ -64,7 +64,7 @@ def test_repvgg_reparameterisation_is_exact():
     torch.manual_seed(0)
     network = module.build_network(**module.NETWORK).eval()
     _randomise_batch_norms(network)
-    buffers = {key: value for key, value in image_tensors(_render_buffers().image("full")).items()}
+    buffers = image_tensors(_render_buffers().image("full"))
     with torch.no_grad():
         before = network(buffers)
         network.fuse()

@@ -164,9 +164,7 @@ def missing_weights(network):
 def train_network_inputs(wildcards):
     """Training crops of a network whose weights are missing; none once the weights exist, so
     an explicit `train_<name>` with committed weights has nothing to do."""
-    if Path(weights_file(wildcards.network)).exists():
-        return []
-    return ancient(training_crop_files())
+    return ancient(training_crop_files()) if missing_weights(wildcards.network) else []
 
 
 def case_outputs(wildcards):
