@@ -11,10 +11,10 @@ import yaml
 from mcbench import BenchError
 from mcbench.buffers import ALL_LAYERS
 from mcbench.render import decode_seed, pick_variant, render_buffers, render_seed
-from mcbench.training import (TRAINING_BASE_SEED, crop_boxes, decode_training_seed, forget,
-                              main, random_scene, render_dict_buffers, scene_fingerprint,
-                              training_example, training_render_seed,
-                              training_scene_fingerprint)
+from mcbench.training import (FIBRE_SEED_BASE, TRAINING_BASE_SEED, crop_boxes,
+                              decode_training_seed, forget, is_fibre_seed, main, random_scene,
+                              render_dict_buffers, scene_fingerprint, training_example,
+                              training_render_seed, training_scene_fingerprint, training_seeds)
 from scenes import available_scenes, load_scene
 
 REPO = Path(__file__).resolve().parents[1]
@@ -101,18 +101,53 @@ def test_same_seed_same_dict():
 
 def test_training_fingerprints_distinct_and_not_test_scenes():
     pick_variant("auto")
-    training = [training_scene_fingerprint(seed) for seed in range(100)]
-    assert len(set(training)) == 100
+    seeds = list(range(100)) + list(range(FIBRE_SEED_BASE, FIBRE_SEED_BASE + 8))
+    training = [training_scene_fingerprint(seed) for seed in seeds]
+    assert len(set(training)) == len(seeds)
     tests = {scene_fingerprint(load_scene(name).build(16, 12)) for name in available_scenes()}
     assert len(tests) == len(available_scenes())
     assert not tests & set(training)
+
+
+def test_training_seeds_object_then_fibre_family():
+    settings = {"first_seed": 5, "count": 3, "fibre_count": 2}
+    assert training_seeds(settings) == [5, 6, 7, FIBRE_SEED_BASE, FIBRE_SEED_BASE + 1]
+    assert training_seeds({"first_seed": 0, "count": 4}) == [0, 1, 2, 3]
+    with pytest.raises(BenchError, match="training.first_seed"):
+        training_seeds({"first_seed": FIBRE_SEED_BASE - 2, "count": 3})
+    with pytest.raises(BenchError, match="training.fibre_count"):
+        training_seeds({"first_seed": 0, "count": 1, "fibre_count": FIBRE_SEED_BASE + 1})
+    config = yaml.safe_load((REPO / "config.yaml").read_text())["training"]
+    assert sum(map(is_fibre_seed, training_seeds(config))) == config["fibre_count"] > 0
+
+
+def test_fibre_scenes_add_thin_curves_to_an_object_scene():
+    pick_variant("auto")
+    import mitsuba as mi
+
+    seed = FIBRE_SEED_BASE + 3
+    scene = random_scene(seed, 16, 12)
+    fibres = [key for key in scene if key.startswith("fibres_")]
+    assert fibres and all(isinstance(scene[key], mi.Shape) for key in fibres)
+    assert not any(key.startswith("fibre") for key in random_scene(3, 16, 12))
+    # sub-pixel strands: at 128 pixels across the frame, every radius is below 0.6 pixel
+    params = mi.traverse(scene[fibres[0]])
+    radius = np.array(params["control_points"]).reshape(-1, 4)[:, 3]
+    sensor = scene["sensor"]
+    fov = float(sensor["fov"])
+    points = np.array(params["control_points"]).reshape(-1, 4)[:, :3]
+    origin = np.array(sensor["to_world"].matrix)[:3, 3]
+    distance = np.linalg.norm(points - origin, axis=1)
+    pixel_at_distance = 2 * distance * np.tan(np.radians(fov) / 2) / 128
+    assert np.percentile(radius / pixel_at_distance, 95) < 0.9
+    assert scene_fingerprint(scene) == scene_fingerprint(random_scene(seed, 16, 12))
 
 
 def test_generator_imports_only_scene_helpers():
     source = (REPO / "mcbench" / "training.py").read_text()
     imported = {line.split()[1] for line in source.splitlines()
                 if line.strip().startswith(("from scenes", "import scenes"))}
-    assert imported <= {"scenes", "scenes._geometry"}, imported
+    assert imported <= {"scenes", "scenes._geometry", "scenes._curves"}, imported
     for line in source.splitlines():
         if line.strip().startswith("from scenes import"):
             assert line.split("import", 1)[1].split() == ["perspective_sensor"], line

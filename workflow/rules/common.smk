@@ -10,6 +10,7 @@ from snakemake.utils import validate
 sys.path.insert(0, str(Path(workflow.basedir)))  # methods/, scenes/, mcbench/ from a checkout
 
 from mcbench import BenchError  # noqa: E402
+from mcbench.training import training_seeds  # noqa: E402
 
 
 validate(config, schema="../schemas/config.schema.yaml")
@@ -193,7 +194,7 @@ TRAINING = {
     **{key: value for key, value in config.get("training", {}).items() if key != "networks"},
 }
 TRAINING_OVERRIDES = config.get("training", {}).get("networks", {})
-TRAINING_SEEDS = range(TRAINING["first_seed"], TRAINING["first_seed"] + TRAINING["count"])
+TRAINING_SEEDS = training_seeds(TRAINING)
 
 
 def training_crop_files():

@@ -9,7 +9,8 @@ rule training_example:
     output:
         [f"{RESULTS}/training/example_{{seed}}_{k}.exr" for k in range(TRAINING["crops"])],
     params:
-        settings=TRAINING,
+        # the settings one example depends on (fibre_count only says how many scenes exist)
+        settings={key: value for key, value in TRAINING.items() if key != "fibre_count"},
         variant=config.get("variant", "auto"),
     threads: config.get("render_threads", 2)
     conda:
