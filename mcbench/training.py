@@ -466,7 +466,7 @@ def _fibre_bsdf(rng: np.random.Generator) -> dict:
 
 
 def _strands(rng: np.random.Generator, kind: str, center, radius: float, count: int,
-             segments: int) -> tuple[np.ndarray, np.ndarray]:
+             segments: int) -> tuple[np.ndarray, float]:
     """Control points (count, segments, 3) of one clump of ``kind`` ("fur", "tuft", "fringe")
     of about ``radius`` world units around ``center``; also the core radius (0 without core)."""
     center = np.asarray(center, dtype=np.float64)
@@ -513,6 +513,7 @@ def _fibre_clumps(rng: np.random.Generator, scene: dict, target, distance: float
     """Add 1-2 fibre clumps to ``scene`` (see the module docstring): the first at the camera
     ``target`` filling about half the frame, a second (40 %) at a random object centre."""
     from scenes._curves import curve_shape
+    from scenes._geometry import rgb
 
     half_frame = distance * np.tan(np.radians(fov) / 2)
     pixel = 2 * half_frame / FIBRE_REFERENCE_WIDTH
@@ -530,8 +531,7 @@ def _fibre_clumps(rng: np.random.Generator, scene: dict, target, distance: float
                                            kind="linearcurve", bsdf=_fibre_bsdf(rng))
         if core > 0:
             core_bsdf = (_material(rng) if rng.random() < 0.5 else
-                         {"type": "diffuse", "reflectance": {"type": "rgb", "value": [
-                             float(x) for x in rng.uniform(0.01, 0.3, 3)]}})
+                         {"type": "diffuse", "reflectance": rgb(rng.uniform(0.01, 0.3, 3))})
             scene[f"fibre_core_{i}"] = {"type": "sphere", "center": [float(x) for x in center],
                                         "radius": core, "bsdf": core_bsdf}
 
@@ -666,7 +666,9 @@ def _feed(h, obj, path: str = "") -> None:
         for key in sorted(params.keys()):
             h.update(key.encode() + b"=")
             try:
-                _feed_array(h, np.array(params[key]))
+                value = params[key]
+                # np.array() of a Mitsuba transform is not its matrix (it changes run to run)
+                _feed_array(h, np.array(value.matrix if hasattr(value, "matrix") else value))
             except Exception:   # a parameter that is no array (or cannot be read)
                 h.update(b"?")
     else:

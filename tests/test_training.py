@@ -99,6 +99,21 @@ def test_same_seed_same_dict():
     assert scene_fingerprint(random_scene(11, 16, 12)) == scene_fingerprint(random_scene(11, 40, 30))
 
 
+def test_fingerprint_same_in_another_process():
+    """Seed 32784 has meshes with textured BSDFs (a traversed ``to_uv`` transform): its
+    fingerprint must not depend on the process (np.array of a transform once did)."""
+    import subprocess
+    import sys
+
+    code = ("from mcbench.render import pick_variant; pick_variant('auto'); "
+            "from mcbench.training import training_scene_fingerprint as f; print(f(32784))")
+    runs = {subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True,
+                           check=True).stdout.strip() for _ in range(2)}
+    pick_variant("auto")
+    runs.add(training_scene_fingerprint(32784))
+    assert len(runs) == 1, runs
+
+
 def test_training_fingerprints_distinct_and_not_test_scenes():
     pick_variant("auto")
     seeds = list(range(100)) + list(range(FIBRE_SEED_BASE, FIBRE_SEED_BASE + 8))
