@@ -1,0 +1,112 @@
+"""Shared test fixtures: one builder of synthetic :class:`mcbench.buffers.RenderBuffers`.
+
+Use it through the ``make_render_buffers`` fixture::
+
+    def test_something(make_render_buffers):
+        buffers = make_render_buffers(height=12, width=10, half_std=0.05, seed=3)
+
+The synthetic case has known statistics: each half buffer is ``truth`` plus independent
+Gaussian noise of standard deviation ``half_std`` (A and B independent of each other), the full
+image is their mean, and the variance layers state the true variance of the mean.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from mcbench.buffers import REQUIRED_LAYERS, RenderBuffers
+
+HALF_SUFFIXES = ("_a", "_b")
+ALL_SUFFIXES = ("",) + HALF_SUFFIXES
+
+
+def synthetic_features(height: int, width: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Noise-free features with edges, float64.
+
+    Returns ``albedo`` (H, W, 3) in [0, 1] with a vertical edge at ``x = width / 2``,
+    ``normal`` (H, W, 3) unit vectors, +z except a tilted disk, and ``depth`` (H, W): a ramp
+    in y behind a nearer disk (depth edge at the disk's rim).
+    """
+    y, x = np.mgrid[0:height, 0:width].astype(np.float64)
+    albedo = np.where((x < width // 2)[..., None], [0.8, 0.3, 0.2], [0.2, 0.5, 0.9])
+    disk = (x - 0.6 * width) ** 2 + (y - 0.4 * height) ** 2 < (0.25 * max(height, width)) ** 2
+    normal = np.zeros((height, width, 3))
+    normal[..., 2] = 1.0
+    normal[disk] = [0.6, 0.0, 0.8]
+    depth = np.where(disk, 2.0, 5.0 + y / max(height, 1))
+    return albedo, normal, depth
+
+
+def synthetic_truth(albedo: np.ndarray, normal: np.ndarray) -> np.ndarray:
+    """Noise-free radiance (H, W, 3), float64: albedo times a smooth shading gradient, brighter
+    where the normal is tilted, so colour edges coincide with feature edges."""
+    height, width = albedo.shape[:2]
+    y, x = np.mgrid[0:height, 0:width].astype(np.float64)
+    shading = 0.3 + 0.7 * (x / max(width, 1)) * (1.0 - 0.5 * y / max(height, 1))
+    tilted = normal[..., 2] < 0.99
+    shading = np.where(tilted, 1.5 * shading + 0.2, shading)
+    return albedo * shading[..., None]
+
+
+def build_render_buffers(truth=None, *, height: int = 16, width: int = 16, spp: int = 8,
+                         half_std=0.1, seed=0, albedo=None, normal=None, depth=None,
+                         variance=None) -> RenderBuffers:
+    """Synthetic render buffers with independent Gaussian noise in each half buffer.
+
+    ``truth``: noise-free radiance (H, W, 3); when given, its shape overrides ``height`` and
+    ``width``; default :func:`synthetic_truth` of the default features.
+    ``half_std``: standard deviation of the noise in each half buffer (scalar or array
+    broadcastable to (H, W, 3)); 0 gives noise-free buffers. Noise is drawn from
+    ``np.random.default_rng(seed)`` (``seed`` may be a ``Generator``, which is then advanced):
+    first A, then B, each ``truth.shape`` standard normals.
+    ``variance``: the *half-buffer* variance of the mean written to ``variance_a`` and
+    ``variance_b`` (broadcastable to (H, W, 3)); default ``half_std**2``. The full image's
+    ``variance`` is half of it, as for the mean of two independent halves.
+    ``albedo``/``normal`` (H, W, 3), ``depth`` (H, W): features, identical (separate copies)
+    in the full, A and B buffers; defaults from :func:`synthetic_features`.
+
+    Layers: ``color = (color_a + color_b) / 2``; every layer float32; all of
+    :data:`mcbench.buffers.REQUIRED_LAYERS` present plus ``albedo_a/_b``, ``normal_a/_b``,
+    ``depth_a/_b``.
+    """
+    if truth is not None:
+        truth = np.asarray(truth, np.float64)
+        if truth.ndim != 3 or truth.shape[2] != 3:
+            raise ValueError(f"truth must have shape (H, W, 3), got {truth.shape}")
+        height, width = truth.shape[:2]
+    default_albedo, default_normal, default_depth = synthetic_features(height, width)
+    albedo = default_albedo if albedo is None else albedo
+    normal = default_normal if normal is None else normal
+    depth = default_depth if depth is None else depth
+    if truth is None:
+        truth = synthetic_truth(np.asarray(albedo, np.float64), np.asarray(normal, np.float64))
+    shape = truth.shape
+    half_std = np.broadcast_to(np.asarray(half_std, np.float64), shape)
+    half_variance = half_std ** 2 if variance is None else np.asarray(variance, np.float64)
+    half_variance = np.broadcast_to(half_variance, shape)
+
+    rng = np.random.default_rng(seed)
+    layers = {}
+    for suffix in HALF_SUFFIXES:
+        layers["color" + suffix] = (truth + half_std * rng.standard_normal(shape)).astype(np.float32)
+        layers["variance" + suffix] = half_variance.astype(np.float32)
+    mean = (layers["color_a"].astype(np.float64) + layers["color_b"]) / 2
+    layers["color"] = mean.astype(np.float32)
+    layers["variance"] = (half_variance / 2).astype(np.float32)
+    features = {"albedo": albedo, "normal": normal, "depth": depth}
+    expected = {"albedo": shape, "normal": shape, "depth": shape[:2]}
+    for name, value in features.items():
+        value = np.asarray(value, np.float32)
+        if value.shape != expected[name]:
+            raise ValueError(f"{name} must have shape {expected[name]}, got {value.shape}")
+        for suffix in ALL_SUFFIXES:
+            layers[name + suffix] = value.copy()
+    assert all(name in layers for name in REQUIRED_LAYERS)
+    return RenderBuffers(layers=layers, spp=spp)
+
+
+@pytest.fixture
+def make_render_buffers():
+    """The builder :func:`build_render_buffers` (see its docstring for the keywords)."""
+    return build_render_buffers
