@@ -8,17 +8,17 @@ from mcbench.exr import ExrError, NonFiniteError, read_layers, read_metadata, wr
 from methods import UnknownMethodError, available_methods, load_method
 
 
-def _render_layers(shape=(6, 7)):
-    rng = np.random.default_rng(0)
-    layers = {}
-    for name in REQUIRED_LAYERS:
-        layers[name] = rng.random(shape if name == "depth" else shape + (3,)).astype(np.float32)
+@pytest.fixture
+def render_layers(make_render_buffers):
+    """A fresh dict of all layers of a small synthetic render (6 x 7 pixels)."""
+    layers = dict(make_render_buffers(height=6, width=7).layers)
+    assert set(REQUIRED_LAYERS) <= set(layers)
     return layers
 
 
-def test_round_trip_preserves_layers_and_metadata(tmp_path):
+def test_round_trip_preserves_layers_and_metadata(tmp_path, render_layers):
     path = tmp_path / "r.exr"
-    layers = _render_layers()
+    layers = render_layers
     write_layers(path, layers, metadata={"spp": 16, "scene": "box"})
     back = read_layers(path)
     assert set(back) == set(layers)
@@ -34,9 +34,9 @@ def test_missing_file_names_the_path(tmp_path):
         read_layers(tmp_path / "nope.exr")
 
 
-def test_corrupt_file_names_the_path(tmp_path):
+def test_corrupt_file_names_the_path(tmp_path, render_layers):
     path = tmp_path / "corrupt.exr"
-    write_layers(path, _render_layers())
+    write_layers(path, render_layers)
     data = path.read_bytes()
     path.write_bytes(data[: len(data) // 3])  # truncated mid-file
     with pytest.raises(ExrError, match="corrupt.exr"):
@@ -46,8 +46,8 @@ def test_corrupt_file_names_the_path(tmp_path):
         read_layers(path)
 
 
-def test_nan_render_is_refused_with_count(tmp_path):
-    layers = _render_layers()
+def test_nan_render_is_refused_with_count(tmp_path, render_layers):
+    layers = render_layers
     layers["color_b"][0, 0, 1] = np.nan
     layers["color_b"][2, 3, :] = np.inf
     path = tmp_path / "nan.exr"
@@ -56,8 +56,8 @@ def test_nan_render_is_refused_with_count(tmp_path):
         RenderBuffers.load(path)
 
 
-def test_missing_layer_is_named(tmp_path):
-    layers = _render_layers()
+def test_missing_layer_is_named(tmp_path, render_layers):
+    layers = render_layers
     del layers["variance_a"]
     path = tmp_path / "partial.exr"
     write_layers(path, layers)
@@ -79,9 +79,10 @@ def test_registry_finds_methods_and_names_bad_keys():
         load_method("oidn", kind="combiner", config_key="combiners[0]")
 
 
-def test_half_buffer_view_uses_its_own_features():
-    layers = _render_layers()
+def test_half_buffer_view_uses_its_own_features(render_layers):
+    layers = render_layers
     layers["albedo_a"] = np.full_like(layers["albedo"], 0.25)
+    del layers["albedo_b"]
     buffers = RenderBuffers(layers=layers, spp=8)
     a = buffers.image("a")
     assert np.all(a.albedo == 0.25) and a.spp == 4

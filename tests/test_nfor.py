@@ -29,22 +29,6 @@ def synthetic_scene(h=64, w=64):
     return color, albedo, normal, depth
 
 
-def make_buffers(color, albedo, normal, depth, sigma_half, seed=0, spp=16):
-    """RenderBuffers with independent Gaussian noise of std ``sigma_half`` in each half buffer."""
-    rng = np.random.default_rng(seed)
-    f32 = lambda a: np.asarray(a, dtype=np.float32)
-    a = color + sigma_half * rng.standard_normal(color.shape)
-    b = color + sigma_half * rng.standard_normal(color.shape)
-    var_half = np.full(color.shape, sigma_half ** 2)
-    layers = {"color": f32((a + b) / 2), "color_a": f32(a), "color_b": f32(b),
-              "variance": f32(var_half / 2), "variance_a": f32(var_half), "variance_b": f32(var_half)}
-    for s in ("", "_a", "_b"):
-        layers["albedo" + s] = f32(albedo)
-        layers["normal" + s] = f32(normal)
-        layers["depth" + s] = f32(depth)
-    return RenderBuffers(layers=layers, spp=spp)
-
-
 def mse(x, y):
     return float(np.mean((np.asarray(x, np.float64) - y) ** 2))
 
@@ -89,9 +73,10 @@ def test_regression_matches_brute_force_lstsq():
     np.testing.assert_allclose(got, num / den[..., None], atol=1e-10)
 
 
-def test_synthetic_mse_five_times_below_noisy():
+def test_synthetic_mse_five_times_below_noisy(make_render_buffers):
     truth, albedo, normal, depth = synthetic_scene()
-    buffers = make_buffers(truth, albedo, normal, depth, sigma_half=0.1)
+    buffers = make_render_buffers(truth, albedo=albedo, normal=normal, depth=depth, half_std=0.1,
+                                  spp=16)
     out = nfor.denoise(buffers)
     noisy = mse(buffers.color, truth)
     for name, image, reference_noisy in (("full", out.full, noisy),
@@ -105,18 +90,20 @@ def test_synthetic_mse_five_times_below_noisy():
     assert sel.shape == truth.shape and (sel >= 0).all() and (sel <= 1).all()
 
 
-def test_noise_free_input_is_returned_unchanged():
+def test_noise_free_input_is_returned_unchanged(make_render_buffers):
     truth, albedo, normal, depth = synthetic_scene(32, 40)
-    buffers = make_buffers(truth, albedo, normal, depth, sigma_half=0.0)
+    buffers = make_render_buffers(truth, albedo=albedo, normal=normal, depth=depth, half_std=0.0,
+                                  spp=16)
     out = nfor.denoise(buffers)
     for image in (out.full, out.a, out.b):
         np.testing.assert_allclose(image, truth, rtol=1e-4, atol=1e-7)
 
 
-def test_flat_black_and_fireflies_stay_finite():
+def test_flat_black_and_fireflies_stay_finite(make_render_buffers):
     truth, albedo, normal, depth = synthetic_scene(40, 40)
     truth[:, :12] = 0.0
-    buffers = make_buffers(truth, albedo, normal, depth, sigma_half=0.05, seed=3)
+    buffers = make_render_buffers(truth, albedo=albedo, normal=normal, depth=depth, half_std=0.05,
+                                  seed=3, spp=16)
     layers = dict(buffers.layers)
     for name in ("color", "color_a", "color_b", "variance", "variance_a", "variance_b"):
         layers[name] = layers[name].copy()

@@ -23,23 +23,11 @@ def piecewise_smooth(h=64, w=64):
     return truth, albedo
 
 
-def make_buffers(truth, albedo, half_variance, rng, spp=4):
-    """RenderBuffers with independent Gaussian half buffers of known variance of the mean."""
-    h, w = truth.shape[:2]
-    layers = {}
-    for s in ("_a", "_b"):
-        noise = rng.normal(size=truth.shape) * np.sqrt(half_variance) if half_variance > 0 else 0.0
-        layers["color" + s] = (truth + noise).astype(np.float32)
-        layers["variance" + s] = np.full((h, w, 3), half_variance, np.float32)
-    layers["color"] = ((layers["color_a"] + layers["color_b"]) / 2).astype(np.float32)
-    layers["variance"] = (layers["variance_a"] / 2).astype(np.float32)
-    normal = np.zeros((h, w, 3), np.float32)
+def flat_features(h, w):
+    """The features the RDFC tests use: no normal or depth edges (+z normals, depth 1)."""
+    normal = np.zeros((h, w, 3))
     normal[..., 2] = 1.0
-    for s in ("", "_a", "_b"):
-        layers["albedo" + s] = albedo.astype(np.float32)
-        layers["normal" + s] = normal
-        layers["depth" + s] = np.ones((h, w), np.float32)
-    return RenderBuffers(layers=layers, spp=spp)
+    return dict(normal=normal, depth=np.ones((h, w)))
 
 
 def test_registered_and_interface():
@@ -47,9 +35,10 @@ def test_registered_and_interface():
     assert module.LABEL == "#8 RDFC"
 
 
-def test_denoises_synthetic_image_5x():
+def test_denoises_synthetic_image_5x(make_render_buffers):
     truth, albedo = piecewise_smooth()
-    buffers = make_buffers(truth, albedo, 0.02, np.random.default_rng(1))
+    buffers = make_render_buffers(truth, albedo=albedo, **flat_features(*truth.shape[:2]),
+                                  half_std=np.sqrt(0.02), seed=1, spp=4)
     out = rdfc.denoise(buffers)
     assert isinstance(out, Denoised)
     for image in (out.full, out.a, out.b):
@@ -63,9 +52,10 @@ def test_denoises_synthetic_image_5x():
     np.testing.assert_allclose(out.full, (out.a.astype(np.float64) + out.b) / 2, rtol=1e-6, atol=1e-7)
 
 
-def test_noise_free_input_is_returned():
+def test_noise_free_input_is_returned(make_render_buffers):
     truth, albedo = piecewise_smooth(40, 40)
-    buffers = make_buffers(truth, albedo, 0.0, np.random.default_rng(0))
+    buffers = make_render_buffers(truth, albedo=albedo, **flat_features(40, 40), half_std=0.0,
+                                  spp=4)
     out = rdfc.denoise(buffers)
     for image in (out.full, out.a, out.b):
         np.testing.assert_allclose(image, truth, rtol=1e-4, atol=1e-6)
@@ -116,15 +106,11 @@ def test_derivative_matches_finite_difference():
         np.testing.assert_allclose(deriv[:, py, px, c], numeric, rtol=1e-4, atol=1e-7)
 
 
-def test_flat_black_and_fireflies_stay_finite():
+def test_flat_black_and_fireflies_stay_finite(make_render_buffers):
     h = w = 32
-    layers = {}
-    for s in ("", "_a", "_b"):
-        layers["color" + s] = np.zeros((h, w, 3), np.float32)
-        layers["variance" + s] = np.zeros((h, w, 3), np.float32)
-        layers["albedo" + s] = np.zeros((h, w, 3), np.float32)
-        layers["normal" + s] = np.zeros((h, w, 3), np.float32)
-        layers["depth" + s] = np.zeros((h, w), np.float32)
+    black = np.zeros((h, w, 3))
+    layers = dict(make_render_buffers(black, albedo=black, normal=black, depth=black[..., 0],
+                                      half_std=0.0, spp=2).layers)
     layers["color_a"][5, 5] = 1e4
     layers["variance_a"][5, 5] = 1e8
     layers["color_b"][20, 9, 1] = 1e4            # firefly with (wrongly) zero variance
