@@ -15,6 +15,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
@@ -112,3 +113,15 @@ class Denoised:
         layers = read_layers(path, ["color", "color_a", "color_b"])
         check_finite(path, layers)
         return cls(full=layers["color"], a=layers["color_a"], b=layers["color_b"])
+
+
+def denoise_each_buffer(buffers: RenderBuffers,
+                        denoise_image: Callable[[ImageBuffers], np.ndarray]) -> Denoised:
+    """Run a single-image denoiser on the full buffer and on each half buffer.
+
+    Each half buffer is denoised with its own features and variance only, keeping
+    y^A independent of x^B as the dual-buffer estimate assumes (Zheng et al. Eq. 10).
+    """
+    return Denoised(full=denoise_image(buffers.image("full")),
+                    a=denoise_image(buffers.image("a")),
+                    b=denoise_image(buffers.image("b")))

@@ -30,12 +30,9 @@ training data          600 production frames,       our 112 procedural scenes, 2
 
 from __future__ import annotations
 
-import torch
-from torch import nn
-
-from mcbench.nn.features import guide_features, irradiance_inputs, remodulate, spatial_gradients
-from mcbench.nn.inference import denoise_with_network
-from mcbench.nn.kernels import apply_pixel_kernels
+import sys
+from functools import cache
+from types import SimpleNamespace
 
 KIND = "denoiser"
 LABEL = "#1 KPCN† (ours, scaled, trained on our scenes)"
@@ -45,8 +42,12 @@ TRAINING = {"steps": 6000, "batch_size": 8, "patch": 64, "learning_rate": 5e-4, 
 INPUT_CHANNELS = 31
 
 
-def network_inputs(buffers: dict[str, torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor]:
-    """(irradiance (N, 3, H, W), network input (N, 31, H, W))."""
+def network_inputs(buffers):
+    """(irradiance (N, 3, H, W), network input (N, 31, H, W)) from a dict of (N, C, H, W) tensors."""
+    import torch
+
+    from mcbench.nn.features import guide_features, irradiance_inputs, spatial_gradients
+
     irradiance, colour_inputs = irradiance_inputs(buffers)
     guides = guide_features(buffers)
     inputs = torch.cat([colour_inputs[:, :3], spatial_gradients(colour_inputs[:, :3]), colour_inputs[:, 3:],
@@ -54,27 +55,41 @@ def network_inputs(buffers: dict[str, torch.Tensor]) -> tuple[torch.Tensor, torc
     return irradiance, inputs
 
 
-class KernelPredictingNetwork(nn.Module):
-    def __init__(self, channels: int = 48, layers: int = 9, kernel_size: int = 13):
-        super().__init__()
-        self.kernel_size = kernel_size
-        convs, width = [], INPUT_CHANNELS
-        for _ in range(layers - 1):
-            convs += [nn.Conv2d(width, channels, 3, padding=1), nn.ReLU(inplace=True)]
-            width = channels
-        convs.append(nn.Conv2d(width, kernel_size * kernel_size, 1))
-        self.body = nn.Sequential(*convs)
+@cache
+def network_classes() -> SimpleNamespace:
+    """The torch modules of KPCN, defined on first call so that importing this module does not
+    import torch (the DAG imports it to read NETWORK and check params)."""
+    from torch import nn
 
-    def forward(self, buffers: dict[str, torch.Tensor]) -> torch.Tensor:
-        irradiance, inputs = network_inputs(buffers)
-        logits = self.body(inputs)
-        return remodulate(apply_pixel_kernels(irradiance, logits, self.kernel_size), buffers["albedo"])
+    from mcbench.nn.features import remodulate
+    from mcbench.nn.kernels import apply_pixel_kernels
+
+    class KernelPredictingNetwork(nn.Module):
+        def __init__(self, channels: int = 48, layers: int = 9, kernel_size: int = 13):
+            super().__init__()
+            self.kernel_size = kernel_size
+            convs, width = [], INPUT_CHANNELS
+            for _ in range(layers - 1):
+                convs += [nn.Conv2d(width, channels, 3, padding=1), nn.ReLU(inplace=True)]
+                width = channels
+            convs.append(nn.Conv2d(width, kernel_size * kernel_size, 1))
+            self.body = nn.Sequential(*convs)
+
+        def forward(self, buffers):
+            irradiance, inputs = network_inputs(buffers)
+            logits = self.body(inputs)
+            return remodulate(apply_pixel_kernels(irradiance, logits, self.kernel_size), buffers["albedo"])
+
+    return SimpleNamespace(KernelPredictingNetwork=KernelPredictingNetwork)
 
 
-def build_network(**arch) -> nn.Module:
-    return KernelPredictingNetwork(**arch)
+def build_network(**arch):
+    """A ``torch.nn.Module`` KPCN of architecture ``arch`` (keys of NETWORK)."""
+    return network_classes().KernelPredictingNetwork(**arch)
 
 
 def denoise(buffers):
     """KPCN on the full buffer and on each half buffer (three inferences, as Zheng et al. ran it)."""
-    return denoise_with_network("kpcn", buffers)
+    from mcbench.nn.inference import denoise_with_network
+
+    return denoise_with_network(sys.modules[__name__], buffers)

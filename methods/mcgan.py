@@ -26,12 +26,9 @@ deeper and wider, with 256² patches); one critic step per generator step.
 
 from __future__ import annotations
 
-import torch
-import torch.nn.functional as F
-from torch import nn
-
-from mcbench.nn.features import exp_radiance, guide_features, irradiance_inputs, log_radiance, remodulate
-from mcbench.nn.inference import denoise_with_network
+import sys
+from functools import cache
+from types import SimpleNamespace
 
 KIND = "denoiser"
 LABEL = "#3 MCGAN† (ours, scaled, trained on our scenes)"
@@ -42,76 +39,90 @@ TRAINING = {"steps": 5000, "batch_size": 8, "patch": 64, "learning_rate": 5e-4, 
             "adversarial_weight": 0.005, "gradient_penalty": 10.0, "critic_learning_rate": 1e-4}
 
 
-class FeatureModulation(nn.Module):
-    """CFM: ``x · (1 + γ(c)) + β(c)`` with γ, β 1×1 convolutions of the condition map c."""
+@cache
+def network_classes() -> SimpleNamespace:
+    """The torch modules of MCGAN (FeatureModulation, ModulatedResidualBlock, Generator, Critic),
+    defined on first call so that importing this module does not import torch."""
+    import torch
+    import torch.nn.functional as F
+    from torch import nn
 
-    def __init__(self, channels: int, condition_channels: int):
-        super().__init__()
-        self.gamma = nn.Conv2d(condition_channels, channels, 1)
-        self.beta = nn.Conv2d(condition_channels, channels, 1)
+    from mcbench.nn.features import exp_radiance, guide_features, irradiance_inputs, log_radiance, remodulate
 
-    def forward(self, x: torch.Tensor, condition: torch.Tensor) -> torch.Tensor:
-        return x * (1.0 + self.gamma(condition)) + self.beta(condition)
+    class FeatureModulation(nn.Module):
+        """CFM: ``x · (1 + γ(c)) + β(c)`` with γ, β 1×1 convolutions of the condition map c."""
+
+        def __init__(self, channels: int, condition_channels: int):
+            super().__init__()
+            self.gamma = nn.Conv2d(condition_channels, channels, 1)
+            self.beta = nn.Conv2d(condition_channels, channels, 1)
+
+        def forward(self, x, condition):
+            return x * (1.0 + self.gamma(condition)) + self.beta(condition)
+
+    class ModulatedResidualBlock(nn.Module):
+        def __init__(self, channels: int, condition_channels: int):
+            super().__init__()
+            self.conv1 = nn.Conv2d(channels, channels, 3, padding=1)
+            self.mod1 = FeatureModulation(channels, condition_channels)
+            self.conv2 = nn.Conv2d(channels, channels, 3, padding=1)
+            self.mod2 = FeatureModulation(channels, condition_channels)
+
+        def forward(self, x, condition):
+            y = F.relu(self.mod1(self.conv1(x), condition))
+            return x + self.mod2(self.conv2(y), condition)
+
+    class Generator(nn.Module):
+        def __init__(self, channels: int = 32, blocks: int = 6, condition_channels: int = 32):
+            super().__init__()
+            self.encoder = nn.Sequential(
+                nn.Conv2d(7, condition_channels, 3, padding=1), nn.ReLU(inplace=True),
+                nn.Conv2d(condition_channels, condition_channels, 3, padding=1), nn.ReLU(inplace=True),
+                nn.Conv2d(condition_channels, condition_channels, 3, padding=1))
+            self.head = nn.Conv2d(4, channels, 3, padding=1)
+            self.blocks = nn.ModuleList(ModulatedResidualBlock(channels, condition_channels) for _ in range(blocks))
+            self.tail = nn.Conv2d(channels, 3, 3, padding=1)
+
+        def forward(self, buffers):
+            _, colour_inputs = irradiance_inputs(buffers)
+            condition = self.encoder(guide_features(buffers))
+            h = F.relu(self.head(colour_inputs))
+            for block in self.blocks:
+                h = block(h, condition)
+            log_irradiance = colour_inputs[:, :3] + self.tail(h)
+            return remodulate(exp_radiance(log_irradiance), buffers["albedo"])
+
+    class Critic(nn.Module):
+        """Conditional patch critic: (radiance, buffers) -> (N, 1, H/8, W/8) scores."""
+
+        def __init__(self, channels: int = 32):
+            super().__init__()
+            c = channels
+            self.body = nn.Sequential(
+                nn.Conv2d(10, c, 4, stride=2, padding=1), nn.LeakyReLU(0.2),
+                nn.Conv2d(c, 2 * c, 4, stride=2, padding=1), nn.LeakyReLU(0.2),
+                nn.Conv2d(2 * c, 4 * c, 4, stride=2, padding=1), nn.LeakyReLU(0.2),
+                nn.Conv2d(4 * c, 1, 3, padding=1))
+
+        def forward(self, radiance, buffers):
+            return self.body(torch.cat([log_radiance(radiance), guide_features(buffers)], dim=1))
+
+    return SimpleNamespace(FeatureModulation=FeatureModulation, ModulatedResidualBlock=ModulatedResidualBlock,
+                           Generator=Generator, Critic=Critic)
 
 
-class ModulatedResidualBlock(nn.Module):
-    def __init__(self, channels: int, condition_channels: int):
-        super().__init__()
-        self.conv1 = nn.Conv2d(channels, channels, 3, padding=1)
-        self.mod1 = FeatureModulation(channels, condition_channels)
-        self.conv2 = nn.Conv2d(channels, channels, 3, padding=1)
-        self.mod2 = FeatureModulation(channels, condition_channels)
-
-    def forward(self, x: torch.Tensor, condition: torch.Tensor) -> torch.Tensor:
-        y = F.relu(self.mod1(self.conv1(x), condition))
-        return x + self.mod2(self.conv2(y), condition)
+def build_network(**arch):
+    """The generator (a ``torch.nn.Module``) of architecture ``arch`` (keys of NETWORK)."""
+    return network_classes().Generator(**arch)
 
 
-class Generator(nn.Module):
-    def __init__(self, channels: int = 32, blocks: int = 6, condition_channels: int = 32):
-        super().__init__()
-        self.encoder = nn.Sequential(
-            nn.Conv2d(7, condition_channels, 3, padding=1), nn.ReLU(inplace=True),
-            nn.Conv2d(condition_channels, condition_channels, 3, padding=1), nn.ReLU(inplace=True),
-            nn.Conv2d(condition_channels, condition_channels, 3, padding=1))
-        self.head = nn.Conv2d(4, channels, 3, padding=1)
-        self.blocks = nn.ModuleList(ModulatedResidualBlock(channels, condition_channels) for _ in range(blocks))
-        self.tail = nn.Conv2d(channels, 3, 3, padding=1)
-
-    def forward(self, buffers: dict[str, torch.Tensor]) -> torch.Tensor:
-        _, colour_inputs = irradiance_inputs(buffers)
-        condition = self.encoder(guide_features(buffers))
-        h = F.relu(self.head(colour_inputs))
-        for block in self.blocks:
-            h = block(h, condition)
-        log_irradiance = colour_inputs[:, :3] + self.tail(h)
-        return remodulate(exp_radiance(log_irradiance), buffers["albedo"])
-
-
-class Critic(nn.Module):
-    """Conditional patch critic: (radiance, buffers) -> (N, 1, H/8, W/8) scores."""
-
-    def __init__(self, channels: int = 32):
-        super().__init__()
-        c = channels
-        self.body = nn.Sequential(
-            nn.Conv2d(10, c, 4, stride=2, padding=1), nn.LeakyReLU(0.2),
-            nn.Conv2d(c, 2 * c, 4, stride=2, padding=1), nn.LeakyReLU(0.2),
-            nn.Conv2d(2 * c, 4 * c, 4, stride=2, padding=1), nn.LeakyReLU(0.2),
-            nn.Conv2d(4 * c, 1, 3, padding=1))
-
-    def forward(self, radiance: torch.Tensor, buffers: dict[str, torch.Tensor]) -> torch.Tensor:
-        return self.body(torch.cat([log_radiance(radiance), guide_features(buffers)], dim=1))
-
-
-def build_network(**arch) -> nn.Module:
-    return Generator(**arch)
-
-
-def build_critic(**arch) -> nn.Module:
-    return Critic(**arch)
+def build_critic(**arch):
+    """The WGAN-GP critic of architecture ``arch`` (keys of CRITIC)."""
+    return network_classes().Critic(**arch)
 
 
 def denoise(buffers):
     """MCGAN's generator on the full buffer and on each half buffer."""
-    return denoise_with_network("mcgan", buffers)
+    from mcbench.nn.inference import denoise_with_network
+
+    return denoise_with_network(sys.modules[__name__], buffers)

@@ -24,12 +24,9 @@ Scaling against Chaitanya et al.: single frames, no recurrent connections (our r
 
 from __future__ import annotations
 
-import torch
-import torch.nn.functional as F
-from torch import nn
-
-from mcbench.nn.features import exp_radiance, guide_features, irradiance_inputs, remodulate
-from mcbench.nn.inference import denoise_with_network
+import sys
+from functools import cache
+from types import SimpleNamespace
 
 KIND = "denoiser"
 LABEL = "OptiX† (our autoencoder)"
@@ -39,48 +36,62 @@ TRAINING = {"steps": 10000, "batch_size": 8, "patch": 64, "learning_rate": 5e-4,
 INPUT_CHANNELS = 11
 
 
-def _double_conv(in_channels: int, out_channels: int) -> nn.Sequential:
-    return nn.Sequential(nn.Conv2d(in_channels, out_channels, 3, padding=1), nn.LeakyReLU(0.1),
-                         nn.Conv2d(out_channels, out_channels, 3, padding=1), nn.LeakyReLU(0.1))
+@cache
+def network_classes() -> SimpleNamespace:
+    """The torch module of the autoencoder (DenoisingAutoencoder), defined on first call so that
+    importing this module does not import torch."""
+    import torch
+    import torch.nn.functional as F
+    from torch import nn
+
+    from mcbench.nn.features import exp_radiance, guide_features, irradiance_inputs, remodulate
+
+    def double_conv(in_channels: int, out_channels: int) -> nn.Sequential:
+        return nn.Sequential(nn.Conv2d(in_channels, out_channels, 3, padding=1), nn.LeakyReLU(0.1),
+                             nn.Conv2d(out_channels, out_channels, 3, padding=1), nn.LeakyReLU(0.1))
+
+    class DenoisingAutoencoder(nn.Module):
+        def __init__(self, widths=(32, 48, 64, 80), bottleneck: int = 96):
+            super().__init__()
+            widths = [int(w) for w in widths]
+            self.levels = len(widths)
+            ins = [INPUT_CHANNELS] + widths[:-1]
+            self.encoders = nn.ModuleList(double_conv(i, o) for i, o in zip(ins, widths))
+            self.bottleneck = double_conv(widths[-1], bottleneck)
+            ups = [bottleneck] + widths[::-1][:-1]
+            self.decoders = nn.ModuleList(double_conv(u + s, s) for u, s in zip(ups, widths[::-1]))
+            self.output = nn.Conv2d(widths[0], 3, 3, padding=1)
+
+        def forward(self, buffers):
+            _, colour_inputs = irradiance_inputs(buffers)
+            x = torch.cat([colour_inputs, guide_features(buffers)], dim=1)
+            height, width = x.shape[2:]
+            multiple = 2 ** self.levels
+            pad_h, pad_w = (-height) % multiple, (-width) % multiple
+            if pad_h or pad_w:
+                x = F.pad(x, (0, pad_w, 0, pad_h), mode="replicate")
+            skips = []
+            for encoder in self.encoders:
+                x = encoder(x)
+                skips.append(x)
+                x = F.max_pool2d(x, 2)
+            x = self.bottleneck(x)
+            for decoder, skip in zip(self.decoders, reversed(skips)):
+                x = decoder(torch.cat([F.interpolate(x, scale_factor=2, mode="nearest"), skip], dim=1))
+            correction = self.output(x)[:, :, :height, :width]
+            log_irradiance = colour_inputs[:, :3] + correction
+            return remodulate(exp_radiance(log_irradiance), buffers["albedo"])
+
+    return SimpleNamespace(DenoisingAutoencoder=DenoisingAutoencoder)
 
 
-class DenoisingAutoencoder(nn.Module):
-    def __init__(self, widths=(32, 48, 64, 80), bottleneck: int = 96):
-        super().__init__()
-        widths = [int(w) for w in widths]
-        self.levels = len(widths)
-        ins = [INPUT_CHANNELS] + widths[:-1]
-        self.encoders = nn.ModuleList(_double_conv(i, o) for i, o in zip(ins, widths))
-        self.bottleneck = _double_conv(widths[-1], bottleneck)
-        ups = [bottleneck] + widths[::-1][:-1]
-        self.decoders = nn.ModuleList(_double_conv(u + s, s) for u, s in zip(ups, widths[::-1]))
-        self.output = nn.Conv2d(widths[0], 3, 3, padding=1)
-
-    def forward(self, buffers: dict[str, torch.Tensor]) -> torch.Tensor:
-        _, colour_inputs = irradiance_inputs(buffers)
-        x = torch.cat([colour_inputs, guide_features(buffers)], dim=1)
-        height, width = x.shape[2:]
-        multiple = 2 ** self.levels
-        pad_h, pad_w = (-height) % multiple, (-width) % multiple
-        if pad_h or pad_w:
-            x = F.pad(x, (0, pad_w, 0, pad_h), mode="replicate")
-        skips = []
-        for encoder in self.encoders:
-            x = encoder(x)
-            skips.append(x)
-            x = F.max_pool2d(x, 2)
-        x = self.bottleneck(x)
-        for decoder, skip in zip(self.decoders, reversed(skips)):
-            x = decoder(torch.cat([F.interpolate(x, scale_factor=2, mode="nearest"), skip], dim=1))
-        correction = self.output(x)[:, :, :height, :width]
-        log_irradiance = colour_inputs[:, :3] + correction
-        return remodulate(exp_radiance(log_irradiance), buffers["albedo"])
-
-
-def build_network(**arch) -> nn.Module:
-    return DenoisingAutoencoder(**arch)
+def build_network(**arch):
+    """The autoencoder (a ``torch.nn.Module``) of architecture ``arch`` (keys of NETWORK)."""
+    return network_classes().DenoisingAutoencoder(**arch)
 
 
 def denoise(buffers):
     """The autoencoder on the full buffer and on each half buffer."""
-    return denoise_with_network("optix_ae", buffers)
+    from mcbench.nn.inference import denoise_with_network
+
+    return denoise_with_network(sys.modules[__name__], buffers)

@@ -35,13 +35,9 @@ extraction); no temporal accumulation (single frames); batch 8 of 64² patches i
 
 from __future__ import annotations
 
-import torch
-import torch.nn.functional as F
-from torch import nn
-
-from mcbench.nn.features import demodulate, demodulated_variance, log_noise_level, normalized_depth, remodulate
-from mcbench.nn.inference import denoise_with_network
-from mcbench.nn.kernels import apply_shared_kernels, bound_importance
+import sys
+from functools import cache
+from types import SimpleNamespace
 
 KIND = "denoiser"
 LABEL = "WSKPN† (Fan et al. 2021; ours, trained on our scenes)"
@@ -54,8 +50,12 @@ TRAINING = {"steps": 5000, "batch_size": 8, "patch": 64, "learning_rate": 1e-3, 
 INPUT_CHANNELS = 11
 
 
-def network_inputs(buffers: dict[str, torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor]:
-    """(irradiance (N, 3, H, W), ImportanceNet input (N, 11, H, W))."""
+def network_inputs(buffers):
+    """(irradiance (N, 3, H, W), ImportanceNet input (N, 11, H, W)) from a dict of (N, C, H, W) tensors."""
+    import torch
+
+    from mcbench.nn.features import demodulate, demodulated_variance, log_noise_level, normalized_depth
+
     irradiance = demodulate(buffers["color"], buffers["albedo"])
     tone_mapped = (irradiance / (1.0 + irradiance)) ** (1.0 / 2.2)
     noise = log_noise_level(irradiance, demodulated_variance(buffers["variance"], buffers["albedo"]))
@@ -65,96 +65,111 @@ def network_inputs(buffers: dict[str, torch.Tensor]) -> tuple[torch.Tensor, torc
     return irradiance, inputs
 
 
-class RepVGGBlock(nn.Module):
-    """RepVGG block (Ding et al. 2021): Σ of 1×1, 3×3 and 5×5 convolution + batch-norm branches and,
-    when widths agree, a batch-norm identity branch; then ReLU (optional).
+@cache
+def network_classes() -> SimpleNamespace:
+    """The torch modules of WSKPN (RepVGGBlock, WeightSharingKPN), defined on first call so that
+    importing this module does not import torch."""
+    import torch
+    import torch.nn.functional as F
+    from torch import nn
 
-    :meth:`fuse` folds the (eval-mode) batch norms into the convolutions and sums the branches into
-    one 5×5 convolution with bias, exactly.
-    """
+    from mcbench.nn.features import remodulate
+    from mcbench.nn.kernels import apply_shared_kernels, bound_importance
 
-    def __init__(self, in_channels: int, out_channels: int, activation: bool = True):
-        super().__init__()
-        self.branches = nn.ModuleList(
-            nn.Sequential(nn.Conv2d(in_channels, out_channels, k, padding=k // 2, bias=False),
-                          nn.BatchNorm2d(out_channels)) for k in (1, 3, 5))
-        self.identity = nn.BatchNorm2d(out_channels) if in_channels == out_channels else None
-        self.activation = activation
-        self.fused: nn.Conv2d | None = None
+    class RepVGGBlock(nn.Module):
+        """RepVGG block (Ding et al. 2021): Σ of 1×1, 3×3 and 5×5 convolution + batch-norm branches
+        and, when widths agree, a batch-norm identity branch; then ReLU (optional).
 
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
-        if self.fused is not None:
-            y = self.fused(x)
-        else:
-            y = sum(branch(x) for branch in self.branches)
+        :meth:`fuse` folds the (eval-mode) batch norms into the convolutions and sums the branches
+        into one 5×5 convolution with bias, exactly.
+        """
+
+        def __init__(self, in_channels: int, out_channels: int, activation: bool = True):
+            super().__init__()
+            self.branches = nn.ModuleList(
+                nn.Sequential(nn.Conv2d(in_channels, out_channels, k, padding=k // 2, bias=False),
+                              nn.BatchNorm2d(out_channels)) for k in (1, 3, 5))
+            self.identity = nn.BatchNorm2d(out_channels) if in_channels == out_channels else None
+            self.activation = activation
+            self.fused = None       # the single 5×5 nn.Conv2d after fuse()
+
+        def forward(self, x):
+            if self.fused is not None:
+                y = self.fused(x)
+            else:
+                y = sum(branch(x) for branch in self.branches)
+                if self.identity is not None:
+                    y = y + self.identity(x)
+            return F.relu(y) if self.activation else y
+
+        @staticmethod
+        def _fold(weight, norm):
+            """Eval-mode ``norm(conv(x))`` as one convolution: scale the weight, shift the bias."""
+            scale = norm.weight.detach() / torch.sqrt(norm.running_var + norm.eps)
+            return weight * scale.view(-1, 1, 1, 1), norm.bias.detach() - norm.running_mean * scale
+
+        def fused_parameters(self):
+            """Weight (out, in, 5, 5) and bias (out,) of the single 5×5 convolution equal to the
+            eval-mode block before its activation."""
+            out_channels = self.branches[0][1].num_features
+            in_channels = self.branches[0][0].in_channels
+            weight = torch.zeros(out_channels, in_channels, 5, 5)
+            bias = torch.zeros(out_channels)
+            for conv, norm in self.branches:
+                pad = (5 - conv.kernel_size[0]) // 2
+                w, b = self._fold(F.pad(conv.weight.detach(), (pad, pad, pad, pad)), norm)
+                weight += w
+                bias += b
             if self.identity is not None:
-                y = y + self.identity(x)
-        return F.relu(y) if self.activation else y
+                eye = torch.zeros(out_channels, in_channels, 5, 5)
+                eye[torch.arange(out_channels), torch.arange(out_channels), 2, 2] = 1.0
+                w, b = self._fold(eye, self.identity)
+                weight += w
+                bias += b
+            return weight, bias
 
-    @staticmethod
-    def _fold(weight: torch.Tensor, norm: nn.BatchNorm2d) -> tuple[torch.Tensor, torch.Tensor]:
-        """Eval-mode ``norm(conv(x))`` as one convolution: scale the weight, shift the bias."""
-        scale = norm.weight.detach() / torch.sqrt(norm.running_var + norm.eps)
-        return weight * scale.view(-1, 1, 1, 1), norm.bias.detach() - norm.running_mean * scale
+        def fuse(self) -> None:
+            weight, bias = self.fused_parameters()
+            conv = nn.Conv2d(weight.shape[1], weight.shape[0], 5, padding=2)
+            conv.weight.data.copy_(weight)
+            conv.bias.data.copy_(bias)
+            self.fused = conv
 
-    def fused_parameters(self) -> tuple[torch.Tensor, torch.Tensor]:
-        """Weight (out, in, 5, 5) and bias (out,) of the single 5×5 convolution equal to the
-        eval-mode block before its activation."""
-        out_channels = self.branches[0][1].num_features
-        in_channels = self.branches[0][0].in_channels
-        weight = torch.zeros(out_channels, in_channels, 5, 5)
-        bias = torch.zeros(out_channels)
-        for conv, norm in self.branches:
-            pad = (5 - conv.kernel_size[0]) // 2
-            w, b = self._fold(F.pad(conv.weight.detach(), (pad, pad, pad, pad)), norm)
-            weight += w
-            bias += b
-        if self.identity is not None:
-            eye = torch.zeros(out_channels, in_channels, 5, 5)
-            eye[torch.arange(out_channels), torch.arange(out_channels), 2, 2] = 1.0
-            w, b = self._fold(eye, self.identity)
-            weight += w
-            bias += b
-        return weight, bias
+    class WeightSharingKPN(nn.Module):
+        def __init__(self, channels: int = 32, blocks: int = 6, kernel_sizes=(1, 3, 5, 7, 9, 11, 13)):
+            super().__init__()
+            self.kernel_sizes = [int(k) for k in kernel_sizes]
+            m = len(self.kernel_sizes)
+            widths = [INPUT_CHANNELS] + [channels] * (blocks - 1)
+            layers = [RepVGGBlock(widths[i], widths[i + 1]) for i in range(blocks - 1)]
+            layers.append(RepVGGBlock(widths[-1], 2 * m, activation=False))
+            self.importance_net = nn.Sequential(*layers)
 
-    def fuse(self) -> None:
-        weight, bias = self.fused_parameters()
-        conv = nn.Conv2d(weight.shape[1], weight.shape[0], 5, padding=2)
-        conv.weight.data.copy_(weight)
-        conv.bias.data.copy_(bias)
-        self.fused = conv
+        def fuse(self) -> None:
+            """Re-parameterise every RepVGG block into one 5×5 convolution (inference form)."""
+            for block in self.importance_net:
+                block.fuse()
 
+        def forward(self, buffers):
+            irradiance, inputs = network_inputs(buffers)
+            out = self.importance_net(inputs)
+            m = len(self.kernel_sizes)
+            importance = bound_importance(out[:, :m])
+            alpha = torch.softmax(out[:, m:], dim=1)                     # Eq. 5 fusion weights
+            fused = sum(alpha[:, i:i + 1] * apply_shared_kernels(irradiance, importance[:, i:i + 1], k)
+                        for i, k in enumerate(self.kernel_sizes))
+            return remodulate(fused, buffers["albedo"])
 
-class WeightSharingKPN(nn.Module):
-    def __init__(self, channels: int = 32, blocks: int = 6, kernel_sizes=(1, 3, 5, 7, 9, 11, 13)):
-        super().__init__()
-        self.kernel_sizes = [int(k) for k in kernel_sizes]
-        m = len(self.kernel_sizes)
-        widths = [INPUT_CHANNELS] + [channels] * (blocks - 1)
-        layers = [RepVGGBlock(widths[i], widths[i + 1]) for i in range(blocks - 1)]
-        layers.append(RepVGGBlock(widths[-1], 2 * m, activation=False))
-        self.importance_net = nn.Sequential(*layers)
-
-    def fuse(self) -> None:
-        """Re-parameterise every RepVGG block into one 5×5 convolution (inference form)."""
-        for block in self.importance_net:
-            block.fuse()
-
-    def forward(self, buffers: dict[str, torch.Tensor]) -> torch.Tensor:
-        irradiance, inputs = network_inputs(buffers)
-        out = self.importance_net(inputs)
-        m = len(self.kernel_sizes)
-        importance = bound_importance(out[:, :m])
-        alpha = torch.softmax(out[:, m:], dim=1)                     # Eq. 5 fusion weights
-        fused = sum(alpha[:, i:i + 1] * apply_shared_kernels(irradiance, importance[:, i:i + 1], k)
-                    for i, k in enumerate(self.kernel_sizes))
-        return remodulate(fused, buffers["albedo"])
+    return SimpleNamespace(RepVGGBlock=RepVGGBlock, WeightSharingKPN=WeightSharingKPN)
 
 
-def build_network(**arch) -> nn.Module:
-    return WeightSharingKPN(**arch)
+def build_network(**arch):
+    """WSKPN (a ``torch.nn.Module``) of architecture ``arch`` (keys of NETWORK)."""
+    return network_classes().WeightSharingKPN(**arch)
 
 
 def denoise(buffers):
     """WSKPN on the full buffer and on each half buffer."""
-    return denoise_with_network("wskpn", buffers)
+    from mcbench.nn.inference import denoise_with_network
+
+    return denoise_with_network(sys.modules[__name__], buffers)

@@ -1,48 +1,50 @@
 """Running a learned method's committed weights on render buffers.
 
-Weights load with ``torch.load(..., weights_only=True)`` (plain tensors and the architecture
-dict, no pickled code). Inference runs in float32 with
-``torch.use_deterministic_algorithms(True)`` under ``torch.inference_mode``; with the same
-thread count the same input gives bit-identical output (tested). A network that provides
-``fuse()`` (WSKPN's RepVGG blocks) is re-parameterised once after loading.
+Weights load through :func:`mcbench.weights.load_weights` (``torch.load(..., weights_only=True)``:
+plain tensors and the architecture dict, no pickled code; any failure names the file). Inference
+runs in float32 with ``torch.use_deterministic_algorithms(True)`` under ``torch.inference_mode``;
+with the same thread count the same input gives bit-identical output (tested). A network that
+provides ``fuse()`` (WSKPN's RepVGG blocks) is re-parameterised once after loading.
+
+Every function takes the learned method's *module* (``NETWORK``, ``TRAINING``,
+``build_network``), never its name: core code does not import ``methods``.
 """
 
 from __future__ import annotations
 
 from functools import lru_cache
+from pathlib import Path
+from types import ModuleType
 
 import numpy as np
 import torch
 
 from mcbench import BenchError
-from mcbench.buffers import Denoised, ImageBuffers, RenderBuffers
+from mcbench.buffers import Denoised, ImageBuffers, RenderBuffers, denoise_each_buffer
+from mcbench.weights import check_learned_method, load_weights, method_name, weights_path
 
 
-def load_network(name: str) -> torch.nn.Module:
-    """The network of ``methods/<name>.py`` with its weights (:func:`mcbench.nn.train.weights_path`),
-    in eval mode; cached per process and weights file."""
-    from mcbench.nn.train import weights_path
-
-    return _load_network(name, str(weights_path(name)))
+def load_network(module: ModuleType, path: str | Path | None = None) -> torch.nn.Module:
+    """The network of learned method ``module`` with the weights in ``path`` (default
+    :func:`mcbench.weights.weights_path` of its name), in eval mode; cached per process, module
+    and weights file (path and modification time)."""
+    check_learned_method(module)
+    path = Path(path) if path is not None else weights_path(method_name(module))
+    if not path.exists():
+        name = method_name(module)
+        raise BenchError(f"{path}: weights of '{name}' are missing; train them with "
+                         f"`snakemake --cores 2 train_{name}`")
+    return _cached_network(module, str(path), path.stat().st_mtime_ns)
 
 
 @lru_cache(maxsize=None)
-def _load_network(name: str, path: str) -> torch.nn.Module:
-    from pathlib import Path
-
-    from mcbench.nn.train import learned_method
-
-    module = learned_method(name)
-    path = Path(path)
-    if not path.exists():
-        raise BenchError(f"{path}: weights of '{name}' are missing; train them with "
-                         f"`snakemake --cores 2 train_{name}`")
+def _cached_network(module: ModuleType, path: str, mtime_ns: int) -> torch.nn.Module:
+    blob = load_weights(path)
     try:
-        blob = torch.load(path, weights_only=True, map_location="cpu")
         network = module.build_network(**blob["arch"])
         network.load_state_dict(blob["state_dict"])
     except (RuntimeError, KeyError, TypeError, ValueError) as exc:
-        raise BenchError(f"{path}: cannot load weights of '{name}' ({exc})") from exc
+        raise BenchError(f"{path}: cannot load weights of '{method_name(module)}' ({exc})") from exc
     network.eval()
     if hasattr(network, "fuse"):
         network.fuse()
@@ -72,9 +74,7 @@ def run_network(network: torch.nn.Module, image: ImageBuffers) -> np.ndarray:
     return np.ascontiguousarray(output[0].permute(1, 2, 0).numpy(), dtype=np.float32)
 
 
-def denoise_with_network(name: str, buffers: RenderBuffers) -> Denoised:
-    """Run the committed network ``name`` on the full buffer and on each half buffer."""
-    from methods import denoise_each_buffer
-
-    network = load_network(name)
+def denoise_with_network(module: ModuleType, buffers: RenderBuffers) -> Denoised:
+    """Run the committed network of learned method ``module`` on the full buffer and on each half buffer."""
+    network = load_network(module)
     return denoise_each_buffer(buffers, lambda image: run_network(network, image))

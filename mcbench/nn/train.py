@@ -1,10 +1,11 @@
 """One training loop for every learned method: seeded, resumable, checkpointed.
 
-``train_network(name, crop_files, weights_path, record_path, checkpoint_path)`` trains the
-network of ``methods/<name>.py`` on training crops (:mod:`mcbench.nn.data`) and writes
+``train_network(module, crop_files, weights_path, record_path, checkpoint_path)`` trains the
+network of a learned method module (``methods/<name>.py``, resolved from its name by the caller:
+core code never imports ``methods``) on training crops (:mod:`mcbench.nn.data`) and writes
 
-* ``weights_path`` -- ``{"arch": NETWORK, "state_dict": ...}``, loadable with
-  ``torch.load(..., weights_only=True)``;
+* ``weights_path`` -- ``{"arch": NETWORK, "state_dict": ...}`` (format and location:
+  :mod:`mcbench.weights`), loadable with ``torch.load(..., weights_only=True)``;
 * ``record_path`` -- JSON: data, settings, loss, validation loss (overall and per validation
   scene), loss history, wall time, machine, torch version.
 
@@ -22,7 +23,8 @@ Determinism and resuming: weights are initialised from ``torch.manual_seed(seed)
 generator seeded ``(seed, s)``; the learning rate is a function of the step. A checkpoint holds
 the network, critic and optimiser states and the history, written atomically every
 ``checkpoint_every`` steps, so a killed run resumes from its last checkpoint and continues with
-the batches an uninterrupted run would have drawn.
+the batches an uninterrupted run would have drawn. Checkpoints load through
+:func:`mcbench.weights.load_weights` (tensors only; a corrupt or hostile file is an error naming it).
 
 Adversarial training (MCGAN, Xu et al. 2019) uses a WGAN-GP critic (Gulrajani et al. 2017):
 critic loss ``D(fake) - D(real) + λ_GP (‖∇D(mix)‖ - 1)²``, generator loss
@@ -41,6 +43,8 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from types import ModuleType
+from typing import Callable
 
 import numpy as np
 import torch
@@ -49,6 +53,8 @@ from mcbench import BenchError
 from mcbench.io import read_json, write_json
 from mcbench.nn.data import CropSet, crop_paths, load_crops, sample_batch, validation_batches
 from mcbench.nn.losses import LOSSES
+from mcbench.weights import CHECKPOINT_KEYS, check_learned_method, load_weights, method_name, record_path, weights_path
+from mcbench.weights import is_learned_method  # noqa: F401  re-export for workflow/rules/common.smk (moving to mcbench.weights)
 
 DEFAULT_SETTINGS = {
     "steps": 4000,
@@ -66,42 +72,8 @@ DEFAULT_SETTINGS = {
     "gradient_penalty": 10.0,
     "critic_learning_rate": 1e-4,
 }
-COMMITTED_WEIGHTS = Path(__file__).resolve().parents[2] / "methods" / "weights"
 # Settings that may change between a run and its resumption without changing the result's meaning.
 RESUMABLE_CHANGES = ("threads", "validate_every", "checkpoint_every")
-
-
-def weights_dir() -> Path:
-    """Folder of learned weights: ``$MCBENCH_WEIGHTS_DIR`` if set (the workflow sets it from the
-    config key ``weights_dir``), else the committed ``methods/weights``."""
-    folder = os.environ.get("MCBENCH_WEIGHTS_DIR")
-    return Path(folder) if folder else COMMITTED_WEIGHTS
-
-
-def weights_path(name: str) -> Path:
-    """Weights of learned method ``name``: ``<weights_dir>/<name>.pt``."""
-    return weights_dir() / f"{name}.pt"
-
-
-def record_path(name: str) -> Path:
-    """Training record of learned method ``name``: ``<weights_dir>/<name>.json``."""
-    return weights_dir() / f"{name}.json"
-
-
-def learned_method(name: str):
-    """The module ``methods.<name>``, checked to be a learned method (``NETWORK``, ``TRAINING``,
-    ``build_network``)."""
-    from methods import load_method
-
-    module = load_method(name, kind="denoiser", config_key=f"network '{name}'")
-    for attribute in ("NETWORK", "TRAINING", "build_network"):
-        if not hasattr(module, attribute):
-            raise BenchError(f"methods/{name}.py is not a learned method: it lacks {attribute}")
-    return module
-
-
-def is_learned_method(module) -> bool:
-    return all(hasattr(module, a) for a in ("NETWORK", "TRAINING", "build_network"))
 
 
 def training_settings(module, overrides: dict | None = None) -> dict:
@@ -178,10 +150,12 @@ def _gradient_penalty(critic, real, fake, buffers, generator: torch.Generator) -
     return ((gradient.flatten(1).norm(dim=1) - 1.0) ** 2).mean()
 
 
-def train_network(name: str, crop_files: list[str | Path], weights_out: str | Path, record_out: str | Path,
-                  checkpoint: str | Path, overrides: dict | None = None, log=print) -> dict:
-    """Train ``methods/<name>.py``'s network (resuming from ``checkpoint`` if present); returns the record."""
-    module = learned_method(name)
+def train_network(module: ModuleType, crop_files: list[str | Path], weights_out: str | Path,
+                  record_out: str | Path, checkpoint: str | Path, overrides: dict | None = None,
+                  log=print) -> dict:
+    """Train the network of learned method ``module`` (resuming from ``checkpoint`` if present);
+    returns the record."""
+    name = method_name(check_learned_method(module))
     settings = training_settings(module, overrides)
     torch.set_num_threads(int(settings["threads"]))
     checkpoint = Path(checkpoint)
@@ -207,7 +181,8 @@ def train_network(name: str, crop_files: list[str | Path], weights_out: str | Pa
     loss_fn = LOSSES[settings["loss"]]
     history, start_step, elapsed = [], 0, 0.0
     if checkpoint.exists():
-        state = torch.load(checkpoint, weights_only=True, map_location="cpu")
+        required = CHECKPOINT_KEYS + (("critic", "critic_optimizer") if adversarial else ())
+        state = load_weights(checkpoint, required=required, what="checkpoint")
         fixed = {k: v for k, v in settings.items() if k not in RESUMABLE_CHANGES}
         if state["arch"] != module.NETWORK or {k: v for k, v in state["settings"].items()
                                                if k not in RESUMABLE_CHANGES} != fixed:
@@ -316,18 +291,21 @@ def train_network(name: str, crop_files: list[str | Path], weights_out: str | Pa
     return record
 
 
-def evaluate_committed(name: str, crops: CropSet) -> dict:
-    """Validation loss of the committed weights of ``name`` on ``crops`` (its validation scenes)."""
+def evaluate_committed(module: ModuleType, crops: CropSet) -> dict:
+    """Validation loss of the committed weights of learned method ``module`` on ``crops`` (its
+    validation scenes, or all of them when none is a validation scene)."""
     from mcbench.nn.inference import load_network
 
-    record = read_json(record_path(name))
-    network = load_network(name)
+    record = read_json(record_path(method_name(module)))
+    network = load_network(module)
     _, validation_set = crops.split()
     return evaluate(network, validation_set if len(validation_set) else crops, record["loss"])
 
 
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m mcbench.nn.train",
+def main(argv: list[str] | None = None, *, load_method: Callable[[str], ModuleType]) -> int:
+    """Command line: ``train <name>`` or ``evaluate <name>``; ``load_method`` resolves a method
+    name to its module (the caller's, e.g. ``methods.load_method``: core never imports ``methods``)."""
+    parser = argparse.ArgumentParser(prog="mcbench.nn.train",
                                      description="Train a learned denoiser, or evaluate its committed weights.")
     parser.add_argument("command", choices=["train", "evaluate"])
     parser.add_argument("name", help="method module in methods/ (kpcn, mcgan, optix_ae, wskpn, ...)")
@@ -336,14 +314,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--checkpoint", default=None)
     args = parser.parse_args(argv)
     try:
+        module = check_learned_method(load_method(args.name))
         files = crop_paths(args.data)
         if args.command == "train":
             overrides = {"steps": args.steps} if args.steps else {}
             checkpoint = args.checkpoint or f"results/training/checkpoints/{args.name}.ckpt"
-            train_network(args.name, files, weights_path(args.name), record_path(args.name), checkpoint,
+            train_network(module, files, weights_path(args.name), record_path(args.name), checkpoint,
                           overrides, log=lambda m: print(m, file=sys.stderr, flush=True))
         else:
-            result = evaluate_committed(args.name, load_crops(files))
+            result = evaluate_committed(module, load_crops(files))
             recorded = read_json(record_path(args.name))["validation"]["loss"]
             print(f"{args.name}: validation loss {result['loss']:.6f} (recorded {recorded:.6f}, "
                   f"ratio {result['loss'] / recorded:.4f}), relMSE {result['relmse']:.6f}")
@@ -351,7 +330,3 @@ def main(argv: list[str] | None = None) -> int:
         print(f"mcbench.nn.train: {exc}", file=sys.stderr)
         return 1
     return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -1,0 +1,109 @@
+"""Where the learned methods' weights live, what their files hold, and loading them safely.
+
+Torch-free at import (parsing the DAG imports this module): :func:`load_weights` imports torch
+only when it is called.
+
+* Folder: ``$MCBENCH_WEIGHTS_DIR`` when set (the workflow sets it from the config key
+  ``weights_dir``), else the committed ``methods/weights`` of this checkout.
+* ``<name>.pt`` -- a ``torch.save`` of ``{"arch": NETWORK, "state_dict": network.state_dict()}``
+  (:data:`WEIGHTS_KEYS`): plain tensors and containers only, so it loads with
+  ``torch.load(..., weights_only=True)``, which never runs code from the file.
+* ``<name>.json`` -- the training record (data, settings, losses, machine; see
+  :mod:`mcbench.nn.train`).
+* Training checkpoints use the same format with the keys :data:`CHECKPOINT_KEYS` (plus the
+  critic's states for adversarial training).
+
+A learned method is a method module that declares ``NETWORK`` (architecture hyperparameters),
+``TRAINING`` (training settings) and ``build_network(**NETWORK)`` (:data:`LEARNED_ATTRIBUTES`).
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from pathlib import Path
+from types import ModuleType
+
+from mcbench import BenchError
+
+WEIGHTS_DIR_ENV = "MCBENCH_WEIGHTS_DIR"
+COMMITTED_WEIGHTS = Path(__file__).resolve().parents[1] / "methods" / "weights"
+WEIGHTS_SUFFIX = ".pt"
+RECORD_SUFFIX = ".json"
+WEIGHTS_KEYS = ("arch", "state_dict")
+CHECKPOINT_KEYS = ("arch", "settings", "step", "seconds", "network", "optimizer", "history")
+LEARNED_ATTRIBUTES = ("NETWORK", "TRAINING", "build_network")
+
+# Sentences of torch's load errors that advise loading unsafely (or filing a torch issue); they
+# are dropped from our messages, which must never suggest running code from a weights file.
+_UNSAFE_ADVICE = ("weights_only", "weights only", "trusted source", "file an issue", "safe_globals",
+                  "documentation of torch.load", "allowlist")
+
+
+def weights_dir() -> Path:
+    """Folder of learned weights: ``$MCBENCH_WEIGHTS_DIR`` if set, else the committed ``methods/weights``."""
+    folder = os.environ.get(WEIGHTS_DIR_ENV)
+    return Path(folder) if folder else COMMITTED_WEIGHTS
+
+
+def weights_path(name: str) -> Path:
+    """Weights of learned method ``name``: ``<weights_dir>/<name>.pt``."""
+    return weights_dir() / f"{name}{WEIGHTS_SUFFIX}"
+
+
+def record_path(name: str) -> Path:
+    """Training record of learned method ``name``: ``<weights_dir>/<name>.json``."""
+    return weights_dir() / f"{name}{RECORD_SUFFIX}"
+
+
+def method_name(module: ModuleType) -> str:
+    """The registry name of a method module: the last part of its module name (``methods.kpcn`` -> ``kpcn``)."""
+    return module.__name__.rsplit(".", 1)[-1]
+
+
+def is_learned_method(module: ModuleType) -> bool:
+    """Whether ``module`` declares every one of :data:`LEARNED_ATTRIBUTES` (an attribute check, imports nothing)."""
+    return all(hasattr(module, attribute) for attribute in LEARNED_ATTRIBUTES)
+
+
+def check_learned_method(module: ModuleType) -> ModuleType:
+    """``module`` itself if it is a learned method, else a :class:`BenchError` naming its file and
+    the first attribute it lacks."""
+    for attribute in LEARNED_ATTRIBUTES:
+        if not hasattr(module, attribute):
+            raise BenchError(f"methods/{method_name(module)}.py is not a learned method: it lacks {attribute}")
+    return module
+
+
+def safe_failure_reason(error: BaseException) -> str:
+    """``error``'s type and message without the sentences of torch's advice to load unsafely."""
+    text = str(error).replace("WeightsUnpickler error:", "")
+    sentences = (s.strip() for s in re.split(r"(?<=[.!?])\s+|\n+", text))
+    kept = [s for s in sentences if s and not any(a in s.lower() for a in _UNSAFE_ADVICE)]
+    return type(error).__name__ + (f": {' '.join(kept)}" if kept else "")
+
+
+def load_weights(path: str | Path, *, required: tuple[str, ...] = WEIGHTS_KEYS, what: str = "weights") -> dict:
+    """The dict saved in ``path`` (weights or a checkpoint), loaded on the CPU with
+    ``torch.load(..., weights_only=True)``.
+
+    Any failure -- a missing, empty, truncated, garbage or hostile file (one that would run code
+    when unpickled), or a dict without the keys ``required`` -- is a :class:`BenchError` that names
+    the file (``what`` says what it should have been) and never advises loading it unsafely.
+    """
+    import torch
+
+    path = Path(path)
+    if not path.is_file():
+        raise BenchError(f"{path}: {what} file is missing")
+    try:
+        blob = torch.load(path, weights_only=True, map_location="cpu")
+    except Exception as error:  # torch raises UnpicklingError, RuntimeError, EOFError, OSError, ...
+        raise BenchError(f"{path}: cannot load {what} ({safe_failure_reason(error)}); the file is corrupt "
+                         f"or not a tensors-only {what} file: restore it or retrain") from None
+    if not isinstance(blob, dict):
+        raise BenchError(f"{path}: {what} file holds a {type(blob).__name__}, not a dict with keys {list(required)}")
+    missing = [key for key in required if key not in blob]
+    if missing:
+        raise BenchError(f"{path}: {what} file lacks the key(s) {missing}")
+    return blob
