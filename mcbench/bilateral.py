@@ -24,12 +24,14 @@ always >= 1, so the output is finite for finite inputs.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, prange
+from numba import prange
+
+from mcbench.jit import cached_njit
 
 VARIANCE_FLOOR = 1e-20
 
 
-@njit(parallel=True, cache=True)
+@cached_njit(parallel=True)
 def _cbf_kernel(values, guide, guide_var, use_guide, inv_two_sg2, feats, inv_two_ss2, radius):
     """values (H, W, K), guide/guide_var (H, W, C), feats (H, W, F) pre-scaled so that the
     feature term is exp(-sum_f (f_p - f_q)^2). Returns (H, W, K) float64."""

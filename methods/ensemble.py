@@ -58,9 +58,10 @@ simplex vectors stays on the simplex.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, prange
+from numba import prange
 
 from mcbench.bilateral import cross_bilateral_filter
+from mcbench.jit import cached_njit
 from mcbench.buffers import Denoised, RenderBuffers
 
 KIND = "combiner"
@@ -83,21 +84,21 @@ _S11 = np.uint64(11)
 _INV53 = 1.0 / 9007199254740992.0  # 2^-53
 
 
-@njit(cache=True, inline="always")
+@cached_njit(inline="always")
 def _mix64(z):
     z = (z ^ (z >> _S30)) * _M1
     z = (z ^ (z >> _S27)) * _M2
     return z ^ (z >> _S31)
 
 
-@njit(cache=True, inline="always")
+@cached_njit(inline="always")
 def _next(state):
     """splitmix64 step: returns (new_state, 64 random bits)."""
     state = state + _GOLDEN
     return state, _mix64(state)
 
 
-@njit(cache=True, inline="always")
+@cached_njit(inline="always")
 def _uniform(bits):
     """Uniform double in [0, 1) from 64 random bits."""
     return float(bits >> _S11) * _INV53
@@ -123,7 +124,7 @@ def objective(weights, color_a, color_b, denoised_a, denoised_b) -> np.ndarray:
 # ---------------------------------------------------------------------------------------
 # iterative solver (Sec. 4.1)
 # ---------------------------------------------------------------------------------------
-@njit(cache=True)
+@cached_njit()
 def _clip_normalise(w):
     n = w.shape[0]
     total = 0.0
@@ -139,7 +140,7 @@ def _clip_normalise(w):
             w[j] = 1.0 / n
 
 
-@njit(cache=True)
+@cached_njit()
 def _iterative_one(ya, yb, xa, xb, w, order, state, max_iterations, tolerance):
     n = ya.shape[0]
     # random start in [0, 1]^N, normalised (Sec. 4.1.2)
@@ -206,7 +207,7 @@ def _iterative_one(ya, yb, xa, xb, w, order, state, max_iterations, tolerance):
     return it
 
 
-@njit(parallel=True, cache=True)
+@cached_njit(parallel=True)
 def _iterative_kernel(ya, yb, xa, xb, seed_state, max_iterations, tolerance):
     """ya, yb: (P, N); xa, xb: (P,). Returns weights (P, N) and iteration counts (P,)."""
     P, n = ya.shape
@@ -235,7 +236,7 @@ _RES_TOL = 1e-8      # residual |sum w a - p*| in units of the scale
 _EIG_TOL = 1e-12     # pseudo-inverse threshold relative to trace(U)
 
 
-@njit(cache=True)
+@cached_njit()
 def _min_norm_on_support(u, v, idx, m, px, py, wtmp):
     """Equality-constrained min-norm weights on support idx[:m] (others 0).
 
@@ -317,7 +318,7 @@ def _min_norm_on_support(u, v, idx, m, px, py, wtmp):
     return ok, norm2
 
 
-@njit(cache=True)
+@cached_njit()
 def _triangle_witness(u, v, bu, bv):
     """A triangle of points containing b (Caratheodory) and b's barycentric coordinates."""
     n = u.shape[0]
@@ -335,7 +336,7 @@ def _triangle_witness(u, v, bu, bv):
     return False, 0, 0, 0, 0.0, 0.0, 0.0
 
 
-@njit(cache=True)
+@cached_njit()
 def _exact_one(ya, yb, xa, xb, w, u, v, cand, idx, wtmp, wbest):
     """Minimum-norm minimiser of Eq. 13 for one pixel-channel; writes w (N,).
 
@@ -489,7 +490,7 @@ def _exact_one(ya, yb, xa, xb, w, u, v, cand, idx, wtmp, wbest):
     return 3
 
 
-@njit(parallel=True, cache=True)
+@cached_njit(parallel=True)
 def _exact_kernel(ya, yb, xa, xb):
     """ya, yb: (P, N); xa, xb: (P,). Returns weights (P, N) and path codes (P,)."""
     P, n = ya.shape

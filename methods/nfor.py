@@ -65,9 +65,10 @@ of the halves (``second_pass_variance_scale`` multiplies it; Tungsten effectivel
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, prange
+from numba import prange
 
 from mcbench.buffers import Denoised, RenderBuffers
+from mcbench.jit import cached_njit
 from mcbench.nlmeans import nl_means_filter
 
 KIND = "denoiser"
@@ -92,7 +93,7 @@ SECOND_PASS_K = 1.0                                              # Sec. 5.4
 # Numba kernels
 # ---------------------------------------------------------------------------------------------
 
-@njit(cache=True)
+@cached_njit()
 def _clamp(i, n):
     if i < 0:
         return 0
@@ -101,7 +102,7 @@ def _clamp(i, n):
     return i
 
 
-@njit(cache=True)
+@cached_njit()
 def _weights_block(guide, variance, y0, y1, radius, patch, k, alpha, eps, clamp_d):
     """NL-means weights w(p, p + o) for the pixels p in rows [y0, y1) and every window offset.
 
@@ -163,7 +164,7 @@ def _weights_block(guide, variance, y0, y1, radius, patch, k, alpha, eps, clamp_
     return out
 
 
-@njit(cache=True)
+@cached_njit()
 def _solve_normal_equations(a, b, d, nch, tol, beta):
     """Solve a beta = b (a: (d, d) SPD-ish, b: (d, nch)) by Cholesky on the diagonally scaled
     matrix, dropping columns whose pivot is below ``tol`` (their coefficients are 0)."""
@@ -219,7 +220,7 @@ def _solve_normal_equations(a, b, d, nch, tol, beta):
     return keep[0]
 
 
-@njit(cache=True, parallel=True)
+@cached_njit(parallel=True)
 def _collaborative_regression(color, guide, guide_variance, features, radius, patch, k, alpha, eps,
                               clamp_d, tol, chunk):
     """Collaborative first-order regression (Bitterli et al. 2016 Sec. 5.2).

@@ -67,10 +67,11 @@ depth are used; patch distances at image borders average only the in-image patch
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, prange
+from numba import prange
 from scipy.ndimage import uniform_filter
 
 from mcbench.buffers import Denoised, RenderBuffers
+from mcbench.jit import cached_njit
 from mcbench.nlmeans import nl_means_filter
 
 KIND = "denoiser"
@@ -93,7 +94,7 @@ TILE = 128
 
 # ----------------------------------------------------------------------------- kernels
 
-@njit(cache=True, parallel=True)
+@cached_njit(parallel=True)
 def _pair_maps(g, gv, dy, dx, kc, alpha, eps, m, valid, grad):
     """For offset o = (dy, dx): m(x) = mean_i Delta_i(x, x+o), valid(x), and per channel
     grad_i(x) = 2 (g_i(x) - g_i(x+o)) / den_i (derivative of Delta_i wrt g_i(x))."""
@@ -120,7 +121,7 @@ def _pair_maps(g, gv, dy, dx, kc, alpha, eps, m, valid, grad):
             valid[y, x] = 1.0
 
 
-@njit(cache=True, parallel=True)
+@cached_njit(parallel=True)
 def _integral(a, out):
     """out[y+1, x+1] = sum of a[:y+1, :x+1] (float64)."""
     h, w = a.shape
@@ -134,12 +135,12 @@ def _integral(a, out):
             out[y + 1, x + 1] += out[y, x + 1]
 
 
-@njit(cache=True)
+@cached_njit()
 def _box(ii, y0, x0, y1, x1):
     return ii[y1 + 1, x1 + 1] - ii[y0, x1 + 1] - ii[y1 + 1, x0] + ii[y0, x0]
 
 
-@njit(cache=True, parallel=True)
+@cached_njit(parallel=True)
 def _candidates_kernel(y_img, v_img, g, gv, feat, fvar, fnorm, fstart, radius, patch_radii,
                        k_colors, self_guided, alpha, eps):
     """Joint-weight filters of y_img for every candidate; see :func:`candidate_filters`."""
