@@ -1,11 +1,10 @@
 """Tests of the ensemble combiner (Zheng et al. 2021) and the cross-bilateral filter,
 against independent truth: a general-purpose QP (qpsolvers/quadprog), the paper's
-two-denoiser closed form (Eq. 29, re-derived here), Monte Carlo of Eq. 16 and a
-brute-force bilateral filter."""
+two-denoiser closed form (Eq. 29, re-derived here), Monte Carlo of Eq. 16 through the
+project's objective, the iterative solver's stopping rule checked on its own trajectory, and
+brute-force loops of the bilateral filter and of the weight filter (Eq. 32-34)."""
 
 from __future__ import annotations
-
-import itertools
 
 import numba
 import numpy as np
@@ -13,7 +12,7 @@ import pytest
 import qpsolvers
 
 from mcbench.bilateral import cross_bilateral_filter
-from mcbench.buffers import Denoised, RenderBuffers
+from mcbench.buffers import Denoised
 from methods import ensemble as E
 
 
@@ -193,19 +192,108 @@ def test_exact_permutation_equivariant():
 # ---------------------------------------------------------------------------------------
 # iterative solver
 # ---------------------------------------------------------------------------------------
-def test_iterative_never_below_exact_and_close():
-    rng = np.random.default_rng(2)
-    n, m = 5, 2000
+def random_plane_problems(seed=2, n=5, m=2000):
+    """m random problems with n points in general position, b mostly outside their hull."""
+    rng = np.random.default_rng(seed)
     pts = rng.normal(size=(m, n, 2))
     bs = rng.normal(size=(m, 2)) * 1.5
-    xa, xb, ya, yb = as_problems(pts, bs)
+    return as_problems(pts, bs)
+
+
+def biased_denoiser_problems(seed=13, n=4, h=64, w=64):
+    """Realistic problems: n biased, slightly noisy denoisers of a smooth image whose noisy
+    halves have std 0.2. Returns color_a, color_b (H, W, 3), denoised_a, denoised_b
+    (n, H, W, 3)."""
+    rng = np.random.default_rng(seed)
+    yy, xx = np.mgrid[0:h, 0:w] / max(h, w)
+    truth = np.stack([0.5 + 0.4 * np.sin(3 * xx), 0.3 + 0.2 * yy, 0.2 + xx * yy], -1)
+    xa = truth + rng.normal(0, 0.2, truth.shape)
+    xb = truth + rng.normal(0, 0.2, truth.shape)
+    bias = rng.normal(0, 0.05, (n, 1, 1, 3))
+    ya = truth + bias + rng.normal(0, 0.03, (n, h, w, 3))
+    yb = truth + bias + rng.normal(0, 0.03, (n, h, w, 3))
+    return xa, xb, ya, yb
+
+
+def gap_above_optimum(weights, xa, xb, ya, yb):
+    """Objective of ``weights`` minus the exact solver's optimum (itself checked against
+    quadprog above), in units of the pixel-channel's scale s^2 = max(|x|, |y|)^2."""
+    optimum = E.objective(E.solve_weights(xa, xb, ya, yb, solver="exact"), xa, xb, ya, yb)
+    scale = np.maximum(np.maximum(np.abs(xa), np.abs(xb)),
+                       np.maximum(np.abs(ya).max(axis=0), np.abs(yb).max(axis=0)))
+    return (E.objective(weights, xa, xb, ya, yb) - optimum) / np.maximum(scale, 1e-30) ** 2
+
+
+def test_iterative_never_below_exact():
+    xa, xb, ya, yb = random_plane_problems()
     wi = E.solve_weights(xa, xb, ya, yb, solver="iterative")
-    we = E.solve_weights(xa, xb, ya, yb, solver="exact")
     assert_simplex(wi)
-    oi = E.objective(wi, xa, xb, ya, yb)
-    oe = E.objective(we, xa, xb, ya, yb)
-    assert (oi - oe).min() >= -1e-12
-    assert np.median(oi - oe) < 1e-6  # converges on most pixel-channels
+    assert gap_above_optimum(wi, xa, xb, ya, yb).min() >= -1e-12
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "the iterative solver (Sec. 4.1, 1024 iterations) leaves many pixel-channels above the "
+    "optimum of Eq. 13: measured 67 % within 1e-6 s^2 on the random problems and 86 % on the "
+    "biased-denoiser problems (15 % of them stop at the 1024 limit); with N vertex-only moves "
+    "(Eq. 31) the weights of denoisers outside the optimal face shrink only slowly"))
+@pytest.mark.parametrize("problems", [random_plane_problems, biased_denoiser_problems])
+def test_iterative_reaches_the_optimum_on_99_percent(problems):
+    """At least 99 % of pixel-channels end within 1e-6 s^2 of the exact optimum of Eq. 13."""
+    xa, xb, ya, yb = problems()
+    gap = gap_above_optimum(E.solve_weights(xa, xb, ya, yb, solver="iterative"), xa, xb, ya, yb)
+    share = float(np.mean(gap <= 1e-6))
+    assert share >= 0.99, share
+
+
+def test_iterative_stopping_rule_on_its_trajectory():
+    """The solver stops after the first whole cycle of N iterations in which no single update
+    changed any weight by more than ``tolerance``, or at ``max_iterations``.
+
+    Independent check: with the counter-based generator, ``max_iterations=t`` returns the
+    weights w(t) after t iterations of the same trajectory, so every update's change is
+    observable (except the first, from the hidden random start). The iteration counts
+    returned with ``return_info`` must be where the rule says to stop."""
+    n, limit, tolerance = 3, 45, 1e-4
+    xa, xb, ya, yb = random_plane_problems(seed=21, n=n, m=300)
+    kw = dict(solver="iterative", seed=5, tolerance=tolerance)
+    final, counts = E.solve_weights(xa, xb, ya, yb, max_iterations=limit, return_info=True, **kw)
+    trajectory = np.stack([E.solve_weights(xa, xb, ya, yb, max_iterations=t, **kw)
+                           for t in range(1, limit + 1)])          # (limit, n, 1, m, 1)
+    step_change = np.abs(np.diff(trajectory, axis=0)).max(axis=1)  # change of update t+2
+    counts = counts.ravel()
+    step_change = step_change.reshape(limit - 1, -1)
+    assert set(np.unique(counts)) <= set(range(n, limit + 1, n))
+    assert 0.1 < np.mean(counts < limit) < 0.9, "the case needs converged and unconverged pixels"
+    for p, k in enumerate(counts):
+        np.testing.assert_array_equal(trajectory[k - 1][:, 0, p], final[:, 0, p])
+        cycles = [step_change[max(0, c * n - 1):(c + 1) * n - 1, p].max()
+                  for c in range(k // n)]                          # updates c*n+1 .. (c+1)*n
+        # every cycle before the last moved a weight by more than the tolerance (the first
+        # cycle's first update is hidden, so only later cycles are checked) ...
+        assert all(change > tolerance for change in cycles[1:-1]), (p, k, cycles)
+        # ... and the last one did not, unless the limit stopped it
+        if k < limit:
+            assert cycles[-1] <= tolerance, (p, k, cycles)
+
+
+def test_iterative_stops_at_the_paper_limit_of_1024():
+    """Pixel-channels that do not converge stop at exactly 1024 iterations by default (the
+    paper's limit); a different limit, even mid-cycle, is respected exactly; converged pixels
+    stop at the same weights whatever the limit, unconverged ones move on with more."""
+    xa, xb, ya, yb = biased_denoiser_problems(n=4, h=24, w=24)
+    w_default, counts = E.solve_weights(xa, xb, ya, yb, return_info=True)
+    assert counts.max() == 1024
+    unconverged = counts == 1024
+    assert 0.02 < unconverged.mean() < 0.9
+    assert np.all(counts[~unconverged] % 4 == 0)
+    w_1001, counts_1001 = E.solve_weights(xa, xb, ya, yb, max_iterations=1001, return_info=True)
+    assert counts_1001.max() == 1001 and np.all(counts_1001[unconverged] == 1001)
+    w_more, counts_more = E.solve_weights(xa, xb, ya, yb, max_iterations=4096, return_info=True)
+    np.testing.assert_array_equal(counts_more[~unconverged], counts[~unconverged])
+    np.testing.assert_array_equal(w_more[:, ~unconverged], w_default[:, ~unconverged])
+    assert np.all(counts_more[unconverged] > 1024)
+    moved = np.abs(w_more - w_default).max(axis=0)[unconverged]
+    assert np.all(moved > 0.0)
 
 
 def test_iterative_two_denoisers_equals_closed_form():
@@ -250,38 +338,74 @@ def test_iterative_deterministic_and_seeded():
 # ---------------------------------------------------------------------------------------
 # Eq. 16: <M> is an unbiased estimator of M^half
 # ---------------------------------------------------------------------------------------
+def estimated_mse_matrix(color_a, color_b, denoised_a, denoised_b):
+    """<M> per pixel-channel recovered from the project's E.objective by polarisation: on the
+    simplex L(w) = w^T <M> w, so <M>_ii = L(e_i) and <M>_ij = 2 L((e_i + e_j) / 2)
+    - (<M>_ii + <M>_jj) / 2. denoised_*: (N, H, W, C). Returns (N, N, H, W, C)."""
+    n = denoised_a.shape[0]
+
+    def loss(w):
+        weights = np.broadcast_to(np.asarray(w, np.float64)[:, None, None, None], denoised_a.shape)
+        return E.objective(weights, color_a, color_b, denoised_a, denoised_b)
+
+    eye = np.eye(n)
+    diag = [loss(eye[i]) for i in range(n)]
+    return np.stack([np.stack([diag[i] if i == j else
+                               2 * loss((eye[i] + eye[j]) / 2) - (diag[i] + diag[j]) / 2
+                               for j in range(n)]) for i in range(n)])
+
+
+def simplex_minimiser(matrix):
+    """argmin w^T M w over the simplex by quadprog (ridge 1e-12 for definiteness)."""
+    n = matrix.shape[0]
+    w = qpsolvers.solve_qp(matrix + 1e-12 * np.eye(n), np.zeros(n), G=-np.eye(n), h=np.zeros(n),
+                           A=np.ones((1, n)), b=np.array([1.0]), solver="quadprog")
+    assert w is not None
+    return w
+
+
 def test_dual_buffer_estimate_unbiased_eq16():
-    """x^A, x^B ~ N(mu, sigma^2) iid; y_i^h = a_i x^h + c_i + s_i eps_i^h + r eta^h (eta shared
-    by the denoisers of one half, so y_i^A and y_j^A are correlated but independent of half
-    B). M^half_ij = (m_i - mu)(m_j - mu) + Cov[y_i^A, y_j^A] with m_i = a_i mu + c_i
-    (Eq. 15); the Monte Carlo mean of <M> (Eq. 11-12) must match within 5 standard errors."""
+    """Eq. 16: the project's objective (E.objective, Eq. 11-13 via Eq. 25) is an unbiased
+    estimate of w^T M^half w. Monte Carlo over T pixels of one scene: x^A, x^B ~ N(mu, sigma^2)
+    iid; y_i^h = a_i x^h + c_i + s_i eps_i^h + r eta^h (eta shared by the denoisers of one half,
+    so y_i^A and y_j^A are correlated but independent of half B). Truth (Eq. 15):
+    M^half_ij = (m_i - mu)(m_j - mu) + Cov[y_i^A, y_j^A] with m_i = a_i mu + c_i. The mean of
+    <M> must match within 5 standard errors, its simplex minimiser must match the true one, and
+    two biased variants (x^A in place of x^B; half-A outputs that saw x^B, against Eq. 10)
+    must be detected."""
     rng = np.random.default_rng(12)
     mu, sigma, r = 0.7, 0.4, 0.1
-    a = np.array([0.9, 0.5, 0.2])
-    c = np.array([0.05, 0.3, 0.5])
-    s = np.array([0.05, 0.1, 0.02])
-    T = 400_000
-    xA = rng.normal(mu, sigma, T)
-    xB = rng.normal(mu, sigma, T)
+    a = np.array([0.3, 0.35, 0.25])
+    c = np.array([0.39, 0.535, 0.545])   # biases m_i - mu = -0.1, 0.08, 0.02
+    s = np.array([0.1, 0.12, 0.1])
+    T = 200_000
+    xA = rng.normal(mu, sigma, (1, T, 1))
+    xB = rng.normal(mu, sigma, (1, T, 1))
 
     def denoise(x):
-        eta = rng.normal(size=T)
-        return a[:, None] * x + c[:, None] + s[:, None] * rng.normal(size=(3, T)) + r * eta
+        eta = rng.normal(size=x.shape)
+        return (a[:, None, None, None] * x + c[:, None, None, None]
+                + s[:, None, None, None] * rng.normal(size=(3,) + x.shape) + r * eta)
 
     yA, yB = denoise(xA), denoise(xB)
-    MA = xA * xB - xB * (yA[:, None] + yA[None, :]) + yA[:, None] * yA[None, :]
-    MB = xA * xB - xA * (yB[:, None] + yB[None, :]) + yB[:, None] * yB[None, :]
-    M = 0.5 * (MA + MB)  # (3, 3, T)
+    m = a * mu + c
+    M_half = np.outer(m - mu, m - mu) + np.outer(a, a) * sigma ** 2 + np.diag(s ** 2) + r ** 2
+
+    M = estimated_mse_matrix(xA, xB, yA, yB).reshape(3, 3, T)
     mean = M.mean(axis=2)
     se = M.std(axis=2, ddof=1) / np.sqrt(T)
-    m = a * mu + c
-    cov = np.outer(a, a) * sigma ** 2 + np.diag(s ** 2) + r ** 2
-    M_half = np.outer(m - mu, m - mu) + cov
     z = np.abs(mean - M_half) / se
     assert z.max() < 5, (mean, M_half, z)
-    # and the estimate is not trivially close: a biased variant (using x^A for both) fails
-    biased = (xA * xA - xA * (yA[:, None] + yA[None, :]) + yA[:, None] * yA[None, :]).mean(2)
-    assert np.abs(biased - M_half).max() / se.max() > 20
+    # the minimiser of the estimated objective is the minimiser of the true half-buffer MSE
+    w_true = simplex_minimiser(M_half)
+    assert 0.05 < w_true.min() < w_true.max() < 0.95  # an interior optimum: a real test
+    np.testing.assert_allclose(simplex_minimiser(mean), w_true, atol=0.02)
+    # the test has power: biased estimates of M^half are rejected
+    same_half = estimated_mse_matrix(xA, xA, yA, yA).reshape(3, 3, T).mean(axis=2)
+    assert (np.abs(same_half - M_half) / se).max() > 20
+    yA_saw_B = denoise((xA + xB) / 2)
+    leaked = estimated_mse_matrix(xA, xB, yA_saw_B, yB).reshape(3, 3, T).mean(axis=2)
+    assert (np.abs(leaked - M_half) / se).max() > 20
 
 
 # ---------------------------------------------------------------------------------------
@@ -329,31 +453,29 @@ def test_nonfinite_inputs_raise_with_count():
 # ---------------------------------------------------------------------------------------
 # weight filter and combine
 # ---------------------------------------------------------------------------------------
-def synthetic_scene(rng, H=20, W=24, n=3, spp=8):
+def synthetic_scene(build, rng, H=20, W=24, n=3, spp=8):
+    """Noisy halves of std 0.2 around a smooth image (``build`` is the make_render_buffers
+    fixture) and n base outputs with a per-denoiser colour bias and a little noise."""
     yy, xx = np.mgrid[0:H, 0:W] / max(H, W)
     truth = np.stack([0.5 + 0.4 * np.sin(3 * xx), 0.3 + 0.2 * yy, 0.2 + xx * yy], -1)
-    noise = 0.2
-    xa = truth + rng.normal(0, noise, truth.shape)
-    xb = truth + rng.normal(0, noise, truth.shape)
+    albedo = np.clip(truth, 0, 1)
+    normal = np.dstack([np.zeros((H, W)), np.zeros((H, W)), np.ones((H, W))])
+    normal[:, W // 2:] = [1.0, 0.0, 0.0]
+    buffers = build(truth, albedo=albedo, normal=normal, half_std=0.2, seed=rng, spp=spp)
+    xa = buffers.color_a.astype(np.float64)
+    xb = buffers.color_b.astype(np.float64)
     bias = rng.normal(0, 0.05, (n, 1, 1, 3))
     ya = truth + bias + rng.normal(0, 0.03, (n, H, W, 3))
     yb = truth + bias + rng.normal(0, 0.03, (n, H, W, 3))
     yf = truth + bias + rng.normal(0, 0.02, (n, H, W, 3))
-    albedo = np.clip(truth, 0, 1)
-    normal = np.dstack([np.zeros((H, W)), np.zeros((H, W)), np.ones((H, W))])
-    normal[:, W // 2:] = [1.0, 0.0, 0.0]
-    layers = {"color": ((xa + xb) / 2).astype(np.float32), "color_a": xa.astype(np.float32),
-              "color_b": xb.astype(np.float32), "albedo": albedo.astype(np.float32),
-              "normal": normal.astype(np.float32)}
-    buffers = RenderBuffers(layers=layers, spp=spp)
     inputs = [Denoised(full=yf[i].astype(np.float32), a=ya[i].astype(np.float32),
                        b=yb[i].astype(np.float32)) for i in range(n)]
     return buffers, inputs, (xa, xb, ya, yb, yf, albedo, normal)
 
 
-def test_filter_weights_simplex_and_constant_fixed_point():
+def test_filter_weights_simplex_and_constant_fixed_point(make_render_buffers):
     rng = np.random.default_rng(13)
-    buffers, inputs, (xa, xb, ya, yb, yf, albedo, normal) = synthetic_scene(rng)
+    buffers, inputs, (xa, xb, ya, yb, yf, albedo, normal) = synthetic_scene(make_render_buffers, rng)
     w = E.solve_weights(xa, xb, ya, yb, solver="exact")
     wf = E.filter_weights(w, yf, ya, yb, albedo, normal)
     assert wf.shape == w.shape
@@ -364,10 +486,72 @@ def test_filter_weights_simplex_and_constant_fixed_point():
     np.testing.assert_allclose(wc, const, atol=1e-12)
 
 
+def brute_force_weight_filter(weights, y_full, y_a, y_b, albedo, normal, *, radius, sigma_s,
+                              sigma_z, sigma_albedo, sigma_normal):
+    """Sec. 4.2 written out pixel by pixel. weights, y_*: (N, H, W, C). The guide is the raw
+    combination z = sum_i w_i y_i of the full outputs, Var[z] = (z^A - z^B)^2 / 2 from the
+    half outputs; kappa (Eq. 32) with D^2 of Eq. 33 read as the mean over channels of
+    (z_p - z_q)^2 / (Var_p + Var_q) (the project's documented reading for RGB); Eq. 34 is the
+    kappa-weighted mean of the weight vectors over the clipped square window."""
+    n, h, w, c = weights.shape
+    z = np.einsum("nhwc,nhwc->hwc", weights, y_full)
+    var = 0.5 * (np.einsum("nhwc,nhwc->hwc", weights, y_a)
+                 - np.einsum("nhwc,nhwc->hwc", weights, y_b)) ** 2
+    out = np.zeros_like(weights)
+    for py in range(h):
+        for px in range(w):
+            total, norm = np.zeros((n, c)), 0.0
+            for qy in range(max(0, py - radius), min(h, py + radius + 1)):
+                for qx in range(max(0, px - radius), min(w, px + radius + 1)):
+                    d2 = np.mean((z[py, px] - z[qy, qx]) ** 2 / (var[py, px] + var[qy, qx]))
+                    kappa = (np.exp(-((py - qy) ** 2 + (px - qx) ** 2) / (2 * sigma_s ** 2))
+                             * np.exp(-d2 / (2 * sigma_z ** 2))
+                             * np.exp(-np.sum((albedo[py, px] - albedo[qy, qx]) ** 2)
+                                      / (2 * sigma_albedo ** 2))
+                             * np.exp(-np.sum((normal[py, px] - normal[qy, qx]) ** 2)
+                                      / (2 * sigma_normal ** 2)))
+                    total += kappa * weights[:, qy, qx]
+                    norm += kappa
+            out[:, py, px] = total / norm
+    return out
+
+
+@pytest.mark.parametrize("radius", [7, 2])
+def test_filter_weights_matches_eq32_34_brute_force(radius):
+    """E.filter_weights with the paper's parameters (Sec. 4.2: radius 7, sigma_s 3, sigma_z 2,
+    sigma_albedo 0.25, sigma_normal 0.15) equals the brute-force loop; the data put every
+    factor of kappa in its sensitive range, so a wrong guide, Var factor or sigma fails."""
+    rng = np.random.default_rng(31)
+    n, h, w = 3, 9, 11
+    weights = rng.dirichlet(np.ones(n), size=(h, w, 3)).transpose(3, 0, 1, 2)
+    truth = rng.uniform(0.2, 1.0, (h, w, 3))
+    y_full = truth + rng.normal(0, 0.05, (n, h, w, 3))
+    y_a = y_full + rng.normal(0, 0.05, (n, h, w, 3))
+    y_b = y_full + rng.normal(0, 0.05, (n, h, w, 3))
+    albedo = rng.uniform(0.4, 0.6, (h, w, 3))
+    normal = rng.normal(size=(h, w, 3)) * 0.05 + [0.0, 0.0, 1.0]
+    paper = dict(sigma_s=3.0, sigma_z=2.0, sigma_albedo=0.25, sigma_normal=0.15)
+    expected = brute_force_weight_filter(weights, y_full, y_a, y_b, albedo, normal,
+                                         radius=radius, **paper)
+    if radius == 7:
+        got = E.filter_weights(weights, y_full, y_a, y_b, albedo, normal)  # the defaults
+    else:
+        got = E.filter_weights(weights, y_full, y_a, y_b, albedo, normal, radius=radius,
+                               sigma_spatial=3.0, sigma_color=2.0, sigma_albedo=0.25,
+                               sigma_normal=0.15)
+    np.testing.assert_allclose(got, expected, rtol=1e-9, atol=1e-12)
+    # sensitivity: each of these deviations moves the result well beyond the tolerance
+    for deviation in (dict(sigma_s=2.5), dict(sigma_z=2.5), dict(sigma_albedo=0.3),
+                      dict(sigma_normal=0.18)):
+        other = brute_force_weight_filter(weights, y_full, y_a, y_b, albedo, normal,
+                                          radius=radius, **{**paper, **deviation})
+        assert np.abs(other - expected).max() > 1e-4, deviation
+
+
 @pytest.mark.parametrize("filter_", [True, False])
-def test_combine_end_to_end(filter_):
+def test_combine_end_to_end(filter_, make_render_buffers):
     rng = np.random.default_rng(14)
-    buffers, inputs, (xa, xb, ya, yb, yf, albedo, normal) = synthetic_scene(rng)
+    buffers, inputs, (xa, xb, ya, yb, yf, albedo, normal) = synthetic_scene(make_render_buffers, rng)
     out = E.combine(buffers, inputs, filter=filter_, solver="exact")
     assert isinstance(out, Denoised)
     for img in (out.full, out.a, out.b):
