@@ -1,15 +1,21 @@
 # Benchmark of Monte Carlo denoisers and their combinations, reproducing
 # Zheng et al. 2021, "Ensemble Denoising for Monte Carlo Renderings".
 #
-#   snakemake --cores 2                       # default config.yaml
+#   snakemake --cores 2                       # the default study (config.yaml)
 #   snakemake --cores 2 --configfile workflow/configs/smoke.yaml
+#
+# A --configfile is the whole configuration: config.yaml is read only when none is given, and
+# what a config leaves out comes from the schema's defaults (mcbench.config), so the same command
+# gives the same study from any folder.
 
 from snakemake.utils import min_version
 
 min_version("9.0")
 
 
-configfile: "config.yaml"
+if not workflow.overwrite_configfiles:
+
+    configfile: f"{workflow.basedir}/config.yaml"
 
 
 include: "workflow/rules/common.smk"
@@ -22,9 +28,9 @@ include: "workflow/rules/training.smk"
 
 rule all:
     input:
-        expand(f"{RESULTS}/tables/ranking_{{metric}}.{{ext}}", metric=config["metrics"], ext=["csv", "md"]),
-        f"{RESULTS}/metrics.csv",
-        f"{RESULTS}/timings.csv",
-        f"{RESULTS}/tables/scenes.md",
-        f"{RESULTS}/figures/gallery.png",
+        rules.gather_metrics.output,
+        rules.gather_timings.output,
+        expand(rules.ranking_table.output, metric=config["metrics"]),
+        rules.scene_table.output,
+        rules.gallery.output,
     default_target: True

@@ -10,10 +10,15 @@ from __future__ import annotations
 import numpy as np
 from skimage.metrics import structural_similarity
 
-__all__ = ["relmse", "smape", "dssim", "aces_filmic", "srgb_encode", "tonemap", "METRICS"]
+__all__ = ["relmse", "smape", "dssim", "aces_filmic", "srgb_encode", "tonemap", "METRICS", "DSSIM_MIN_SIZE"]
 
 RELMSE_EPSILON = 0.01
 SMAPE_EPSILON = 0.01
+DSSIM_SIGMA = 1.5
+# Side of DSSIM's Gaussian window, 2 * round(3.5 sigma) + 1 = 11 (scikit-image truncates the
+# Gaussian at 3.5 sigma, radius int(3.5 sigma + 0.5)): the smallest image DSSIM is defined on. The config schema's minimum
+# `resolution` is this number (a test checks that both agree).
+DSSIM_MIN_SIZE = 2 * int(3.5 * DSSIM_SIGMA + 0.5) + 1
 
 
 def _pair(image, reference):
@@ -70,8 +75,11 @@ def dssim(image, reference) -> float:
     data range 1, averaged over RGB channels and pixels.
     """
     y, r = _pair(image, reference)
+    if min(y.shape[:2]) < DSSIM_MIN_SIZE:
+        raise ValueError(f"DSSIM needs images of at least {DSSIM_MIN_SIZE}x{DSSIM_MIN_SIZE} pixels "
+                         f"(its Gaussian window), got {y.shape[1]}x{y.shape[0]}")
     ssim = structural_similarity(tonemap(y), tonemap(r), channel_axis=2, data_range=1.0,
-                                 gaussian_weights=True, sigma=1.5, use_sample_covariance=False)
+                                 gaussian_weights=True, sigma=DSSIM_SIGMA, use_sample_covariance=False)
     return float(1.0 - ssim)
 
 

@@ -12,18 +12,64 @@ import numpy as np
 import pandas as pd
 from scipy.stats import rankdata
 
-__all__ = ["case_scores", "ranking_table", "format_markdown"]
+from mcbench import BenchError
+
+__all__ = ["IncompleteMetricsError", "check_complete", "case_scores", "ranking_table", "format_markdown"]
+
+COLUMNS = ["scene", "spp", "candidate", "metric", "value"]
+
+
+class IncompleteMetricsError(BenchError):
+    """A metrics table that would rank cases over different candidate sets or with lost values."""
+
+
+def check_complete(metrics: pd.DataFrame, *, candidates: list[str], metric_names: list[str],
+                   cases: list[tuple[str, int]] | None = None, source: str = "metrics") -> None:
+    """Refuse a tidy metrics table unless every case holds every candidate and every metric
+    exactly once, with a finite value (a truncated CSV, a dropped row or a missing candidate
+    would otherwise move scores silently: a case with fewer entries is scored on another scale).
+
+    ``cases`` (scene, spp) pins the expected cases too. Errors name ``source`` and the case.
+    """
+    missing_columns = [c for c in COLUMNS if c not in metrics.columns]
+    if missing_columns:
+        raise IncompleteMetricsError(f"{source}: missing column(s) {missing_columns}")
+    values = pd.to_numeric(metrics["value"], errors="coerce").to_numpy(dtype=np.float64)
+    bad = ~np.isfinite(values)
+    if bad.any():
+        row = metrics[bad].iloc[0]
+        raise IncompleteMetricsError(f"{source}: {int(bad.sum())} value(s) missing or not finite, first at "
+                                     f"scene {row['scene']}, spp {row['spp']}, {row['candidate']}, {row['metric']}")
+    expected = {(c, m) for c in candidates for m in metric_names}
+    found_cases = set()
+    for (scene, spp), case in metrics.groupby(["scene", "spp"], sort=True):
+        found_cases.add((str(scene), int(spp)))
+        pairs = list(zip(case["candidate"], case["metric"]))
+        duplicated = sorted({p for p in pairs if pairs.count(p) > 1})
+        lacking = sorted(expected - set(pairs))
+        unexpected = sorted(set(pairs) - expected)
+        if duplicated or lacking or unexpected:
+            parts = [f"missing {lacking[:6]}" if lacking else "", f"unexpected {unexpected[:6]}" if unexpected else "",
+                     f"duplicated {duplicated[:6]}" if duplicated else ""]
+            raise IncompleteMetricsError(f"{source}: case scene {scene}, spp {spp} is incomplete: "
+                                         + "; ".join(p for p in parts if p))
+    if cases is not None:
+        lost = sorted({(str(s), int(n)) for s, n in cases} - found_cases)
+        if lost:
+            raise IncompleteMetricsError(f"{source}: no rows for case(s) {lost[:6]}")
 
 
 def case_scores(metrics: pd.DataFrame, metric: str) -> pd.DataFrame:
     """Per-case scores from a tidy table with columns scene, spp, candidate, metric, value.
 
-    Returns columns scene, spp, candidate, score. Lower error => higher score.
-    A case missing some candidate is scored over the entries it has.
+    Returns columns scene, spp, candidate, score. Lower error => higher score. Every case must
+    have the same candidates (checked: a case scored over fewer entries would be on another scale).
     """
     rows = metrics[metrics["metric"] == metric]
     if rows.empty:
         raise ValueError(f"no values for metric '{metric}'")
+    candidates = sorted(set(rows["candidate"]))
+    check_complete(rows, candidates=candidates, metric_names=[metric])
     out = []
     for (scene, spp), case in rows.groupby(["scene", "spp"], sort=True):
         scores = rankdata(-case["value"].to_numpy(dtype=np.float64), method="average")
@@ -32,18 +78,15 @@ def case_scores(metrics: pd.DataFrame, metric: str) -> pd.DataFrame:
     return pd.concat(out, ignore_index=True)
 
 
-def ranking_table(metrics: pd.DataFrame, metric: str, order: list[str] | None = None) -> pd.DataFrame:
+def ranking_table(metrics: pd.DataFrame, metric: str) -> pd.DataFrame:
     """Table 3 of the paper: rows candidates, columns spp (mean score over scenes) and ``Avg.``
-    (mean over spp). ``order`` fixes the row order (default: by overall score, best first)."""
+    (mean over spp), sorted by overall score, best first."""
     scores = case_scores(metrics, metric)
     per_spp = scores.groupby(["candidate", "spp"])["score"].mean().unstack("spp")
     per_spp = per_spp.reindex(columns=sorted(per_spp.columns))
     per_spp.columns = [str(c) for c in per_spp.columns]
     per_spp["Avg."] = per_spp.mean(axis=1)
-    if order is None:
-        per_spp = per_spp.sort_values("Avg.", ascending=False)
-    else:
-        per_spp = per_spp.reindex([c for c in order if c in per_spp.index])
+    per_spp = per_spp.sort_values("Avg.", ascending=False, kind="stable")
     per_spp.index.name = "candidate"
     return per_spp
 

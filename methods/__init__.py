@@ -17,7 +17,11 @@ Adding a method is one new file here plus one line in ``config.yaml``.
 from __future__ import annotations
 
 import importlib
+import inspect
+import math
 import pkgutil
+import types
+import typing
 from types import ModuleType
 from typing import Callable
 
@@ -58,13 +62,124 @@ def load_method(name: str, kind: str | None = None, config_key: str = "config") 
     return module
 
 
-def denoise_each_buffer(buffers: RenderBuffers,
-                        denoise_image: Callable[[ImageBuffers], np.ndarray]) -> Denoised:
-    """Run a single-image denoiser on the full buffer and on each half buffer.
+# Re-export: single-image methods call ``methods.denoise_each_buffer``; it lives in core
+# (mcbench.buffers) so that core code (mcbench.nn.inference) never imports this package.
+from mcbench.buffers import denoise_each_buffer  # noqa: E402, F401
 
-    Each half buffer is denoised with its own features and variance only, keeping
-    y^A independent of x^B as the dual-buffer estimate assumes (Zheng et al. Eq. 10).
+
+# ---------------------------------------------------------------------------------------------
+# The candidate table of a config: checked when the DAG is parsed, before any job runs.
+
+NOISY = "noisy"                 # the noisy input's row in every table: no method may take it
+NOISY_LABEL = "Noisy input"
+_POSITIONAL = {"denoiser": 1, "combiner": 2}   # denoise(buffers, ...), combine(buffers, inputs, ...)
+
+
+def method_parameters(module: ModuleType) -> dict[str, inspect.Parameter]:
+    """The config parameters of a method: the keyword parameters of its ``denoise``/``combine``
+    after the positional ``buffers`` (and ``inputs``)."""
+    function = getattr(module, KINDS[module.KIND])
+    parameters = list(inspect.signature(function).parameters.values())[_POSITIONAL[module.KIND]:]
+    return {p.name: p for p in parameters if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)}
+
+
+def _allowed(value, hint) -> bool:
+    """Whether ``value`` (from YAML) fits the annotation ``hint``: ``Literal[...]`` values,
+    ``bool``, ``int`` (not bool), ``float`` (int or float, not bool), ``str``, unions of these;
+    any other annotation is not checked here."""
+    origin = typing.get_origin(hint)
+    if origin is typing.Literal:
+        return any(value == choice and type(value) is type(choice) for choice in typing.get_args(hint))
+    if origin in (typing.Union, types.UnionType):
+        return any(_allowed(value, arg) for arg in typing.get_args(hint))
+    if hint is type(None):
+        return value is None
+    if hint is bool:
+        return isinstance(value, bool)
+    if hint is int:
+        return isinstance(value, int) and not isinstance(value, bool)
+    if hint is float:
+        return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+    if hint is str:
+        return isinstance(value, str)
+    return True
+
+
+def _describe(hint) -> str:
+    if typing.get_origin(hint) is typing.Literal:
+        return "one of " + ", ".join(repr(v) for v in typing.get_args(hint))
+    return getattr(hint, "__name__", str(hint))
+
+
+def check_params(module: ModuleType, params: dict, *, config_key: str) -> None:
+    """Refuse params that ``module``'s ``denoise``/``combine`` does not take, values outside the
+    annotated type or ``Literal`` choices, and missing required parameters. Errors name the key,
+    e.g. ``combiners[3].params.solvr: ensemble has no parameter 'solvr'; it takes solver, ...``."""
+    name = module.__name__.split(".")[-1]
+    if not isinstance(params, dict):
+        raise BenchError(f"{config_key}: params must be a mapping, got {type(params).__name__}")
+    known = method_parameters(module)
+    function = getattr(module, KINDS[module.KIND])
+    try:
+        hints = typing.get_type_hints(function)
+    except Exception as exc:   # an annotation that does not evaluate is the module's bug
+        raise BenchError(f"methods/{name}.py: cannot read the annotations of {function.__name__}() ({exc})") from exc
+    for key, value in params.items():
+        if key not in known:
+            raise BenchError(f"{config_key}.{key}: {name} has no parameter '{key}'; it takes "
+                             f"{', '.join(known) or 'no parameters'}")
+        hint = hints.get(key)
+        if hint is not None and not _allowed(value, hint):
+            raise BenchError(f"{config_key}.{key}: {value!r} is not allowed for {name}; expected {_describe(hint)}")
+    missing = [key for key, p in known.items() if p.default is p.empty and key not in params]
+    if missing:
+        raise BenchError(f"{config_key}: {name} needs parameter(s) {', '.join(missing)}")
+
+
+def _default_label(module: ModuleType, inputs: list[str], params: dict) -> str:
+    """``LABEL`` plus what tells this entry apart: its inputs (combiners) and its params."""
+    details = []
+    if inputs:
+        details.append("+".join(inputs))
+    if params:
+        details.append(", ".join(f"{key}={value}" for key, value in params.items()))
+    return f"{module.LABEL} ({'; '.join(details)})" if details else module.LABEL
+
+
+def method_table(denoisers: list, combiners: list, *, is_learned: Callable[[ModuleType], bool]) -> dict:
+    """Ordered ``{candidate name: {kind, module, params, inputs, label, learned}}`` of a config.
+
+    Everything that would otherwise fail hours later or silently change a table stops here, with
+    the config key: unknown modules, a wrong kind, params the method does not take or values it
+    does not allow, the reserved name ``noisy``, duplicate names, combiner inputs that are not an
+    earlier entry, and duplicate table labels (default labels include inputs and params, so two
+    variants of one method differ). Imports only the method modules the config names.
     """
-    return Denoised(full=denoise_image(buffers.image("full")),
-                    a=denoise_image(buffers.image("a")),
-                    b=denoise_image(buffers.image("b")))
+    table = {}
+    entries = [("denoiser", f"denoisers[{i}]", {"name": e} if isinstance(e, str) else dict(e))
+               for i, e in enumerate(denoisers)]
+    entries += [("combiner", f"combiners[{i}]", dict(e)) for i, e in enumerate(combiners)]
+    for kind, key, entry in entries:
+        name = entry["name"]
+        if name == NOISY:
+            raise BenchError(f"{key}.name: '{NOISY}' is reserved for the noisy input's row; choose another name")
+        if name in table:
+            raise BenchError(f"{key}.name: duplicate method name '{name}'")
+        module = load_method(entry.get("method", name), kind=kind, config_key=f"{key}.method" if "method" in entry else key)
+        params = dict(entry.get("params") or {})
+        check_params(module, params, config_key=f"{key}.params")
+        inputs = list(entry.get("inputs", []))
+        for position, input_name in enumerate(inputs):
+            if input_name not in table:
+                raise BenchError(f"{key}.inputs[{position}]: '{input_name}' is not a denoiser or an "
+                                 f"earlier combiner of the config")
+        table[name] = {"kind": kind, "module": module.__name__.split(".")[-1], "params": params,
+                       "inputs": inputs, "label": entry.get("label") or _default_label(module, inputs, params),
+                       "learned": bool(is_learned(module)), "config_key": key}
+    labels = {NOISY_LABEL: NOISY}
+    for name, spec in table.items():
+        if spec["label"] in labels:
+            raise BenchError(f"{spec['config_key']}.label: '{spec['label']}' is also the label of "
+                             f"'{labels[spec['label']]}'; table rows must have distinct labels")
+        labels[spec["label"]] = name
+    return table

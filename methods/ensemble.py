@@ -57,6 +57,8 @@ simplex vectors stays on the simplex.
 
 from __future__ import annotations
 
+from typing import Literal
+
 import numpy as np
 from numba import prange
 
@@ -632,9 +634,11 @@ def filter_weights(weights, denoised_full, denoised_a, denoised_b, albedo, norma
     return np.ascontiguousarray(out / out.sum(axis=0, keepdims=True))
 
 
-def combine(buffers: RenderBuffers, inputs: list[Denoised], solver="iterative", seed=0,
-            max_iterations=1024, tolerance=1e-9, filter=True, radius=7, sigma_spatial=3.0,
-            sigma_color=2.0, sigma_albedo=0.25, sigma_normal=0.15) -> Denoised:
+def combine(buffers: RenderBuffers, inputs: list[Denoised], *,
+            solver: Literal["iterative", "exact"] = "iterative", seed: int = 0,
+            max_iterations: int = 1024, tolerance: float = 1e-9, filter: bool = True,
+            radius: int = 7, sigma_spatial: float = 3.0, sigma_color: float = 2.0,
+            sigma_albedo: float = 0.25, sigma_normal: float = 0.15) -> Denoised:
     """Ensemble of the ``inputs`` (Sec. 4): solve raw weights from the half buffers, filter
     them (unless ``filter=False``, an ablation), and combine (Eq. 35).
 

@@ -42,6 +42,10 @@ def denoise_image(image: ImageBuffers, radius: int = 7, sigma_spatial: float = 4
     return np.moveaxis(filtered, 0, 2).astype(np.float32)
 
 
-def denoise(buffers: RenderBuffers, **params):
+def denoise(buffers: RenderBuffers, *, radius: int = 7, sigma_spatial: float = 4.0,
+            sigma_color: float = 2.0, sigma_albedo: float = 0.1, sigma_normal: float = 0.2,
+            sigma_depth: float = 0.05):
     """Joint bilateral filtering of the full buffer and of each half buffer."""
+    params = dict(radius=radius, sigma_spatial=sigma_spatial, sigma_color=sigma_color,
+                  sigma_albedo=sigma_albedo, sigma_normal=sigma_normal, sigma_depth=sigma_depth)
     return denoise_each_buffer(buffers, lambda image: denoise_image(image, **params))

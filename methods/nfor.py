@@ -371,7 +371,7 @@ def prefilter_features(features_a, features_b):
     return out_a, out_b
 
 
-def denoise(buffers: RenderBuffers, second_pass_variance_scale: float = 1.0) -> Denoised:
+def denoise(buffers: RenderBuffers, *, second_pass_variance_scale: float = 1.0) -> Denoised:
     """NFOR on one render. Returns ``Denoised(full, a, b, extras={"selection": s})``, float32."""
     f64 = lambda name: np.asarray(buffers.layers[name], dtype=np.float64)
     color, variance = f64("color"), np.maximum(f64("variance"), 0.0)

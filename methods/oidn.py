@@ -8,6 +8,8 @@ A and B images is denoised with its own features, as the paper runs OIDN three t
 
 from __future__ import annotations
 
+from typing import Literal
+
 import numpy as np
 
 from mcbench.buffers import ImageBuffers, RenderBuffers
@@ -15,9 +17,10 @@ from methods import denoise_each_buffer
 
 KIND = "denoiser"
 LABEL = "#6 OIDN"
+Quality = Literal["high", "balanced", "fast", "default"]   # OIDN's filter qualities
 
 
-def denoise_image(image: ImageBuffers, quality: str = "high") -> np.ndarray:
+def denoise_image(image: ImageBuffers, *, quality: Quality = "high") -> np.ndarray:
     """Denoise one (H, W, 3) HDR image with OIDN's RT filter; returns float32 (H, W, 3)."""
     import pyoidn
 
@@ -27,6 +30,6 @@ def denoise_image(image: ImageBuffers, quality: str = "high") -> np.ndarray:
     return pyoidn.denoise(color, albedo=albedo, normal=normal, hdr=True, quality=quality)
 
 
-def denoise(buffers: RenderBuffers, quality: str = "high"):
+def denoise(buffers: RenderBuffers, *, quality: Quality = "high"):
     """OIDN on the full buffer and on each half buffer."""
     return denoise_each_buffer(buffers, lambda image: denoise_image(image, quality=quality))

@@ -389,7 +389,7 @@ def prefilter_features(buffers: RenderBuffers):
     return out
 
 
-def denoise(buffers: RenderBuffers, radius: int = WINDOW_RADIUS):
+def denoise(buffers: RenderBuffers, *, radius: int = WINDOW_RADIUS):
     """RDFC on the half buffers; returns Denoised(full=(a+b)/2, a, b) as float32 (H, W, 3)."""
     colors = {w: np.nan_to_num(np.asarray(buffers.layers["color" + s], dtype=np.float64))
               for w, s in (("a", "_a"), ("b", "_b"))}

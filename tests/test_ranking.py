@@ -53,3 +53,79 @@ def test_markdown_uses_labels_and_marks_best():
 def test_unknown_metric_raises():
     with pytest.raises(ValueError, match="dssim"):
         case_scores(_tidy([("s", 4, "a", "relmse", 1.0)]), "dssim")
+
+
+# --- incomplete tables stop instead of being ranked -----------------------------------------
+
+def _full_case(scene="s", spp=4, candidates=("noisy", "a", "b"), metrics=("relmse", "dssim")):
+    return [(scene, spp, c, m, float(i + 1)) for i, c in enumerate(candidates) for m in metrics]
+
+
+def test_a_case_missing_a_candidate_is_not_ranked_on_another_scale():
+    from mcbench.ranking import IncompleteMetricsError
+
+    rows = _full_case("x") + [r for r in _full_case("y") if r[2] != "b"]
+    with pytest.raises(IncompleteMetricsError, match=r"scene y, spp 4 is incomplete: missing \[\('b', 'dssim'\)"):
+        ranking_table(_tidy(rows), "dssim")
+
+
+def test_non_finite_or_empty_values_stop_naming_the_case():
+    from mcbench.ranking import IncompleteMetricsError, check_complete
+
+    rows = _full_case()
+    rows[3] = rows[3][:4] + (float("nan"),)
+    with pytest.raises(IncompleteMetricsError, match=r"1 value\(s\) missing or not finite, first at scene s, spp 4, a, dssim"):
+        check_complete(_tidy(rows), candidates=["noisy", "a", "b"], metric_names=["relmse", "dssim"])
+
+
+def test_check_complete_refuses_duplicates_extras_and_lost_cases():
+    from mcbench.ranking import IncompleteMetricsError, check_complete
+
+    kwargs = dict(candidates=["noisy", "a", "b"], metric_names=["relmse", "dssim"])
+    check_complete(_tidy(_full_case()), **kwargs, cases=[("s", 4)])
+    with pytest.raises(IncompleteMetricsError, match="duplicated"):
+        check_complete(_tidy(_full_case() + _full_case()[:1]), **kwargs)
+    with pytest.raises(IncompleteMetricsError, match="unexpected"):
+        check_complete(_tidy(_full_case(candidates=("noisy", "a", "b", "c"))), **kwargs)
+    with pytest.raises(IncompleteMetricsError, match=r"no rows for case\(s\) \[\('s', 8\)\]"):
+        check_complete(_tidy(_full_case()), **kwargs, cases=[("s", 4), ("s", 8)])
+
+
+def _write_case(path, rows):
+    _tidy(rows).to_csv(path, index=False)
+    return str(path)
+
+
+def test_gather_refuses_a_case_csv_cut_mid_row(tmp_path):
+    """A per-case CSV cut in the middle of a row (an empty value, rows dropped) stops the gather
+    with the file named, instead of moving scores."""
+    from mcbench import BenchError
+    from mcbench.steps import gather_tables
+
+    kwargs = dict(candidates=["noisy", "a", "b"], metric_names=["relmse", "dssim"])
+    good = _write_case(tmp_path / "x.csv", _full_case("x"))
+    cut = tmp_path / "y.csv"
+    text = _tidy(_full_case("y")).to_csv(index=False)
+    cut.write_text(text[: text.index("a,dssim") + len("a,dssim,")])   # last row without its value
+    with pytest.raises(BenchError, match="y.csv"):
+        gather_tables([good, str(cut)], str(tmp_path / "all.csv"), cases=[("x", 4), ("y", 4)], **kwargs)
+    assert not (tmp_path / "all.csv").exists()
+    wrong_case = _write_case(tmp_path / "z.csv", _full_case("z"))
+    with pytest.raises(BenchError, match=r"z.csv: no rows for case\(s\) \[\('w', 4\)\]"):
+        gather_tables([wrong_case], str(tmp_path / "all.csv"), cases=[("w", 4)], **kwargs)
+    frame = gather_tables([good], str(tmp_path / "all.csv"), cases=[("x", 4)], **kwargs)
+    assert len(frame) == 6 and pd.read_csv(tmp_path / "all.csv").equals(frame)
+
+
+def test_write_rankings_refuses_a_table_with_other_candidates(tmp_path):
+    from mcbench import BenchError
+    from mcbench.steps import write_rankings
+
+    path = _write_case(tmp_path / "metrics.csv", _full_case())
+    write_rankings(path, "relmse", str(tmp_path / "r.csv"), str(tmp_path / "r.md"),
+                   candidates=["noisy", "a", "b"], labels={})
+    table = pd.read_csv(tmp_path / "r.csv")
+    assert list(table["candidate"]) == ["noisy", "a", "b"]      # lowest error first: noisy = 1.0
+    with pytest.raises(BenchError, match=r"missing \[\('c', 'relmse'\)\]"):
+        write_rankings(path, "relmse", str(tmp_path / "r2.csv"), str(tmp_path / "r2.md"),
+                       candidates=["noisy", "a", "b", "c"], labels={})

@@ -1,86 +1,58 @@
-# Helpers shared by the rules: config validation, the method table, input functions.
+# Helpers shared by the rules: the resolved config, the method table, input functions.
+# Path patterns live in the rules' own output declarations (rules.X.output); the helpers here
+# expand those.
 
 import functools
-import os
 import sys
-from pathlib import Path
 
-from snakemake.utils import validate
+from snakemake.logging import logger
+from pathlib import Path
 
 sys.path.insert(0, str(Path(workflow.basedir)))  # methods/, scenes/, mcbench/ from a checkout
 
 from mcbench import BenchError  # noqa: E402
-from mcbench.training import training_seeds  # noqa: E402
+from mcbench.config import config_digest, resolve_config  # noqa: E402
+from mcbench.metrics import METRICS  # noqa: E402
+from mcbench.seeds import training_seeds  # noqa: E402
+from mcbench.weights import COMMITTED_WEIGHTS, is_learned_method  # noqa: E402
+from methods import NOISY, NOISY_LABEL, method_table  # noqa: E402
+from scenes import available_scenes, load_scene  # noqa: E402
 
 
-validate(config, schema="../schemas/config.schema.yaml")
+# The whole configuration: the config file (config.yaml or the --configfile) plus the schema's
+# defaults, validated; errors name the file and the key.
+_CONFIG_SOURCE = ", ".join(str(f) for f in workflow.configfiles) or "config"
+_RESOLVED = resolve_config(dict(config), source=_CONFIG_SOURCE)
+config.clear()
+config.update(_RESOLVED)
+logger.info(f"mcbench: configuration {_CONFIG_SOURCE} with the schema's defaults, digest {config_digest(config)}")
 
 RESULTS = "results"
 # Learned methods' weights: the committed methods/weights of this checkout unless the config
 # names another folder (relative to the working directory).
-WEIGHTS_DIR = config.get("weights_dir") or str(Path(workflow.basedir) / "methods" / "weights")
+WEIGHTS_DIR = config["weights_dir"] or str(COMMITTED_WEIGHTS)
 
-
-def _method_table(config):
-    """Ordered {candidate name: {kind, module, params, inputs, label}} from the config.
-
-    Every module name is checked against methods/ here, so a typo stops the run before any
-    job starts, with an error naming the config key.
-    """
-    from methods import load_method
-    from mcbench.nn.train import is_learned_method
-
-    table = {}
-    for index, entry in enumerate(config["denoisers"]):
-        entry = {"name": entry} if isinstance(entry, str) else dict(entry)
-        key = f"denoisers[{index}]"
-        method_module = load_method(entry.get("method", entry["name"]), kind="denoiser", config_key=key)
-        if entry["name"] in table:
-            raise BenchError(f"{key}: duplicate method name '{entry['name']}'")
-        module_name = method_module.__name__.split(".")[-1]
-        table[entry["name"]] = {"kind": "denoiser", "module": module_name,
-                                "params": entry.get("params", {}), "inputs": [],
-                                "label": entry.get("label", method_module.LABEL),
-                                "learned": is_learned_method(method_module)}
-    for index, entry in enumerate(config.get("combiners", [])):
-        key = f"combiners[{index}]"
-        method_module = load_method(entry["method"], kind="combiner", config_key=key)
-        if entry["name"] in table:
-            raise BenchError(f"{key}: duplicate method name '{entry['name']}'")
-        for position, name in enumerate(entry["inputs"]):
-            if name not in table:
-                raise BenchError(f"{key}.inputs[{position}]: '{name}' is not a denoiser or an "
-                                 f"earlier combiner in config.yaml")
-        table[entry["name"]] = {"kind": "combiner", "module": method_module.__name__.split(".")[-1],
-                                "params": entry.get("params", {}), "inputs": list(entry["inputs"]),
-                                "label": entry.get("label", f"{method_module.LABEL} ({'+'.join(entry['inputs'])})"),
-                                "learned": False}
-    return table
-
-
-def _check_scenes(config):
-    from scenes import load_scene
-
-    for index, name in enumerate(config["scenes"]):
-        load_scene(name, config_key=f"scenes[{index}]")
-
-
-METHODS = _method_table(config)
-_check_scenes(config)
+METHODS = method_table(config["denoisers"], config["combiners"], is_learned=is_learned_method)
+for _index, _scene in enumerate(config["scenes"]):
+    load_scene(_scene, config_key=f"scenes[{_index}]")
 SCENES = list(config["scenes"])
 SPPS = sorted(config["spp"])
 CANDIDATES = list(METHODS)
-LABELS = {name: spec["label"] for name, spec in METHODS.items()}
-LABELS["noisy"] = "Noisy input"
+LABELS = {NOISY: NOISY_LABEL, **{name: spec["label"] for name, spec in METHODS.items()}}
+METRIC_NAMES = list(config["metrics"])
 REFERENCE_CHUNKS = config["reference"]["chunks"]
 
 
 def _reference_spp_table(config):
-    """Reference spp per scene: ``reference.scene_spp[scene]`` or ``reference.spp``."""
-    per_scene = config["reference"].get("scene_spp", {})
+    """Reference spp per configured scene: ``reference.scene_spp[scene]`` or ``reference.spp``.
+    ``scene_spp`` may name scenes the config does not run (a narrowed ``scenes:`` keeps working),
+    but each must be a scene of scenes/."""
+    per_scene = config["reference"]["scene_spp"]
+    known = available_scenes()
     for name in per_scene:
-        if name not in SCENES:
-            raise BenchError(f"reference.scene_spp: '{name}' is not one of the configured scenes")
+        if name not in known:
+            raise BenchError(f"reference.scene_spp.{name}: no scene '{name}' in scenes/; "
+                             f"available: {', '.join(known)}")
     table = {scene: int(per_scene.get(scene, config["reference"]["spp"])) for scene in SCENES}
     for scene, spp in table.items():
         key = f"reference.scene_spp.{scene}" if scene in per_scene else "reference.spp"
@@ -93,35 +65,24 @@ def _reference_spp_table(config):
 REFERENCE_SPP = _reference_spp_table(config)
 
 
-def reference_chunk_spp(wildcards):
-    return REFERENCE_SPP[wildcards.scene] // REFERENCE_CHUNKS
-
-
-def reference_path(scene):
-    return f"{RESULTS}/references/{scene}.exr"
-
-
 wildcard_constraints:
     scene="[A-Za-z][A-Za-z0-9_]*",
     method="[A-Za-z][A-Za-z0-9_]*",
     spp=r"\d+",
     chunk=r"\d+",
     seed=r"\d+",
-    metric="relmse|smape|dssim",
+    metric="|".join(METRICS),
 
 
-def render_path(scene, spp):
-    return f"{RESULTS}/renders/{scene}/spp{spp}.exr"
-
-
-def output_path(scene, spp, method):
-    return f"{RESULTS}/outputs/{scene}/spp{spp}/{method}.exr"
+def reference_chunk_spp(wildcards):
+    return REFERENCE_SPP[wildcards.scene] // REFERENCE_CHUNKS
 
 
 def method_inputs(wildcards):
     """Outputs of the methods a combiner takes (empty for a base denoiser)."""
     spec = METHODS[wildcards.method]
-    return [output_path(wildcards.scene, wildcards.spp, name) for name in spec["inputs"]]
+    return [rules.run_method.output.exr.format(scene=wildcards.scene, spp=wildcards.spp, method=name)
+            for name in spec["inputs"]]
 
 
 def weights_file(network):
@@ -129,17 +90,19 @@ def weights_file(network):
 
 
 def method_weights(wildcards):
-    """A learned method's weights as an input only while they are missing (then the train rule
-    makes them). Present weights are not an input, so nothing of the training part of the DAG
-    (crops, train rule) is ever planned by the main job, even on a clean checkout without
-    training data; a change of the weights reruns the method through `weights_digest`."""
+    """Nothing: a learned method's weights must exist before the main job runs it. Missing
+    weights stop the DAG with the folder named (a mistyped ``weights_dir`` would otherwise plan
+    hours of training renders); `snakemake train_<name>` is the one way to make them."""
     spec = METHODS[wildcards.method]
-    return missing_weights(spec["module"]) if spec["learned"] else []
+    if spec["learned"] and not Path(weights_file(spec["module"])).exists():
+        raise BenchError(f"no weights for {spec['module']} in {WEIGHTS_DIR} (weights_dir); train them "
+                         f"with `snakemake --cores 2 train_{spec['module']}` or fix weights_dir")
+    return []
 
 
 def weights_digest(wildcards):
-    """SHA-256 of a learned method's present weights ("" otherwise): a params entry, so the
-    provenance trigger reruns the method when its weights change."""
+    """SHA-256 of a learned method's weights ("" otherwise): a params entry, so the provenance
+    trigger reruns the method when its weights change."""
     spec = METHODS[wildcards.method]
     path = Path(weights_file(spec["module"]))
     if not spec["learned"] or not path.exists():
@@ -169,48 +132,42 @@ def train_network_inputs(wildcards):
 
 
 def case_outputs(wildcards):
-    return {name: output_path(wildcards.scene, wildcards.spp, name) for name in CANDIDATES}
+    return {name: rules.run_method.output.exr.format(scene=wildcards.scene, spp=wildcards.spp, method=name)
+            for name in CANDIDATES}
 
 
 def all_timing_records(wildcards=None):
-    return [f"{RESULTS}/outputs/{scene}/spp{spp}/{method}.json"
-            for scene in SCENES for spp in SPPS for method in CANDIDATES]
+    return expand(rules.run_method.output.timing, scene=SCENES, spp=SPPS, method=CANDIDATES)
 
 
 def all_case_metrics(wildcards=None):
-    return [f"{RESULTS}/metrics/{scene}/spp{spp}.csv" for scene in SCENES for spp in SPPS]
+    return expand(rules.case_metrics.output[0], scene=SCENES, spp=SPPS)
 
 
-# Training data and learned methods (rules in training.smk).
+def reference_paths():
+    return {scene: rules.merge_reference.output[0].format(scene=scene) for scene in SCENES}
 
-TRAINING = {
-    "first_seed": 0,
-    "count": 64,
-    "resolution": [128, 128],
-    "crop": 64,
-    "crops": 2,
-    "spp": [4, 16, 64, 256],
-    "target_spp": 4096,
-    **{key: value for key, value in config.get("training", {}).items() if key != "networks"},
-}
-TRAINING_OVERRIDES = config.get("training", {}).get("networks", {})
+
+def render_cost_records(wildcards=None):
+    """The benchmark records of the noisy renders and the reference chunks (the scene table's
+    CPU-hours), declared as inputs so that the table waits for them."""
+    noisy = expand(rules.render_noisy.benchmark, scene=SCENES, spp=SPPS)
+    chunks = expand(rules.render_reference_chunk.benchmark, scene=SCENES, chunk=range(REFERENCE_CHUNKS))
+    return {"noisy": noisy, "reference": chunks}
+
+
+# Training data and learned methods (rules in training.smk). Defaults: the schema's.
+
+TRAINING = {key: value for key, value in config["training"].items() if key != "networks"}
+TRAINING_OVERRIDES = config["training"]["networks"]
 TRAINING_SEEDS = training_seeds(TRAINING)
+# train_<name> rules for the learned methods the config names (no other method module is imported)
+NETWORKS = sorted({spec["module"] for spec in METHODS.values() if spec["learned"]})
+for _name in TRAINING_OVERRIDES:
+    if _name not in NETWORKS:
+        raise BenchError(f"training.networks.{_name}: not a learned method of this config; "
+                         f"learned: {', '.join(NETWORKS) or 'none'}")
 
 
 def training_crop_files():
-    return [f"{RESULTS}/training/example_{seed}_{k}.exr" for seed in TRAINING_SEEDS for k in range(TRAINING["crops"])]
-
-
-def _learned_networks():
-    """Every learned method module in methods/ (those declaring NETWORK, TRAINING, build_network)."""
-    from methods import available_methods, load_method
-    from mcbench.nn.train import is_learned_method
-
-    modules = {name: load_method(name) for name in available_methods()}
-    return sorted(name for name, module in modules.items() if is_learned_method(module))
-
-
-NETWORKS = _learned_networks()
-for _name in TRAINING_OVERRIDES:
-    if _name not in NETWORKS:
-        raise BenchError(f"training.networks: '{_name}' is not a learned method; learned: {', '.join(NETWORKS)}")
+    return expand(rules.training_example.output, seed=TRAINING_SEEDS)

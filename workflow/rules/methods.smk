@@ -6,7 +6,7 @@
 
 rule run_method:
     input:
-        render=f"{RESULTS}/renders/{{scene}}/spp{{spp}}.exr",
+        render=rules.render_noisy.output[0],
         inputs=method_inputs,
         weights=method_weights,
     output:

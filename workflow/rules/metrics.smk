@@ -4,13 +4,13 @@
 rule case_metrics:
     input:
         unpack(case_outputs),
-        reference=f"{RESULTS}/references/{{scene}}.exr",
-        render=f"{RESULTS}/renders/{{scene}}/spp{{spp}}.exr",
+        reference=rules.merge_reference.output[0],
+        render=rules.render_noisy.output[0],
     output:
         f"{RESULTS}/metrics/{{scene}}/spp{{spp}}.csv",
     params:
         candidates=CANDIDATES,
-        metrics=config["metrics"],
+        metrics=METRIC_NAMES,
     conda:
         "../envs/mcbench.yaml"
     log:
@@ -19,11 +19,17 @@ rule case_metrics:
         "../scripts/case_metrics.py"
 
 
+# One table of every error; every case must hold every candidate and metric with a finite value
+# (mcbench.ranking.check_complete), or the run stops naming the case file.
 rule gather_metrics:
     input:
         all_case_metrics,
     output:
         f"{RESULTS}/metrics.csv",
+    params:
+        candidates=[NOISY] + CANDIDATES,
+        metrics=METRIC_NAMES,
+        cases=[{"scene": scene, "spp": spp} for scene in SCENES for spp in SPPS],
     conda:
         "../envs/mcbench.yaml"
     log:

@@ -5,10 +5,10 @@ rule render_noisy:
     output:
         f"{RESULTS}/renders/{{scene}}/spp{{spp}}.exr",
     params:
-        resolution=config.get("resolution"),
-        variant=config.get("variant", "auto"),
-        seed=config.get("seed", 0),
-    threads: config.get("render_threads", 2)
+        resolution=config["resolution"],
+        variant=config["variant"],
+        seed=config["seed"],
+    threads: config["render_threads"]
     conda:
         "../envs/mcbench.yaml"
     log:
@@ -24,10 +24,10 @@ rule render_reference_chunk:
         temp(f"{RESULTS}/references/{{scene}}/chunk{{chunk}}.exr"),
     params:
         spp=reference_chunk_spp,
-        resolution=config.get("resolution"),
-        variant=config.get("variant", "auto"),
-        seed=config.get("seed", 0),
-    threads: config.get("render_threads", 2)
+        resolution=config["resolution"],
+        variant=config["variant"],
+        seed=config["seed"],
+    threads: config["render_threads"]
     conda:
         "../envs/mcbench.yaml"
     log:

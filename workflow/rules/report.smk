@@ -3,7 +3,7 @@
 
 rule ranking_table:
     input:
-        f"{RESULTS}/metrics.csv",
+        rules.gather_metrics.output[0],
     output:
         csv=report(
             f"{RESULTS}/tables/ranking_{{metric}}.csv",
@@ -12,7 +12,7 @@ rule ranking_table:
         ),
         md=f"{RESULTS}/tables/ranking_{{metric}}.md",
     params:
-        order=["noisy"] + CANDIDATES,
+        candidates=[NOISY] + CANDIDATES,
         labels=LABELS,
     conda:
         "../envs/mcbench.yaml"
@@ -24,15 +24,15 @@ rule ranking_table:
 
 rule scene_table:
     input:
-        metrics=f"{RESULTS}/metrics.csv",
-        references=[reference_path(scene) for scene in SCENES],
+        unpack(render_cost_records),
+        metrics=rules.gather_metrics.output[0],
+        references=list(reference_paths().values()),
     output:
         csv=report(f"{RESULTS}/tables/scenes.csv", caption="../report/scenes.rst", category="Scenes"),
         md=f"{RESULTS}/tables/scenes.md",
     params:
-        references={scene: reference_path(scene) for scene in SCENES},
+        references=reference_paths(),
         reference_spp=REFERENCE_SPP,
-        benchmarks=f"{RESULTS}/benchmarks",
     conda:
         "../envs/mcbench.yaml"
     log:
@@ -43,11 +43,11 @@ rule scene_table:
 
 rule gallery:
     input:
-        [reference_path(scene) for scene in SCENES],
+        list(reference_paths().values()),
     output:
         report(f"{RESULTS}/figures/gallery.png", caption="../report/gallery.rst", category="Scenes"),
     params:
-        references={scene: reference_path(scene) for scene in SCENES},
+        references=reference_paths(),
     conda:
         "../envs/mcbench.yaml"
     log:

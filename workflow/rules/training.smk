@@ -11,8 +11,8 @@ rule training_example:
     params:
         # the settings one example depends on (fibre_count only says how many scenes exist)
         settings={key: value for key, value in TRAINING.items() if key != "fibre_count"},
-        variant=config.get("variant", "auto"),
-    threads: config.get("render_threads", 2)
+        variant=config["variant"],
+    threads: config["render_threads"]
     conda:
         "../envs/mcbench.yaml"
     log:
@@ -41,7 +41,7 @@ rule train_network:
         weights_dir=lambda wildcards, output: os.path.dirname(output.weights),
     wildcard_constraints:
         network="|".join(NETWORKS),
-    threads: config.get("render_threads", 2)
+    threads: config["render_threads"]
     conda:
         "../envs/mcbench.yaml"
     log:

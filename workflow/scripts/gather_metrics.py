@@ -1,4 +1,7 @@
 from mcbench.logs import run_logged
 from mcbench.steps import gather_tables
 
-run_logged(snakemake.log[0], gather_tables, list(snakemake.input), snakemake.output[0])
+cases = [(case["scene"], int(case["spp"])) for case in snakemake.params.cases]
+run_logged(snakemake.log[0], gather_tables, list(snakemake.input), snakemake.output[0],
+           candidates=list(snakemake.params.candidates), metric_names=list(snakemake.params.metrics),
+           cases=cases)

@@ -2,5 +2,5 @@ from mcbench.logs import run_logged
 from mcbench.steps import write_scene_table
 
 run_logged(snakemake.log[0], write_scene_table, snakemake.input.metrics, dict(snakemake.params.references),
-           dict(snakemake.params.reference_spp), snakemake.params.benchmarks, snakemake.output.csv,
-           snakemake.output.md)
+           dict(snakemake.params.reference_spp), snakemake.output.csv, snakemake.output.md,
+           noisy_records=list(snakemake.input.noisy), reference_records=list(snakemake.input.reference))

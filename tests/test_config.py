@@ -1,0 +1,165 @@
+"""The configuration means what it says: defaults from the schema only, strict types, every
+method's params checked against its signature when the DAG is parsed, reserved and duplicate
+names refused, and the schema agreeing with the code (metric names, DSSIM's window)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import yaml
+
+import methods
+from mcbench import BenchError
+from mcbench.config import ConfigError, key_path, load_schema, resolve_config, schema_defaults
+from mcbench.metrics import DSSIM_MIN_SIZE, METRICS
+
+REPO = Path(__file__).resolve().parents[1]
+CONFIGS = sorted((REPO / "workflow" / "configs").glob("*.yaml")) + [REPO / "config.yaml"]
+
+
+def _every_property(schema, root, path=()):
+    """(path, sub-schema) of every named property of the schema, through objects and $refs."""
+    if "$ref" in schema:
+        node = root
+        for part in schema["$ref"][2:].split("/"):
+            node = node[part]
+        schema = node
+    for name, sub in schema.get("properties", {}).items():
+        yield path + (name,), sub
+        yield from _every_property(sub, root, path + (name,))
+
+
+def test_every_top_level_and_nested_key_has_its_default_in_the_schema():
+    schema = load_schema()
+    missing = [".".join(p) for p, sub in _every_property(schema, schema)
+               if "default" not in sub and p[0] not in ("denoisers", "combiners")
+               and not (len(p) >= 2 and p[-2] == "networks")]
+    assert missing == []
+    defaults = schema_defaults()
+    assert set(defaults) == set(schema["properties"])
+    assert defaults["training"]["count"] == 128 and defaults["reference"]["spp"] == 16384
+
+
+def test_config_yaml_sets_only_what_the_schema_does_not_default():
+    """config.yaml holds no copy of a schema default (one place per default)."""
+    written = yaml.safe_load((REPO / "config.yaml").read_text())
+    defaults = schema_defaults()
+
+    def copies(value, default, path):
+        if isinstance(value, dict) and isinstance(default, dict):
+            for key, sub in value.items():
+                yield from copies(sub, default.get(key, object()), path + [key])
+        elif value == default:
+            yield key_path(path)
+
+    assert list(copies(written, defaults, [])) == []
+    assert resolve_config(written)["reference"]["scene_spp"] == {"cornell_box": 65536, "glass_caustics": 65536}
+
+
+def test_a_config_file_is_the_whole_configuration():
+    narrowed = resolve_config({"scenes": ["cornell_box"]})
+    assert narrowed["scenes"] == ["cornell_box"]
+    # nothing is inherited from config.yaml: the per-scene reference spp stays the schema's (empty)
+    assert narrowed["reference"] == {"spp": 16384, "chunks": 4, "scene_spp": {}}
+    smoke = resolve_config(yaml.safe_load((REPO / "workflow/configs/smoke.yaml").read_text()))
+    assert smoke["reference"] == {"spp": 1024, "chunks": 2, "scene_spp": {}}
+    # a nested object given in part keeps its own values and takes the rest from the schema
+    assert resolve_config({"training": {"count": 3}})["training"]["crops"] == 4
+
+
+@pytest.mark.parametrize("config, key", [
+    ({"spp": [4.0]}, "spp[0]"),
+    ({"spp": [4, 7]}, "spp[1]"),
+    ({"resolution": [DSSIM_MIN_SIZE - 1, 64]}, "resolution"),
+    ({"reference": {"chunks": 2.0}}, "reference.chunks"),
+    ({"seed": True}, "seed"),
+    ({"render_threads": 0}, "render_threads"),
+    ({"sceness": ["cornell_box"]}, "<config>"),
+    ({"training": {"networks": {"kpcn": {"stepz": 3}}}}, "training.networks.kpcn"),
+])
+def test_invalid_values_are_refused_naming_the_key(config, key):
+    with pytest.raises(ConfigError) as error:
+        resolve_config(config, source="my.yaml")
+    assert str(error.value).startswith(f"my.yaml: {key}")
+
+
+def test_schema_resolution_minimum_is_dssims_window():
+    schema = load_schema()
+    items = schema["properties"]["resolution"]["oneOf"][1]["items"]
+    assert items["minimum"] == DSSIM_MIN_SIZE == 11
+    assert resolve_config({"resolution": [11, 11]})["resolution"] == [11, 11]
+
+
+def test_schema_metric_names_are_the_implemented_metrics():
+    schema = load_schema()
+    assert schema["properties"]["metrics"]["items"]["enum"] == list(METRICS)
+
+
+@pytest.mark.parametrize("path", CONFIGS, ids=lambda p: p.name)
+def test_every_shipped_config_resolves_and_its_methods_check(path):
+    config = resolve_config(yaml.safe_load(path.read_text()), source=str(path))
+    table = methods.method_table(config["denoisers"], config["combiners"], is_learned=lambda m: False)
+    labels = [spec["label"] for spec in table.values()]
+    assert len(labels) == len(set(labels))
+
+
+def _table(denoisers=("oidn", "jbf"), combiners=()):
+    return methods.method_table(list(denoisers), list(combiners), is_learned=lambda module: False)
+
+
+@pytest.mark.parametrize("combiner, message", [
+    ({"params": {"solvr": "exact"}}, "combiners[0].params.solvr: ensemble has no parameter 'solvr'"),
+    ({"params": {"solver": "exactt"}}, "combiners[0].params.solver: 'exactt' is not allowed"),
+    ({"params": {"radius": 2.5}}, "combiners[0].params.radius: 2.5 is not allowed"),
+    ({"params": {"filter": "no"}}, "combiners[0].params.filter: 'no' is not allowed"),
+    ({"inputs": ["oidn", "nfor"]}, "combiners[0].inputs[1]: 'nfor' is not a denoiser"),
+    ({"name": "noisy"}, "combiners[0].name: 'noisy' is reserved"),
+    ({"name": "jbf"}, "combiners[0].name: duplicate method name 'jbf'"),
+    ({"method": "oidn"}, "combiners[0].method: 'oidn' is a denoiser, not a combiner"),
+])
+def test_combiner_mistakes_stop_at_parse_naming_the_key(combiner, message):
+    entry = {"name": "ens", "method": "ensemble", "inputs": ["oidn", "jbf"], **combiner}
+    with pytest.raises(BenchError) as error:
+        _table(combiners=[entry])
+    assert str(error.value).startswith(message)
+
+
+def test_denoiser_params_are_checked_against_the_signature():
+    with pytest.raises(BenchError, match=r"denoisers\[1\].params.quality: 'best' is not allowed for oidn"):
+        _table(denoisers=["jbf", {"name": "oidn_best", "method": "oidn", "params": {"quality": "best"}}])
+    with pytest.raises(BenchError, match=r"denoisers\[0\].params.sigma: jbf has no parameter 'sigma'"):
+        _table(denoisers=[{"name": "jbf", "params": {"sigma": 1.0}}])
+    with pytest.raises(BenchError, match=r"denoisers\[0\].name: 'noisy' is reserved"):
+        _table(denoisers=[{"name": "noisy", "method": "oidn"}])
+    table = _table(denoisers=["jbf", {"name": "jbf3", "method": "jbf", "params": {"radius": 3, "sigma_color": 1}}])
+    assert table["jbf3"]["params"] == {"radius": 3, "sigma_color": 1}
+
+
+def test_default_labels_tell_variants_apart_and_duplicate_labels_stop():
+    table = _table(combiners=[{"name": "ensemble", "method": "ensemble", "inputs": ["oidn", "jbf"]},
+                              {"name": "ensemble_exact", "method": "ensemble", "inputs": ["oidn", "jbf"],
+                               "params": {"solver": "exact"}}])
+    assert table["ensemble"]["label"] == "Ensemble (oidn+jbf)"
+    assert table["ensemble_exact"]["label"] == "Ensemble (oidn+jbf; solver=exact)"
+    with pytest.raises(BenchError, match=r"combiners\[1\].label: 'Same' is also the label of 'a'"):
+        _table(combiners=[{"name": "a", "method": "ensemble", "inputs": ["oidn", "jbf"], "label": "Same"},
+                          {"name": "b", "method": "ensemble", "inputs": ["oidn", "jbf"], "label": "Same"}])
+    with pytest.raises(BenchError, match="also the label of 'noisy'"):
+        _table(denoisers=[{"name": "oidn", "label": "Noisy input"}])
+
+
+def test_every_method_param_annotation_is_checkable():
+    """Each method's config parameters carry annotations the checker understands, so a wrong
+    type is caught at parse time for every method, not only for the ones tested above."""
+    import typing
+
+    simple = (bool, int, float, str)
+    for name in methods.available_methods():
+        module = methods.load_method(name)
+        function = getattr(module, methods.KINDS[module.KIND])
+        hints = typing.get_type_hints(function)
+        for parameter in methods.method_parameters(module):
+            hint = hints.get(parameter)
+            assert hint is not None, f"methods/{name}.py: parameter '{parameter}' has no annotation"
+            assert hint in simple or typing.get_origin(hint) is typing.Literal, (name, parameter, hint)
