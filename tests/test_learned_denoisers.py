@@ -15,7 +15,8 @@ from mcbench.buffers import RenderBuffers
 from mcbench.io import read_json
 from mcbench.nn.data import CropSet, is_validation_seed
 from mcbench.nn.inference import image_tensors, load_network, run_network
-from mcbench.nn.train import COMMITTED_WEIGHTS, evaluate, is_learned_method, record_path, weights_path
+from mcbench.nn.train import evaluate
+from mcbench.weights import COMMITTED_WEIGHTS, is_learned_method, load_weights, record_path, weights_path
 from methods import available_methods, load_method
 
 LEARNED = ["kpcn", "mcgan", "optix_ae", "wskpn"]
@@ -24,19 +25,15 @@ LEARNED = ["kpcn", "mcgan", "optix_ae", "wskpn"]
 BLACK_TOLERANCE = {"kpcn": 1e-7, "wskpn": 1e-7, "mcgan": 0.05, "optix_ae": 0.05}
 
 
-def _render_buffers(height=13, width=17, seed=0, spp=8):
-    rng = np.random.default_rng(seed)
-    truth = rng.uniform(0.05, 2.0, (height, width, 3)).astype(np.float32)
-    layers = {}
-    for suffix, n in (("", spp), ("_a", spp / 2), ("_b", spp / 2)):
-        sigma = 0.5 / np.sqrt(n)
-        layers["color" + suffix] = np.maximum(truth + rng.normal(0, sigma, truth.shape), 0).astype(np.float32)
-        layers["variance" + suffix] = np.full_like(truth, sigma ** 2)
-        layers["albedo" + suffix] = rng.uniform(0, 1, truth.shape).astype(np.float32)
-        normal = rng.normal(size=truth.shape)
-        layers["normal" + suffix] = (normal / np.linalg.norm(normal, axis=2, keepdims=True)).astype(np.float32)
-        layers["depth" + suffix] = rng.uniform(1, 5, (height, width)).astype(np.float32)
-    return RenderBuffers(layers=layers, spp=spp)
+@pytest.fixture
+def noisy_buffers(make_render_buffers):
+    """Synthetic buffers (tests/conftest.py) of a positive random truth (no negative radiance, as
+    in renders), spp 8, noise std 0.1 per half buffer: ``noisy_buffers(height, width, seed)``."""
+    def build(height=13, width=17, seed=0):
+        truth = np.random.default_rng(seed).uniform(0.5, 2.0, (height, width, 3))
+        return make_render_buffers(truth, spp=8, half_std=0.1, seed=seed)
+
+    return build
 
 
 def test_registry_lists_the_learned_methods_and_labels_stand_ins():
@@ -59,19 +56,19 @@ def _randomise_batch_norms(network):
             layer.bias.data.copy_(torch.randn(n, generator=generator) * 0.1)
 
 
-def test_repvgg_reparameterisation_is_exact():
+def test_repvgg_reparameterisation_is_exact(noisy_buffers):
     module = importlib.import_module("methods.wskpn")
     torch.manual_seed(0)
     network = module.build_network(**module.NETWORK).eval()
     _randomise_batch_norms(network)
-    buffers = image_tensors(_render_buffers().image("full"))
+    buffers = image_tensors(noisy_buffers().image("full"))
     with torch.no_grad():
         before = network(buffers)
         network.fuse()
         after = network(buffers)
     assert all(block.fused is not None for block in network.importance_net)
     torch.testing.assert_close(after, before, rtol=1e-4, atol=1e-5)
-    block = module.RepVGGBlock(4, 4).eval()
+    block = module.network_classes().RepVGGBlock(4, 4).eval()
     _randomise_batch_norms(block)
     x = torch.randn(2, 4, 9, 9)
     with torch.no_grad():
@@ -81,14 +78,14 @@ def test_repvgg_reparameterisation_is_exact():
 
 
 @pytest.mark.parametrize("name", LEARNED)
-def test_untrained_networks_start_unsaturated(name):
+def test_untrained_networks_start_unsaturated(name, noisy_buffers):
     """At initialisation every network's output depends on its weights (non-zero gradients) and
     WSKPN's fusion weights are spread over its kernels (guards against the saturation that
     stalled a first WSKPN without batch norms)."""
     module = importlib.import_module(f"methods.{name}")
     torch.manual_seed(0)
     network = module.build_network(**module.NETWORK).train()
-    buffers = image_tensors(_render_buffers(32, 32, seed=4).image("full"))
+    buffers = image_tensors(noisy_buffers(32, 32, seed=4).image("full"))
     network(buffers).mean().backward()
     gradients = [p.grad for p in network.parameters() if p.grad is not None]
     assert gradients and all(torch.isfinite(g).all() for g in gradients)
@@ -102,12 +99,12 @@ def test_untrained_networks_start_unsaturated(name):
 
 
 @pytest.mark.parametrize("name", LEARNED)
-def test_untrained_networks_handle_any_size(name):
+def test_untrained_networks_handle_any_size(name, noisy_buffers):
     module = importlib.import_module(f"methods.{name}")
     torch.manual_seed(0)
     network = module.build_network(**module.NETWORK).eval()
     for height, width in ((13, 17), (4, 4), (33, 20)):
-        image = _render_buffers(height, width).image("a")
+        image = noisy_buffers(height, width).image("a")
         output = run_network(network, image)
         assert output.shape == (height, width, 3) and output.dtype == np.float32
         assert np.all(np.isfinite(output))
@@ -118,7 +115,7 @@ def test_committed_weights_load_safely_and_match_their_record(name):
     path = weights_path(name)
     assert path.parent == COMMITTED_WEIGHTS and path.exists(), f"{path} missing"
     assert path.stat().st_size < 5 * 2 ** 20
-    blob = torch.load(path, weights_only=True, map_location="cpu")
+    blob = load_weights(path)
     module = load_method(name)
     assert blob["arch"] == module.NETWORK
     record = read_json(record_path(name))
@@ -133,9 +130,9 @@ def test_committed_weights_load_safely_and_match_their_record(name):
 
 
 @pytest.mark.parametrize("name", LEARNED)
-def test_inference_is_deterministic_and_finite_on_hard_cases(name):
+def test_inference_is_deterministic_and_finite_on_hard_cases(name, noisy_buffers):
     module = load_method(name)
-    buffers = _render_buffers(24, 20, seed=3)
+    buffers = noisy_buffers(24, 20, seed=3)
     first = module.denoise(buffers)
     second = module.denoise(buffers)
     for a, b in ((first.full, second.full), (first.a, second.a), (first.b, second.b)):
@@ -178,7 +175,7 @@ def validation_scene():
 def test_committed_weights_reproduce_their_validation_loss(name, validation_scene):
     seed, crops = validation_scene
     record = read_json(record_path(name))
-    result = evaluate(load_network(name), crops, record["loss"])
+    result = evaluate(load_network(load_method(name)), crops, record["loss"])
     recorded = record["validation"]["per_scene"][str(seed)]
     assert result["loss"] == pytest.approx(recorded, rel=0.03)
 

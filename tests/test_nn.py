@@ -245,7 +245,7 @@ def test_training_writes_loadable_weights_and_a_faithful_record(tmp_path, crop_f
     from mcbench.nn.train import evaluate, train_network
     import methods.optix_ae as module
 
-    record = train_network("optix_ae", crop_files, tmp_path / "w.pt", tmp_path / "w.json", tmp_path / "ck.pt",
+    record = train_network(module, crop_files, tmp_path / "w.pt", tmp_path / "w.json", tmp_path / "ck.pt",
                            TINY, log=lambda m: None)
     blob = torch.load(tmp_path / "w.pt", weights_only=True)
     assert blob["arch"] == module.NETWORK
@@ -262,8 +262,9 @@ def test_training_writes_loadable_weights_and_a_faithful_record(tmp_path, crop_f
 
 def test_killed_training_resumes_to_the_same_weights(tmp_path, crop_files, monkeypatch):
     import mcbench.nn.train as train
+    import methods.kpcn as kpcn
 
-    train.train_network("kpcn", crop_files, tmp_path / "a.pt", tmp_path / "a.json", tmp_path / "a.ckpt", TINY,
+    train.train_network(kpcn, crop_files, tmp_path / "a.pt", tmp_path / "a.json", tmp_path / "a.ckpt", TINY,
                         log=lambda m: None)
     original = train.sample_batch
 
@@ -274,13 +275,13 @@ def test_killed_training_resumes_to_the_same_weights(tmp_path, crop_files, monke
 
     monkeypatch.setattr(train, "sample_batch", killed_at_step_4)
     with pytest.raises(KeyboardInterrupt):
-        train.train_network("kpcn", crop_files, tmp_path / "b.pt", tmp_path / "b.json", tmp_path / "b.ckpt", TINY,
+        train.train_network(kpcn, crop_files, tmp_path / "b.pt", tmp_path / "b.json", tmp_path / "b.ckpt", TINY,
                             log=lambda m: None)
     assert not (tmp_path / "b.pt").exists()
     assert torch.load(tmp_path / "b.ckpt", weights_only=True)["step"] == 3
     monkeypatch.setattr(train, "sample_batch", original)
     messages = []
-    train.train_network("kpcn", crop_files, tmp_path / "b.pt", tmp_path / "b.json", tmp_path / "b.ckpt", TINY,
+    train.train_network(kpcn, crop_files, tmp_path / "b.pt", tmp_path / "b.json", tmp_path / "b.ckpt", TINY,
                         log=messages.append)
     assert any("resuming" in m and "step 3" in m for m in messages)
     a = torch.load(tmp_path / "a.pt", weights_only=True)["state_dict"]
@@ -288,14 +289,15 @@ def test_killed_training_resumes_to_the_same_weights(tmp_path, crop_files, monke
     assert all(torch.equal(a[key], b[key]) for key in a)
     # a checkpoint of other settings is refused, naming the file
     with pytest.raises(BenchError, match="b.ckpt"):
-        train.train_network("kpcn", crop_files, tmp_path / "c.pt", tmp_path / "c.json", tmp_path / "b.ckpt",
+        train.train_network(kpcn, crop_files, tmp_path / "c.pt", tmp_path / "c.json", tmp_path / "b.ckpt",
                             {**TINY, "learning_rate": 1e-2}, log=lambda m: None)
 
 
 def test_adversarial_training_runs_and_checkpoints_the_critic(tmp_path, crop_files):
     from mcbench.nn.train import train_network
+    import methods.mcgan as mcgan
 
-    record = train_network("mcgan", crop_files, tmp_path / "g.pt", tmp_path / "g.json", tmp_path / "g.ckpt",
+    record = train_network(mcgan, crop_files, tmp_path / "g.pt", tmp_path / "g.json", tmp_path / "g.ckpt",
                            {**TINY, "steps": 2}, log=lambda m: None)
     state = torch.load(tmp_path / "g.ckpt", weights_only=True)
     assert "critic" in state and "critic_optimizer" in state
@@ -313,7 +315,7 @@ def test_training_learns_to_denoise(tmp_path):
     _, validation = crops.split()
     settings = {**TINY, "steps": 60, "batch_size": 4, "learning_rate": 2e-3, "validate_every": 60,
                 "checkpoint_every": 60}
-    record = train_network("kpcn", files, tmp_path / "k.pt", tmp_path / "k.json", tmp_path / "k.ckpt", settings,
+    record = train_network(module, files, tmp_path / "k.pt", tmp_path / "k.json", tmp_path / "k.ckpt", settings,
                            log=lambda m: None)
 
     class Identity(torch.nn.Module):
@@ -327,13 +329,42 @@ def test_training_learns_to_denoise(tmp_path):
     assert record["validation"]["loss"] < 0.8 * untrained
 
 
-def test_unknown_settings_and_non_learned_methods_are_refused(crop_files, tmp_path):
-    from mcbench.nn.train import learned_method, train_network
+def test_unknown_settings_and_non_learned_methods_are_refused(crop_files, tmp_path, capsys):
+    from mcbench.nn.train import main, train_network
+    import methods.kpcn as kpcn
+    from methods import load_method
 
     with pytest.raises(BenchError, match="unknown training setting"):
-        train_network("kpcn", crop_files, tmp_path / "x.pt", tmp_path / "x.json", tmp_path / "x.ckpt",
+        train_network(kpcn, crop_files, tmp_path / "x.pt", tmp_path / "x.json", tmp_path / "x.ckpt",
                       {"stepz": 3})
-    with pytest.raises(BenchError, match="not a learned method"):
-        learned_method("oidn")
+    with pytest.raises(BenchError, match=r"methods/oidn\.py is not a learned method"):
+        train_network(load_method("oidn"), crop_files, tmp_path / "x.pt", tmp_path / "x.json", tmp_path / "x.ckpt")
     with pytest.raises(BenchError, match="validation"):
-        train_network("kpcn", crop_files[:2], tmp_path / "x.pt", tmp_path / "x.json", tmp_path / "x.ckpt", TINY)
+        train_network(kpcn, crop_files[:2], tmp_path / "x.pt", tmp_path / "x.json", tmp_path / "x.ckpt", TINY)
+    # the command line resolves names with the caller's loader and reports errors in one line
+    assert main(["evaluate", "oidn", "--data", str(tmp_path)], load_method=load_method) == 1
+    assert "methods/oidn.py is not a learned method" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("damage", ["hostile", "truncated"])
+def test_damaged_checkpoint_is_refused_naming_it(crop_files, tmp_path, damage):
+    """A checkpoint goes through mcbench.weights.load_weights: a corrupt or code-running file is
+    an error that names it and never suggests loading it unsafely; nothing of it runs."""
+    import os
+    import traceback
+
+    from mcbench.nn.train import train_network
+    import methods.kpcn as kpcn
+
+    class RunsCode:
+        def __reduce__(self):
+            return os.mkdir, (str(tmp_path / "pwned"),)
+
+    checkpoint = tmp_path / "k.ckpt"
+    torch.save({"arch": kpcn.NETWORK, "network": RunsCode(), "payload": torch.ones(256)}, checkpoint)
+    if damage == "truncated":
+        checkpoint.write_bytes(checkpoint.read_bytes()[:300])
+    with pytest.raises(BenchError, match=r"k\.ckpt: cannot load checkpoint") as caught:
+        train_network(kpcn, crop_files, tmp_path / "k.pt", tmp_path / "k.json", checkpoint, TINY, log=lambda m: None)
+    assert "weights_only" not in "".join(traceback.format_exception(caught.value))
+    assert not (tmp_path / "pwned").exists() and not (tmp_path / "k.pt").exists()
