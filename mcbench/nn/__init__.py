@@ -9,12 +9,18 @@
   train/validation split, seeded augmented batches;
 * :mod:`mcbench.nn.train` -- the seeded, resumable training loop with checkpoints, the optional
   adversarial critic, validation, and the weights + record it writes;
-* :mod:`mcbench.nn.inference` -- loading committed weights (``weights_only=True``) and running a
-  network on one image, deterministically.
+* :mod:`mcbench.nn.inference` -- loading committed weights and running a network on one image,
+  deterministically.
+
+The weights' location and file format, the safe loader and :func:`mcbench.weights.is_learned_method`
+are in the torch-free :mod:`mcbench.weights`.
 
 A learned method is one module in ``methods/`` that declares ``NETWORK`` (architecture
 hyperparameters), ``TRAINING`` (training settings) and ``build_network(**NETWORK)``; the network's
 ``forward`` takes a dict of raw buffers (see :data:`mcbench.nn.data.BUFFER_KEYS`) and returns
 linear HDR radiance (N, 3, H, W). Its weights live in ``methods/weights/<name>.pt`` with a record
-``methods/weights/<name>.json``.
+``methods/weights/<name>.json``. The functions here take the method's *module* (core never imports
+``methods``; callers resolve names with ``methods.load_method``), and torch is imported only by
+this package's modules other than ``__init__``: a method module imports them inside
+``build_network`` / ``denoise`` so that importing it (as parsing the DAG does) does not import torch.
 """
