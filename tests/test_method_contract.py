@@ -1,0 +1,146 @@
+"""The contract every module in ``methods/`` must keep, so a new method is tested the moment its
+file exists: it loads through the registry, returns a :class:`mcbench.buffers.Denoised` whose
+full, A and B images are finite float (H, W, 3) arrays, and the same input gives the same output.
+Hard cases: fireflies, black regions, a 1x1 image, and for combiners identical inputs and an
+input equal to the noisy image.
+
+A method that fails a hard case is listed in ``KNOWN_FAILURES`` (strict xfail, so fixing it
+makes the test fail until the entry is removed).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from mcbench.buffers import Denoised
+from methods import available_methods, load_method
+
+HEIGHT, WIDTH = 12, 10
+DENOISER_CASES = ("fireflies", "black_region", "one_pixel")
+COMBINER_CASES = DENOISER_CASES + ("identical_inputs", "input_is_noisy_image")
+
+# (method, case) -> reason; keep in sync with the methods' own limitations
+KNOWN_FAILURES: dict[tuple[str, str], str] = {
+    ("rdfc", "one_pixel"): "rdfc.feature_gradient_sq pads an empty np.diff with mode='edge': "
+                           "ValueError on any image 1 pixel high or wide",
+}
+
+
+def method_kind(name: str) -> str:
+    """KIND of methods/<name>.py, or "unknown" if it does not load (the basic test then fails
+    with the loader's error)."""
+    try:
+        return load_method(name).KIND
+    except Exception:  # noqa: BLE001 -- reported by test_loads_and_keeps_the_contract
+        return "unknown"
+
+
+def case_params():
+    params = []
+    for name in available_methods():
+        cases = COMBINER_CASES if method_kind(name) == "combiner" else DENOISER_CASES
+        for case in cases:
+            marks = ()
+            if (name, case) in KNOWN_FAILURES:
+                marks = pytest.mark.xfail(strict=True, reason=KNOWN_FAILURES[(name, case)])
+            params.append(pytest.param(name, case, marks=marks, id=f"{name}-{case}"))
+    return params
+
+
+def blurred(image: np.ndarray) -> np.ndarray:
+    """3x3 box mean with edge replication, float32: a stand-in base denoiser output."""
+    h, w = image.shape[:2]
+    padded = np.pad(np.asarray(image, np.float64), ((1, 1), (1, 1), (0, 0)), mode="edge")
+    total = sum(padded[dy:dy + h, dx:dx + w] for dy in range(3) for dx in range(3))
+    return (total / 9).astype(np.float32)
+
+
+def synthetic_inputs(buffers) -> list[Denoised]:
+    """Two base outputs for combiners: a blurred copy of each image and a biased one."""
+    images = (buffers.color, buffers.color_a, buffers.color_b)
+    smooth = Denoised(*(blurred(x) for x in images))
+    biased = Denoised(*(blurred(x) * np.float32(0.9) + np.float32(0.02) for x in images))
+    return [smooth, biased]
+
+
+def with_layers(buffers, **changes):
+    """A copy of ``buffers`` with some layers replaced (arrays copied as float32)."""
+    layers = {name: value.copy() for name, value in buffers.layers.items()}
+    layers.update({name: np.asarray(value, np.float32) for name, value in changes.items()})
+    return type(buffers)(layers=layers, spp=buffers.spp)
+
+
+def hard_case(case: str, build):
+    """(buffers, combiner inputs) of the named hard case; ``build`` is make_render_buffers."""
+    if case == "one_pixel":
+        buffers = build(height=1, width=1, seed=3)
+        return buffers, synthetic_inputs(buffers)
+    buffers = build(height=HEIGHT, width=WIDTH, seed=4)
+    if case == "fireflies":
+        layers = {name: buffers.layers[name].copy() for name in
+                  ("color_a", "color_b", "variance_a", "variance_b")}
+        for (y, x), half in (((2, 3), "a"), ((7, 8), "b"), ((10, 1), "a")):
+            layers["color_" + half][y, x] *= 1e4
+            layers["variance_" + half][y, x] = layers["color_" + half][y, x] ** 2
+        layers["color"] = (layers["color_a"].astype(np.float64) + layers["color_b"]) / 2
+        layers["variance"] = (layers["variance_a"].astype(np.float64) + layers["variance_b"]) / 4
+        buffers = with_layers(buffers, **layers)
+        inputs = synthetic_inputs(buffers)
+        inputs[1] = Denoised(inputs[1].full, inputs[1].a.copy(), inputs[1].b)
+        inputs[1].a[5, 5] *= 1e4                        # a firefly left in one base output
+        return buffers, inputs
+    if case == "black_region":
+        black = {}
+        for name, value in buffers.layers.items():
+            black[name] = value.copy()
+            black[name][:, : WIDTH // 2] = 0.0           # colour, variance and all features
+        buffers = with_layers(buffers, **black)
+        return buffers, synthetic_inputs(buffers)
+    if case == "identical_inputs":
+        smooth = synthetic_inputs(buffers)[0]
+        return buffers, [smooth, Denoised(smooth.full.copy(), smooth.a.copy(), smooth.b.copy())]
+    if case == "input_is_noisy_image":
+        noisy = Denoised(buffers.color.copy(), buffers.color_a.copy(), buffers.color_b.copy())
+        return buffers, [noisy, synthetic_inputs(buffers)[0]]
+    raise ValueError(f"unknown hard case {case!r}")
+
+
+def run(module, buffers, inputs) -> Denoised:
+    if module.KIND == "combiner":
+        return module.combine(buffers, inputs)
+    return module.denoise(buffers)
+
+
+def assert_valid_output(result, shape):
+    assert isinstance(result, Denoised), type(result)
+    for which in ("full", "a", "b"):
+        image = np.asarray(getattr(result, which))
+        assert image.shape == shape + (3,), (which, image.shape)
+        assert np.issubdtype(image.dtype, np.floating), (which, image.dtype)
+        assert np.isfinite(image).all(), f"{which}: {np.count_nonzero(~np.isfinite(image))} non-finite"
+
+
+@pytest.mark.parametrize("name", available_methods())
+def test_loads_and_keeps_the_contract(name, make_render_buffers):
+    module = load_method(name)
+    assert isinstance(getattr(module, "LABEL", None), str) and module.LABEL
+    buffers = make_render_buffers(height=HEIGHT, width=WIDTH, seed=1)
+    inputs = synthetic_inputs(buffers)
+    first = run(module, buffers, inputs)
+    assert_valid_output(first, (HEIGHT, WIDTH))
+    second = run(module, buffers, inputs)
+    for which in ("full", "a", "b"):
+        assert np.array_equal(getattr(first, which), getattr(second, which)), \
+            f"{name}: {which} differs between two runs on the same input"
+    # the output depends on the input (a method returning a constant would pass the above)
+    other = make_render_buffers(height=HEIGHT, width=WIDTH, seed=2)
+    assert not np.array_equal(run(module, other, synthetic_inputs(other)).full, first.full)
+
+
+@pytest.mark.parametrize(("name", "case"), case_params())
+def test_hard_case_gives_finite_output(name, case, make_render_buffers):
+    module = load_method(name)
+    buffers, inputs = hard_case(case, make_render_buffers)
+    result = run(module, buffers, inputs)
+    assert_valid_output(result, buffers.shape)
