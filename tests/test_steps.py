@@ -1,0 +1,174 @@
+"""Fast tests of the rule bodies in ``mcbench.steps`` on tiny synthetic EXRs: each step's files
+against the project functions (or closed forms) recomputed here from the same inputs."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from mcbench import BenchError, steps
+from mcbench.buffers import Denoised, RenderBuffers
+from mcbench.exr import read_layers, read_metadata, write_layers
+from mcbench.metrics import METRICS
+from methods import load_method
+
+SCENE, SPP = "box", 8
+
+
+@pytest.fixture
+def case_files(tmp_path, make_render_buffers):
+    """A render EXR and its noise-free reference EXR (16 x 16)."""
+    buffers = make_render_buffers(spp=SPP, half_std=0.05, seed=7)
+    truth = make_render_buffers(spp=SPP, half_std=0.0).color
+    render, reference = tmp_path / "render.exr", tmp_path / "reference.exr"
+    write_layers(render, buffers.layers, metadata={"spp": SPP, "scene": SCENE})
+    write_layers(reference, {"color": truth}, metadata={"spp": 4096, "scene": SCENE})
+    return render, reference
+
+
+def run(method, render, tmp_path, **kw):
+    output, timing = tmp_path / f"{method}.exr", tmp_path / f"{method}.json"
+    steps.run_method(method, str(render), str(output), str(timing), scene=SCENE, spp=SPP,
+                     threads=1, **kw)
+    return output, timing
+
+
+@pytest.mark.parametrize("name", ["jbf", "oidn"])
+def test_run_method_writes_the_methods_output_and_its_timing(name, case_files, tmp_path):
+    render, _ = case_files
+    output, timing = run(f"{name}_run", render, tmp_path, module_name=name)
+    expected = load_method(name).denoise(RenderBuffers.load(render))
+    written = Denoised.load(output)
+    for which in ("full", "a", "b"):
+        np.testing.assert_array_equal(getattr(written, which), getattr(expected, which))
+    meta = read_metadata(output)
+    assert (meta["method"], meta["scene"], meta["spp"]) == (f"{name}_run", SCENE, str(SPP))
+    record = json.loads(timing.read_text())
+    assert {k: record[k] for k in ("scene", "spp", "method", "module", "kind", "width", "height",
+                                   "threads")} == {
+        "scene": SCENE, "spp": SPP, "method": f"{name}_run", "module": name, "kind": "denoiser",
+        "width": 16, "height": 16, "threads": 1}
+    assert 0.0 < record["seconds"] < 60.0
+    assert float(meta["seconds"]) == pytest.approx(record["seconds"], abs=1e-6)
+
+
+def test_run_method_combiner_reads_its_inputs(case_files, tmp_path):
+    render, _ = case_files
+    inputs = [run(name, render, tmp_path, module_name=name)[0] for name in ("jbf", "oidn")]
+    output, timing = run("ens", render, tmp_path, module_name="ensemble",
+                         params={"solver": "exact"}, input_paths=[str(p) for p in inputs])
+    expected = load_method("ensemble").combine(RenderBuffers.load(render),
+                                               [Denoised.load(p) for p in inputs], solver="exact")
+    layers = read_layers(output)
+    for name, value in expected.layers().items():
+        np.testing.assert_array_equal(layers[name], value)
+    assert json.loads(timing.read_text())["kind"] == "combiner"
+
+
+def test_run_method_refuses_an_input_of_another_size(case_files, tmp_path, make_render_buffers):
+    render, _ = case_files
+    small = make_render_buffers(height=8, width=8)
+    wrong = tmp_path / "wrong.exr"
+    write_layers(wrong, {"color": small.color, "color_a": small.color_a, "color_b": small.color_b})
+    with pytest.raises(BenchError, match="wrong.exr.*does not match"):
+        run("ens", render, tmp_path, module_name="ensemble", input_paths=[str(wrong)])
+
+
+def case_metrics(render, reference, tmp_path, *, scene=SCENE, spp=SPP):
+    output, _ = run("jbf", render, tmp_path, module_name="jbf")
+    csv = tmp_path / f"metrics_{scene}_{spp}.csv"
+    frame = steps.compute_case_metrics(scene, spp, str(reference), str(render), {"jbf": str(output)},
+                                       list(METRICS), str(csv))
+    return frame, csv, output
+
+
+def test_compute_case_metrics_equals_the_metrics_recomputed(case_files, tmp_path):
+    render, reference = case_files
+    frame, csv, output = case_metrics(render, reference, tmp_path)
+    truth = read_layers(reference, ["color"])["color"]
+    images = {steps.NOISY: RenderBuffers.load(render).color, "jbf": Denoised.load(output).full}
+    assert len(frame) == len(images) * len(METRICS)
+    for row in frame.itertuples():
+        assert (row.scene, row.spp) == (SCENE, SPP)
+        assert row.value == METRICS[row.metric](images[row.candidate], truth)
+    assert frame.set_index(["candidate", "metric"]).loc[("jbf", "relmse"), "value"] < \
+        frame.set_index(["candidate", "metric"]).loc[(steps.NOISY, "relmse"), "value"]
+    pd.testing.assert_frame_equal(pd.read_csv(csv), frame)
+
+
+def test_gather_tables_concatenates_the_cases(case_files, tmp_path):
+    render, reference = case_files
+    first, csv_a, _ = case_metrics(render, reference, tmp_path, scene="box", spp=8)
+    second, csv_b, _ = case_metrics(render, reference, tmp_path, scene="room", spp=16)
+    out = tmp_path / "metrics.csv"
+    frame = steps.gather_tables([str(csv_a), str(csv_b)], str(out), candidates=[steps.NOISY, "jbf"],
+                                metric_names=list(METRICS), cases=[("box", 8), ("room", 16)])
+    expected = pd.concat([first, second], ignore_index=True)
+    pd.testing.assert_frame_equal(frame.reset_index(drop=True), expected)
+    pd.testing.assert_frame_equal(pd.read_csv(out), expected)
+
+
+def test_write_rankings_scores_the_lower_error_higher(case_files, tmp_path):
+    render, reference = case_files
+    frame, csv, _ = case_metrics(render, reference, tmp_path)
+    table = steps.write_rankings(str(csv), "relmse", str(tmp_path / "r.csv"), str(tmp_path / "r.md"),
+                                 candidates=[steps.NOISY, "jbf"], labels={"jbf": "JBF"})
+    # two entries: the lower relMSE scores 2, the other 1 (Sec. 5.3.3)
+    assert table.loc["jbf", "Avg."] == 2.0 and table.loc[steps.NOISY, "Avg."] == 1.0
+    assert "JBF" in (tmp_path / "r.md").read_text()
+    assert set(pd.read_csv(tmp_path / "r.csv")["candidate"]) == {"jbf", steps.NOISY}
+
+
+def test_gather_timings_collects_and_sorts_the_records(tmp_path):
+    records = [{"scene": s, "spp": n, "method": m, "module": m, "kind": "denoiser", "seconds": t,
+                "width": 4, "height": 3, "threads": 2, "machine": "test"}
+               for s, n, m, t in [("b", 16, "oidn", 0.5), ("a", 8, "oidn", 0.25), ("a", 8, "jbf", 1.0)]]
+    paths = []
+    for i, record in enumerate(records):
+        path = tmp_path / f"t{i}.json"
+        path.write_text(json.dumps(record))
+        paths.append(str(path))
+    out = tmp_path / "timings.csv"
+    frame = steps.gather_timings(paths, str(out))
+    assert list(frame.columns) == ["scene", "spp", "method", "module", "kind", "seconds", "width",
+                                   "height", "threads", "machine"]
+    assert list(zip(frame["method"], frame["scene"], frame["seconds"])) == [
+        ("jbf", "a", 1.0), ("oidn", "a", 0.25), ("oidn", "b", 0.5)]
+    pd.testing.assert_frame_equal(pd.read_csv(out), frame.reset_index(drop=True))
+
+
+def test_merge_reference_is_the_spp_weighted_mean(tmp_path):
+    """Two chunks of 64 and 192 spp: colour, features and the second moment pool with weights
+    1/4 and 3/4; variance of the mean = (M2 - mean^2) / (N - 1) with N = 256."""
+    rng = np.random.default_rng(3)
+    h, w = 5, 6
+    chunks, paths = [], []
+    for index, spp in enumerate((64, 192)):
+        color = rng.uniform(0.1, 1.0, (h, w, 3))
+        layers = {"color": color, "color_m2": color ** 2 + rng.uniform(0.01, 0.1, (h, w, 3)),
+                  "albedo": rng.uniform(0, 1, (h, w, 3)), "normal": rng.uniform(-1, 1, (h, w, 3)),
+                  "depth": rng.uniform(1, 5, (h, w))}
+        layers = {k: v.astype(np.float32) for k, v in layers.items()}
+        path = tmp_path / f"chunk{index}.exr"
+        write_layers(path, layers, metadata={"scene": SCENE, "spp": spp, "chunk": index,
+                                             "seeds": str(100 + index), "seconds": 1.5})
+        chunks.append((spp, layers))
+        paths.append(str(path))
+    out = tmp_path / "reference.exr"
+    steps.merge_reference(paths, str(out))
+    merged = read_layers(out)
+
+    def pooled(name):
+        return sum(spp * layers[name].astype(np.float64) for spp, layers in chunks) / 256
+
+    mean = pooled("color")
+    np.testing.assert_allclose(merged["color"], mean, rtol=1e-6)
+    np.testing.assert_allclose(merged["variance"], (pooled("color_m2") - mean ** 2) / 255,
+                               rtol=1e-4, atol=1e-9)
+    for name in ("albedo", "normal", "depth"):
+        np.testing.assert_allclose(merged[name], pooled(name), rtol=1e-6, atol=1e-7)
+    meta = read_metadata(out)
+    assert meta["spp"] == "256" and meta["chunks"] == "2" and meta["scene"] == SCENE
