@@ -17,7 +17,8 @@ import time
 import pandas as pd
 import yaml
 
-from mcbench.render import pick_variant, render_buffers, set_threads
+from mcbench.render import render_buffers
+from mcbench.variants import pick_variant, set_threads
 from scenes import load_scene
 
 
@@ -33,10 +34,11 @@ def main() -> None:
     reference = config["reference"]
     rows = []
     for scene in config["scenes"]:
-        resolution = tuple(config["resolution"]) if config.get("resolution") else tuple(load_scene(scene).RESOLUTION)
-        render_buffers(scene, 2, resolution=resolution, variant=variant)
+        module = load_scene(scene)
+        resolution = tuple(config["resolution"]) if config.get("resolution") else tuple(module.RESOLUTION)
+        render_buffers(module, 2, resolution=resolution, variant=variant)
         start = time.perf_counter()
-        render_buffers(scene, args.spp, resolution=resolution, variant=variant)
+        render_buffers(module, args.spp, resolution=resolution, variant=variant)
         per_spp = (time.perf_counter() - start) / args.spp
         noisy_spp = sum(config["spp"])
         reference_spp = reference.get("scene_spp", {}).get(scene, reference["spp"])

@@ -12,56 +12,49 @@ from pooled sums ``S1, S2`` over ``N`` samples
     mean = S1 / N,   variance of the mean = (S2 / N - mean^2) / (N - 1)
 
 (the unbiased sample variance divided by ``N``). Tiny negative values from rounding are set to 0.
+Each buffer or chunk is split into passes of at most :data:`MAX_WAVEFRONT` samples
+(:func:`passes_for`); every pass has its own 32-bit seed, laid out in :mod:`mcbench.seeds`
+(which also maps a seed to the one handed to Mitsuba in scalar variants).
 
-Seeds (see :func:`render_seed`)
--------------------------------
-Every ``mi.render`` call gets its own 32-bit seed, laid out as bit fields::
+What is rendered
+----------------
+The renderer never looks up a scene by name (core does not import ``scenes/``): callers pass
 
-    bit 31..29  base_seed   global seed from the config, 0..7
-    bit 28      kind        0 = noisy render, 1 = reference chunk
-    bit 27..16  field       noisy: (spp_code << 1) | half    reference: chunk (0..4095)
-    bit 15..0   pass        pass index within one buffer / chunk (0..65535)
+* a scene *module* (``DESCRIPTION``, ``CATEGORY``, ``RESOLUTION``, ``build(width, height)``, see
+  ``scenes/__init__.py``) to :func:`render_buffers` and :func:`render_reference_chunk`, which
+  use the test render seeds of :func:`mcbench.seeds.render_seed`; or
+* a Mitsuba scene *dict* (integrator and sensor included) with a caller-chosen ``key`` and
+  seeds to :func:`render_dict_buffers` (noisy full/A/B buffers) or :func:`render_scene_sums`
+  (float64 moment sums of one run of passes); the training data uses these.
 
-``spp_code`` is ``spp/2 - 1`` for spp <= 2048 (any even spp) and ``1023 + spp/2048`` for
-larger multiples of 2048 up to 2**21; ``half`` is 0 for buffer A and 1 for buffer B. The map
-from (base_seed, kind, spp, half, chunk, pass) to the seed is injective (each field has its own
-bits and every field value decodes back, see :func:`decode_seed`), so no two renders ever share
-a seed. In the LLVM variants Mitsuba seeds lane ``i`` of the wavefront with
-``TEA(seed, i)``, a bijection of the pair, so distinct seeds give distinct random streams.
-
-The scalar variant seeds pixel by pixel with ``seed * W * H + block_id * B^2 + i`` (B = block
-size, i = pixel in the block), which would wrap around 2**32 and collide for seeds like ours.
-There each buffer/chunk is rendered in one pass (pass 0; no wavefront limit on the CPU), with
-the Mitsuba seed ``(seed >> 16) * m`` where ``m = ceil(blocks * B^2 / (W*H))``; renders are
-refused unless ``((seed >> 16) + 1) * m * W * H <= 2**32``, so the pixel seed ranges of two
-different renders are disjoint integer intervals (see :func:`mitsuba_seed`).
+Both paths wrap the scene the same way (:func:`load_scene_dict`) and share the moment sums and
+buffer assembly (:func:`buffers_from_moment_sums`), so the same dict and seeds give the same
+buffers bit for bit. Loaded scenes are cached per process by ``(key, width, height, variant)``
+(a module's key is its module name, e.g. ``scenes.cornell_box``); :func:`forget_scene` drops a
+key's entries.
 """
 
 from __future__ import annotations
 
-import glob
-import math
-import os
-import re
-import sys
 import time
+from types import ModuleType
+from typing import Callable
 
 import numpy as np
 
 from mcbench import BenchError
 from mcbench.buffers import ALL_LAYERS
+from mcbench.seeds import SCALAR_BLOCK_SIZE, mitsuba_seed, render_seed
+from mcbench.variants import pick_variant, set_threads
 
-__all__ = ["RenderError", "pick_variant", "render_seed", "decode_seed", "mitsuba_seed",
-           "passes_for", "render_buffers", "render_reference_chunk", "merge_reference_chunks",
-           "moments_to_mean_variance", "buffers_from_moment_sums", "MAX_WAVEFRONT"]
+__all__ = ["RenderError", "MAX_WAVEFRONT", "passes_for", "load_scene_dict", "forget_scene",
+           "render_scene_sums", "render_dict_buffers", "render_buffers", "render_reference_chunk",
+           "merge_reference_chunks", "moments_to_mean_variance", "buffers_from_moment_sums",
+           "film_size"]
 
 MAX_WAVEFRONT = 2 ** 22          # samples per mi.render call in vectorised variants (W*H*spp_pass)
-MIN_LLVM_MAJOR = 19              # older libLLVM versions crash Dr.Jit 1.5 on this machine
-SCALAR_BLOCK_SIZE = 16           # explicit block size in scalar variants (seed ranges depend on it)
 AOVS = "albedo:albedo,nn:sh_normal,dd:depth"
-LLVM_SEARCH_PATTERNS = ("/usr/lib/x86_64-linux-gnu/libLLVM*.so*", "/usr/lib/llvm-*/lib/libLLVM*.so*",
-                        "/usr/lib64/libLLVM*.so*", "/usr/local/lib/libLLVM*.so*",
-                        "/usr/lib/libLLVM*.so*", "/opt/homebrew/opt/llvm/lib/libLLVM*.dylib")
+SENSOR_TYPES = ("perspective", "thinlens", "orthographic")
 
 # Film channel names (Mitsuba 3.9 moment + aov integrators) of each quantity: m1 and m2.
 CHANNELS = {
@@ -75,187 +68,12 @@ CHANNELS = {
 }
 FEATURES = ("albedo", "normal", "depth")
 
+SeedOfPass = Callable[[int], int]            # pass index -> 32-bit seed
+SeedOfHalfPass = Callable[[int, int], int]   # (half 0 = A / 1 = B, pass index) -> 32-bit seed
+
 
 class RenderError(BenchError):
     """Rendering failed or produced unusable numbers; the message names scene and spp."""
-
-
-# --------------------------------------------------------------------------- variants
-
-_active_variant: str | None = None
-
-
-def _llvm_major(path: str) -> int | None:
-    """LLVM major version from a library file name (``libLLVM.so.19.1``, ``libLLVM-19.so``)."""
-    match = re.search(r"libLLVM(?:\.so\.|-|\.)(\d+)", os.path.basename(path))
-    return int(match.group(1)) if match else None
-
-
-def find_libllvm() -> tuple[str | None, str]:
-    """Path of a usable libLLVM (major >= 19) and a one-line reason when there is none.
-
-    ``DRJIT_LIBLLVM_PATH`` is used when it names an existing file whose version is >= 19 or
-    cannot be told from its name; otherwise the newest libLLVM >= 19 in the usual folders.
-    """
-    env = os.environ.get("DRJIT_LIBLLVM_PATH")
-    reason = "no libLLVM >= %d found" % MIN_LLVM_MAJOR
-    if env:
-        major = _llvm_major(env)
-        if os.path.isfile(env) and (major is None or major >= MIN_LLVM_MAJOR):
-            return env, ""
-        reason = (f"DRJIT_LIBLLVM_PATH={env} is " +
-                  ("missing" if not os.path.isfile(env) else f"LLVM {major} (< {MIN_LLVM_MAJOR})"))
-    found = [(major, path) for pattern in LLVM_SEARCH_PATTERNS for path in glob.glob(pattern)
-             if (major := _llvm_major(path)) is not None and major >= MIN_LLVM_MAJOR
-             and os.path.isfile(path)]
-    if found:
-        return max(found)[1], ""
-    return None, reason
-
-
-def pick_variant(requested: str = "auto") -> str:
-    """Set the Mitsuba variant once per process and return its name.
-
-    ``"auto"`` gives ``cuda_ad_rgb`` when Dr.Jit finds a CUDA GPU (cluster/GPU runs of the
-    paper-scale config), else ``llvm_ad_rgb`` when a libLLVM >= 19 is usable (``DRJIT_LIBLLVM_PATH`` is
-    then set to it), else ``scalar_rgb`` with one line on stderr saying why. An explicit
-    variant is honoured; a variant Mitsuba lacks raises :class:`BenchError` naming the config
-    key ``variant``. Asking for a different variant after one was set raises too.
-    """
-    global _active_variant
-    import mitsuba as mi
-
-    if _active_variant is not None:
-        if requested in ("auto", _active_variant):
-            return _active_variant
-        raise BenchError(f"config key 'variant': this process already renders with "
-                         f"'{_active_variant}' and cannot switch to '{requested}'")
-    if requested == "auto" and _cuda_usable():
-        variant = "cuda_ad_rgb"
-    elif requested == "auto":
-        library, reason = find_libllvm()
-        variant = "scalar_rgb"
-        if library is not None:
-            os.environ["DRJIT_LIBLLVM_PATH"] = library
-            import drjit as dr
-            if "llvm_ad_rgb" in mi.variants() and dr.has_backend(dr.JitBackend.LLVM):
-                variant = "llvm_ad_rgb"
-            else:
-                reason = f"Dr.Jit cannot use the LLVM backend with {library}"
-        if variant == "scalar_rgb":
-            print(f"mcbench.render: using scalar_rgb (3-4x slower): {reason}", file=sys.stderr)
-    else:
-        variant = requested
-        if variant not in mi.variants():
-            raise BenchError(f"config key 'variant': Mitsuba {mi.__version__} has no variant "
-                             f"'{variant}'; available: {', '.join(mi.variants())}")
-        if variant.startswith("llvm_"):
-            library, reason = find_libllvm()
-            if library is None:
-                raise BenchError(f"config key 'variant': '{variant}' needs libLLVM >= "
-                                 f"{MIN_LLVM_MAJOR} ({reason}); use 'auto' or 'scalar_rgb'")
-            os.environ["DRJIT_LIBLLVM_PATH"] = library
-    mi.set_variant(variant)
-    _active_variant = variant
-    return variant
-
-
-def _cuda_usable() -> bool:
-    """True when Mitsuba has ``cuda_ad_rgb`` and Dr.Jit can initialise its CUDA backend."""
-    import drjit as dr
-    import mitsuba as mi
-
-    try:
-        return "cuda_ad_rgb" in mi.variants() and bool(dr.has_backend(dr.JitBackend.CUDA))
-    except Exception:  # no driver, no device: fall through to the CPU variants
-        return False
-
-
-def set_threads(threads: int | None) -> None:
-    """Set the Dr.Jit thread pool size (used by both scalar and LLVM variants) when given."""
-    if threads is not None:
-        import drjit as dr
-        if int(threads) < 1:
-            raise BenchError(f"config key 'render_threads': must be >= 1, got {threads}")
-        dr.set_thread_count(int(threads))
-
-
-# --------------------------------------------------------------------------- seeds
-
-_SPP_SMALL = 2048        # every even spp up to this has its own code
-_SPP_STEP = 2048         # above it, multiples of this up to _SPP_STEP * 1024
-
-
-def spp_code(spp: int) -> int:
-    """11-bit code of a noisy spp level: ``spp/2 - 1`` for even spp <= 2048, else
-    ``1023 + spp/2048`` for multiples of 2048 up to 2**21 (codes 1025..2047)."""
-    spp = int(spp)
-    if spp >= 2 and spp % 2 == 0 and spp <= _SPP_SMALL:
-        return spp // 2 - 1
-    if spp > _SPP_SMALL and spp % _SPP_STEP == 0 and spp // _SPP_STEP <= 1024:
-        return 1023 + spp // _SPP_STEP
-    raise BenchError(f"config key 'spp': {spp} spp has no seed code; use an even spp <= 2048 or a "
-                     f"multiple of 2048 up to {_SPP_STEP * 1024}")
-
-
-def render_seed(kind: str, spp: int | None = None, half: int | None = None, chunk: int | None = None,
-                pass_index: int = 0, base_seed: int = 0) -> int:
-    """32-bit Mitsuba seed of one render pass (layout in the module docstring).
-
-    ``kind`` is ``"noisy"`` (needs ``spp`` = total spp of the full image and ``half`` 0 = A,
-    1 = B) or ``"reference"`` (needs ``chunk``). Distinct arguments give distinct seeds.
-    """
-    base_seed, pass_index = int(base_seed), int(pass_index)
-    if not 0 <= base_seed <= 7:
-        raise BenchError(f"config key 'seed': must be in 0..7, got {base_seed}")
-    if not 0 <= pass_index < 1 << 16:
-        raise BenchError(f"pass index {pass_index} out of range 0..65535 (too many passes; "
-                         f"lower the spp or the resolution)")
-    if kind == "noisy":
-        if half not in (0, 1):
-            raise ValueError(f"half must be 0 (A) or 1 (B), got {half!r}")
-        field, kind_bit = (spp_code(spp) << 1) | half, 0
-    elif kind == "reference":
-        if chunk is None or not 0 <= int(chunk) < 1 << 12:
-            raise BenchError(f"config key 'reference.chunks': chunk {chunk} out of range 0..4095")
-        field, kind_bit = int(chunk), 1
-    else:
-        raise ValueError(f"kind must be 'noisy' or 'reference', got {kind!r}")
-    return (base_seed << 29) | (kind_bit << 28) | (field << 16) | pass_index
-
-
-def decode_seed(seed: int) -> dict:
-    """Inverse of :func:`render_seed`: the fields a seed was made from."""
-    base, kind_bit, field, pass_index = seed >> 29, (seed >> 28) & 1, (seed >> 16) & 0xFFF, seed & 0xFFFF
-    out = {"base_seed": base, "kind": "reference" if kind_bit else "noisy", "pass_index": pass_index}
-    if kind_bit:
-        out["chunk"] = field
-    else:
-        code, out["half"] = field >> 1, field & 1
-        out["spp"] = 2 * (code + 1) if code < 1024 else _SPP_STEP * (code - 1023)
-    return out
-
-
-def scalar_seed_stride(width: int, height: int, block_size: int = SCALAR_BLOCK_SIZE) -> int:
-    """Smallest ``m`` with ``m * W * H >=`` the pixel-seed range ``blocks * B^2`` that one
-    scalar-variant render uses (Mitsuba adds ``block_id * B^2 + i`` to ``seed * W * H``)."""
-    blocks = math.ceil(width / block_size) * math.ceil(height / block_size)
-    return math.ceil(blocks * block_size ** 2 / (width * height))
-
-
-def mitsuba_seed(seed: int, variant: str, width: int, height: int) -> int:
-    """The seed handed to ``mi.render``: ``seed`` itself in vectorised variants; in scalar
-    variants ``(seed >> 16) * m`` (see module docstring), refusing a wrap-around of 2**32."""
-    if not variant.startswith("scalar"):
-        return seed
-    if seed & 0xFFFF:
-        raise ValueError("scalar variants render each buffer in one pass (pass index 0)")
-    index, stride = seed >> 16, scalar_seed_stride(width, height)
-    if (index + 1) * stride * width * height > 1 << 32:
-        raise BenchError(f"config key 'variant': scalar_rgb cannot give disjoint seeds at "
-                         f"{width}x{height} with this seed/spp/chunk (pixel seeds would wrap "
-                         f"around 2**32); use llvm_ad_rgb, a lower 'seed' or a smaller resolution")
-    return index * stride
 
 
 def passes_for(spp: int, width: int, height: int, variant: str) -> list[int]:
@@ -270,51 +88,87 @@ def passes_for(spp: int, width: int, height: int, variant: str) -> list[int]:
     return [per_pass] * full + ([rest] if rest else [])
 
 
-# --------------------------------------------------------------------------- rendering
+# --------------------------------------------------------------------------- loading
 
 _scene_cache: dict = {}
 
 
-def _resolve(scene: str, resolution) -> tuple:
-    from scenes import load_scene
-
-    module = load_scene(scene)
-    width, height = (resolution if resolution is not None else module.RESOLUTION)
-    return module, int(width), int(height)
+def film_size(desc: dict) -> tuple[int, int]:
+    """``(width, height)`` in pixels of the film of a scene dict's sensor."""
+    sensor = _sensor_key(desc, "scene dict")
+    return int(desc[sensor]["film"]["width"]), int(desc[sensor]["film"]["height"])
 
 
-def _load(scene: str, module, width: int, height: int, variant: str):
-    """The Mitsuba scene object with the moment/aov wrapper, box filter and independent sampler
-    (cached per process)."""
+def _sensor_key(desc: dict, label: str) -> str:
+    try:
+        return next(k for k, v in desc.items() if isinstance(v, dict) and v.get("type") in SENSOR_TYPES)
+    except StopIteration:
+        raise RenderError(f"scene '{label}': no {'/'.join(SENSOR_TYPES)} sensor in its dict") from None
+
+
+def _wrapped(desc: dict, label: str, width: int, height: int, variant: str) -> tuple[dict, dict]:
+    """A copy of ``desc`` with the moment/aov integrator wrapper, box filter and independent
+    sampler (``desc`` itself is not changed), and the scene's own integrator dict."""
+    desc = dict(desc)
+    integrator = desc["integrator"]
+    desc["integrator"] = {"type": "moment",
+                          "nested": {"type": "aov", "aovs": AOVS, "integrator": integrator}}
+    if variant.startswith("scalar"):
+        desc["integrator"]["block_size"] = SCALAR_BLOCK_SIZE
+    sensor_key = _sensor_key(desc, label)
+    sensor = dict(desc[sensor_key])
+    film = dict(sensor["film"])
+    if (int(film["width"]), int(film["height"])) != (width, height):
+        raise RenderError(f"scene '{label}': build({width}, {height}) made a "
+                          f"{film['width']}x{film['height']} film")
+    film["rfilter"] = {"type": "box"}
+    for crop_key in ("crop_width", "crop_height", "crop_offset_x", "crop_offset_y"):
+        film.pop(crop_key, None)
+    sensor["film"] = film
+    sensor["sampler"] = {"type": "independent", "sample_count": 1}
+    desc[sensor_key] = sensor
+    return desc, integrator
+
+
+def _loaded(key: str, build: Callable[[], dict], label: str, width: int, height: int, variant: str):
+    """Cached ``(Mitsuba scene, scene integrator dict)``; ``build()`` runs only on a miss."""
     import mitsuba as mi
 
-    key = (scene, width, height, variant)
-    if key not in _scene_cache:
-        desc = module.build(width, height)
-        integrator = desc["integrator"]
-        desc["integrator"] = {"type": "moment",
-                              "nested": {"type": "aov", "aovs": AOVS, "integrator": integrator}}
-        if variant.startswith("scalar"):
-            desc["integrator"]["block_size"] = SCALAR_BLOCK_SIZE
-        sensor_key = next(k for k, v in desc.items() if isinstance(v, dict)
-                          and v.get("type") in ("perspective", "thinlens", "orthographic"))
-        sensor = dict(desc[sensor_key])
-        film = dict(sensor["film"])
-        if (int(film["width"]), int(film["height"])) != (width, height):
-            raise RenderError(f"scene '{scene}': build({width}, {height}) made a "
-                              f"{film['width']}x{film['height']} film")
-        film["rfilter"] = {"type": "box"}
-        for crop_key in ("crop_width", "crop_height", "crop_offset_x", "crop_offset_y"):
-            film.pop(crop_key, None)
-        sensor["film"] = film
-        sensor["sampler"] = {"type": "independent", "sample_count": 1}
-        desc[sensor_key] = sensor
+    cache_key = (key, width, height, variant)
+    if cache_key not in _scene_cache:
+        desc, integrator = _wrapped(build(), label, width, height, variant)
         try:
-            _scene_cache[key] = (mi.load_dict(desc), integrator)
+            _scene_cache[cache_key] = (mi.load_dict(desc), integrator)
         except Exception as exc:
-            raise RenderError(f"scene '{scene}': Mitsuba cannot load it ({exc})") from exc
-    return _scene_cache[key]
+            raise RenderError(f"scene '{label}': Mitsuba cannot load it ({exc})") from exc
+    return _scene_cache[cache_key]
 
+
+def load_scene_dict(desc: dict, *, key: str, variant: str = "auto"):
+    """The Mitsuba scene of scene dict ``desc`` wrapped for rendering (module docstring): the
+    ``moment(aov(...))`` integrator, a box filter and an ``independent`` sampler, loaded once per
+    process under ``key`` (which also names the scene in errors). ``desc`` is not changed.
+
+    Returns ``(scene, integrator)``: the loaded ``mi.Scene`` and the scene's own integrator dict.
+    """
+    scene_object, integrator, *_ = _loaded_dict(desc, key, variant)
+    return scene_object, integrator
+
+
+def _loaded_dict(desc: dict, key: str, variant: str):
+    """``(scene, integrator, variant, width, height)`` of a scene dict, the variant picked."""
+    variant = pick_variant(variant)
+    width, height = film_size(desc)
+    return (*_loaded(key, lambda: desc, key, width, height, variant), variant, width, height)
+
+
+def forget_scene(key: str) -> None:
+    """Drop every cached Mitsuba scene loaded under ``key`` (all sizes and variants)."""
+    for cache_key in [k for k in _scene_cache if k[0] == key]:
+        del _scene_cache[cache_key]
+
+
+# --------------------------------------------------------------------------- moment sums
 
 def _channel_indices(scene_object) -> dict[str, tuple[list[int], list[int]]]:
     """Indices of the m1 and m2 channels of each quantity in the developed film, by name."""
@@ -335,10 +189,12 @@ def _render_pass(scene_object, spp: int, seed: int) -> np.ndarray:
     return np.asarray(mi.render(scene_object, spp=spp, seed=seed), dtype=np.float64)
 
 
-def _render_sums(scene: str, scene_object, pass_spp: list[int], seeds: list[int],
-                 variant: str, width: int, height: int, total_spp: int) -> dict[str, tuple]:
-    """Render the passes and return, per quantity, float64 sums (S1, S2) of samples and squared
-    samples, each (H, W, C) with C = 3 (color, albedo, normal) or 1 (depth)."""
+def _moment_sums(label: str, scene_object, spp: int, seed_of: SeedOfPass, variant: str,
+                 width: int, height: int, label_spp: int) -> tuple[dict[str, tuple], list[int]]:
+    """Render ``spp`` samples in the passes of :func:`passes_for`, pass ``p`` seeded with
+    ``seed_of(p)``; per quantity float64 sums (S1, S2), each (H, W, C), and the seeds used."""
+    pass_spp = passes_for(spp, width, height, variant)
+    seeds = [seed_of(p) for p in range(len(pass_spp))]
     sums = {}
     for spp, seed in zip(pass_spp, seeds):
         image = _render_pass(scene_object, spp, mitsuba_seed(seed, variant, width, height))
@@ -346,7 +202,7 @@ def _render_sums(scene: str, scene_object, pass_spp: list[int], seeds: list[int]
         color = image[..., index["color"][0]]
         if not np.all(np.isfinite(color)) or not np.all(np.isfinite(image[..., index["color"][1]])):
             bad = int((~np.isfinite(image)).any(axis=2).sum())
-            raise RenderError(f"scene '{scene}' at {total_spp} spp: Mitsuba produced NaN/Inf in "
+            raise RenderError(f"scene '{label}' at {label_spp} spp: Mitsuba produced NaN/Inf in "
                               f"{bad} pixel(s) (pass seed {seed}, variant {variant})")
         for quantity, (m1, m2) in index.items():
             s1, s2 = image[..., m1] * spp, image[..., m2] * spp
@@ -354,7 +210,50 @@ def _render_sums(scene: str, scene_object, pass_spp: list[int], seeds: list[int]
                 sums[quantity] = (sums[quantity][0] + s1, sums[quantity][1] + s2)
             else:
                 sums[quantity] = (s1, s2)
-    return sums
+    return sums, seeds
+
+
+def render_scene_sums(desc: dict, spp: int, seed_of: SeedOfPass, *, key: str,
+                      variant: str = "auto") -> tuple[dict[str, tuple[np.ndarray, np.ndarray]], list[int]]:
+    """Float64 moment sums of ``spp`` samples of scene dict ``desc`` (loaded with
+    :func:`load_scene_dict` under ``key``), split into the passes of :func:`passes_for`, pass
+    ``p`` seeded with ``seed_of(p)``.
+
+    Returns ``(sums, seeds)``: ``sums[q] = (S1, S2)``, the sums of samples and squared samples
+    over all passes, float64 (H, W, C) with C = 3 (``color``, ``albedo``, ``normal``) or 1
+    (``depth``) -- :func:`moments_to_mean_variance` turns them into means and variances -- and
+    the list of seeds used. Raises :class:`RenderError` on NaN/Inf from Mitsuba.
+    """
+    scene_object, _, variant, width, height = _loaded_dict(desc, key, variant)
+    return _moment_sums(key, scene_object, int(spp), seed_of, variant, width, height, int(spp))
+
+
+def _half_buffers(label: str, scene_object, spp: int, seed_of: SeedOfHalfPass, variant: str,
+                  width: int, height: int) -> tuple[dict[str, np.ndarray], list[int], list[int]]:
+    """Layers of :data:`ALL_LAYERS` from half buffers A and B of ``spp/2`` samples each, and
+    the seeds of A and of B."""
+    half_spp = spp // 2
+    sums, seeds = {}, {}
+    for half in (0, 1):
+        sums[half], seeds[half] = _moment_sums(label, scene_object, half_spp,
+                                               lambda p, half=half: seed_of(half, p),
+                                               variant, width, height, spp)
+    return buffers_from_moment_sums(sums[0], sums[1], half_spp), seeds[0], seeds[1]
+
+
+def render_dict_buffers(desc: dict, spp: int, seed_of: SeedOfHalfPass, *, key: str,
+                        variant: str = "auto") -> tuple[dict[str, np.ndarray], list[int]]:
+    """Noisy buffers of scene dict ``desc`` with the conventions of :func:`render_buffers`.
+
+    ``spp``: even total spp (``spp/2`` per half buffer); ``seed_of(half, pass_index)`` gives the
+    32-bit seed of each pass of half 0 (A) and 1 (B); ``key`` names the scene in errors and in
+    the scene cache (:func:`forget_scene`). Returns the float32 layers of :data:`ALL_LAYERS`
+    (see :func:`buffers_from_moment_sums`) and the seeds used (A's, then B's).
+    """
+    spp = _even_spp(spp, key)
+    scene_object, _, variant, width, height = _loaded_dict(desc, key, variant)
+    layers, seeds_a, seeds_b = _half_buffers(key, scene_object, spp, seed_of, variant, width, height)
+    return layers, seeds_a + seeds_b
 
 
 def moments_to_mean_variance(s1: np.ndarray, s2: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -379,10 +278,53 @@ def _mitsuba_version() -> str:
     return mi.__version__
 
 
-def render_buffers(scene: str, spp: int, *, resolution: tuple[int, int] | None = None,
+def _describe(integrator: dict) -> str:
+    return ",".join(f"{k}={v}" for k, v in sorted(integrator.items()))
+
+
+# --------------------------------------------------------------------------- test scenes
+
+def _even_spp(spp, label: str) -> int:
+    if not isinstance(spp, (int, np.integer)) or spp < 2 or spp % 2:
+        raise BenchError(f"config key 'spp': scene '{label}' needs an even spp >= 2, got {spp}")
+    return int(spp)
+
+
+def _scene_module(scene: ModuleType | str) -> ModuleType:
+    """The scene module itself. TEMPORARY (issue 11): a scene *name* is still resolved here for
+    callers not yet converted to ``scenes.load_scene(name)``; remove with them."""
+    if not isinstance(scene, str):
+        return scene
+    import warnings
+
+    from scenes import load_scene  # the only core import of scenes/, to be removed
+    warnings.warn("mcbench.render: pass scenes.load_scene(name), not a scene name",
+                  DeprecationWarning, stacklevel=3)
+    return load_scene(scene)
+
+
+def _scene_name(module: ModuleType) -> str:
+    return module.__name__.rpartition(".")[2]
+
+
+def _size(module: ModuleType, resolution) -> tuple[int, int]:
+    width, height = (resolution if resolution is not None else module.RESOLUTION)
+    return int(width), int(height)
+
+
+def _loaded_module(module: ModuleType, width: int, height: int, variant: str):
+    return _loaded(module.__name__, lambda: module.build(width, height), _scene_name(module),
+                   width, height, variant)
+
+
+def render_buffers(scene: ModuleType, spp: int, *, resolution: tuple[int, int] | None = None,
                    variant: str = "auto", seed: int = 0, threads: int | None = None
                    ) -> tuple[dict[str, np.ndarray], dict[str, str]]:
-    """Render the two independent half buffers A and B (spp/2 samples each) of ``scene``.
+    """Render the two independent half buffers A and B (spp/2 samples each) of a test scene.
+
+    ``scene``: the scene module (``scenes.load_scene(name)``; its name is the module's last
+    component); ``resolution``: ``(width, height)``, default the module's ``RESOLUTION``;
+    ``seed``: the config's global seed (:func:`mcbench.seeds.render_seed`).
 
     Returns float32 layers for every name in :data:`mcbench.buffers.ALL_LAYERS`: ``color*``
     (H, W, 3) linear radiance, ``variance*`` (H, W, 3) variance of the mean, ``albedo*``,
@@ -391,30 +333,63 @@ def render_buffers(scene: str, spp: int, *, resolution: tuple[int, int] | None =
     Metadata (strings): scene, spp, variant, seed, seeds_a, seeds_b, mitsuba, seconds,
     resolution (``WxH``), integrator, passes.
     """
-    if not isinstance(spp, (int, np.integer)) or spp < 2 or spp % 2:
-        raise BenchError(f"config key 'spp': scene '{scene}' needs an even spp >= 2, got {spp}")
-    spp = int(spp)
-    module, width, height = _resolve(scene, resolution)
+    module = _scene_module(scene)
+    name = _scene_name(module)
+    spp = _even_spp(spp, name)
+    width, height = _size(module, resolution)
     variant = pick_variant(variant)
     set_threads(threads)
     start = time.perf_counter()
-    scene_object, integrator = _load(scene, module, width, height, variant)
-    half_spp = spp // 2
-    pass_spp = passes_for(half_spp, width, height, variant)
-    seeds, sums = {}, {}
-    for half, suffix in ((0, "_a"), (1, "_b")):
-        seeds[suffix] = [render_seed("noisy", spp=spp, half=half, pass_index=p, base_seed=seed)
-                         for p in range(len(pass_spp))]
-        sums[suffix] = _render_sums(scene, scene_object, pass_spp, seeds[suffix], variant,
-                                    width, height, spp)
-    layers = buffers_from_moment_sums(sums["_a"], sums["_b"], half_spp)
+    scene_object, integrator = _loaded_module(module, width, height, variant)
+    layers, seeds_a, seeds_b = _half_buffers(
+        name, scene_object, spp,
+        lambda half, p: render_seed("noisy", spp=spp, half=half, pass_index=p, base_seed=seed),
+        variant, width, height)
     seconds = time.perf_counter() - start
     metadata = {
-        "scene": scene, "spp": str(spp), "variant": variant, "seed": str(seed),
-        "seeds_a": ",".join(map(str, seeds["_a"])), "seeds_b": ",".join(map(str, seeds["_b"])),
+        "scene": name, "spp": str(spp), "variant": variant, "seed": str(seed),
+        "seeds_a": ",".join(map(str, seeds_a)), "seeds_b": ",".join(map(str, seeds_b)),
         "mitsuba": _mitsuba_version(), "seconds": f"{seconds:.3f}",
         "resolution": f"{width}x{height}", "integrator": _describe(integrator),
-        "passes": str(len(pass_spp)),
+        "passes": str(len(seeds_a)),
+    }
+    return layers, metadata
+
+
+def render_reference_chunk(scene: ModuleType, spp: int, chunk: int, *,
+                           resolution: tuple[int, int] | None = None, variant: str = "auto",
+                           seed: int = 0, threads: int | None = None
+                           ) -> tuple[dict[str, np.ndarray], dict[str, str]]:
+    """Render chunk ``chunk`` (0-based) of a reference of scene module ``scene``: ``spp``
+    samples with seeds disjoint from every noisy render and every other chunk.
+
+    Layers (float32): ``color`` (H, W, 3) sample mean, ``color_m2`` (H, W, 3) mean of squared
+    samples, ``albedo``, ``normal`` (H, W, 3) and ``depth`` (H, W) sample means. Metadata
+    (strings): scene, spp, chunk, variant, seed, seeds, mitsuba, seconds, resolution, integrator.
+    """
+    module = _scene_module(scene)
+    name = _scene_name(module)
+    if not isinstance(spp, (int, np.integer)) or spp < 1:
+        raise BenchError(f"config key 'reference.spp': scene '{name}' needs spp >= 1, got {spp}")
+    spp, chunk = int(spp), int(chunk)
+    width, height = _size(module, resolution)
+    variant = pick_variant(variant)
+    set_threads(threads)
+    start = time.perf_counter()
+    scene_object, integrator = _loaded_module(module, width, height, variant)
+    sums, seeds = _moment_sums(
+        name, scene_object, spp,
+        lambda p: render_seed("reference", chunk=chunk, pass_index=p, base_seed=seed),
+        variant, width, height, spp)
+    layers = {"color": sums["color"][0] / spp, "color_m2": sums["color"][1] / spp}
+    for quantity in FEATURES:
+        layers[quantity] = _squeeze(sums[quantity][0] / spp)
+    layers = {k: np.ascontiguousarray(v, dtype=np.float32) for k, v in layers.items()}
+    metadata = {
+        "scene": name, "spp": str(spp), "chunk": str(chunk), "variant": variant,
+        "seed": str(seed), "seeds": ",".join(map(str, seeds)), "mitsuba": _mitsuba_version(),
+        "seconds": f"{time.perf_counter() - start:.3f}", "resolution": f"{width}x{height}",
+        "integrator": _describe(integrator),
     }
     return layers, metadata
 
@@ -454,45 +429,6 @@ def buffers_from_moment_sums(sums_a: dict, sums_b: dict, half_spp: int) -> dict[
     for suffix in ("", "_a", "_b"):
         layers["albedo" + suffix] = np.clip(layers["albedo" + suffix], 0.0, 1.0)
     return {name: np.ascontiguousarray(layers[name], dtype=np.float32) for name in ALL_LAYERS}
-
-
-def _describe(integrator: dict) -> str:
-    return ",".join(f"{k}={v}" for k, v in sorted(integrator.items()))
-
-
-def render_reference_chunk(scene: str, spp: int, chunk: int, *, resolution: tuple[int, int] | None = None,
-                           variant: str = "auto", seed: int = 0, threads: int | None = None
-                           ) -> tuple[dict[str, np.ndarray], dict[str, str]]:
-    """Render chunk ``chunk`` (0-based) of a reference: ``spp`` samples with seeds disjoint from
-    every noisy render and every other chunk.
-
-    Layers (float32): ``color`` (H, W, 3) sample mean, ``color_m2`` (H, W, 3) mean of squared
-    samples, ``albedo``, ``normal`` (H, W, 3) and ``depth`` (H, W) sample means. Metadata
-    (strings): scene, spp, chunk, variant, seed, seeds, mitsuba, seconds, resolution, integrator.
-    """
-    if not isinstance(spp, (int, np.integer)) or spp < 1:
-        raise BenchError(f"config key 'reference.spp': scene '{scene}' needs spp >= 1, got {spp}")
-    spp, chunk = int(spp), int(chunk)
-    module, width, height = _resolve(scene, resolution)
-    variant = pick_variant(variant)
-    set_threads(threads)
-    start = time.perf_counter()
-    scene_object, integrator = _load(scene, module, width, height, variant)
-    pass_spp = passes_for(spp, width, height, variant)
-    seeds = [render_seed("reference", chunk=chunk, pass_index=p, base_seed=seed)
-             for p in range(len(pass_spp))]
-    sums = _render_sums(scene, scene_object, pass_spp, seeds, variant, width, height, spp)
-    layers = {"color": sums["color"][0] / spp, "color_m2": sums["color"][1] / spp}
-    for quantity in FEATURES:
-        layers[quantity] = _squeeze(sums[quantity][0] / spp)
-    layers = {k: np.ascontiguousarray(v, dtype=np.float32) for k, v in layers.items()}
-    metadata = {
-        "scene": scene, "spp": str(spp), "chunk": str(chunk), "variant": variant,
-        "seed": str(seed), "seeds": ",".join(map(str, seeds)), "mitsuba": _mitsuba_version(),
-        "seconds": f"{time.perf_counter() - start:.3f}", "resolution": f"{width}x{height}",
-        "integrator": _describe(integrator),
-    }
-    return layers, metadata
 
 
 def merge_reference_chunks(chunks: list[tuple[dict, dict]]) -> tuple[dict[str, np.ndarray], dict[str, str]]:

@@ -11,7 +11,10 @@ A scene module ``scenes/<name>.py`` exposes
 
 The renderer (:mod:`mcbench.render`) replaces the film's reconstruction filter by a box
 filter, replaces the sampler, and wraps the scene's integrator to get the sample moments and
-the auxiliary features. ``build`` must be called after a Mitsuba variant has been set.
+the auxiliary features; it takes the module itself (the caller resolves a name with
+:func:`load_scene`). ``build`` must be called after a Mitsuba variant has been set. Building
+blocks (sensors, quads, boxes, meshes, textures, skies, curves) are core modules:
+:mod:`mcbench.geometry` and :mod:`mcbench.curves`.
 """
 
 from __future__ import annotations
@@ -22,7 +25,7 @@ from types import ModuleType
 
 from mcbench import BenchError
 
-__all__ = ["UnknownSceneError", "available_scenes", "load_scene", "perspective_sensor"]
+__all__ = ["UnknownSceneError", "available_scenes", "load_scene"]
 
 _REQUIRED_ATTRIBUTES = ("DESCRIPTION", "CATEGORY", "RESOLUTION", "build")
 
@@ -49,22 +52,3 @@ def load_scene(name: str, config_key: str = "scenes") -> ModuleType:
         raise UnknownSceneError(f"config key '{config_key}': scene module scenes/{name}.py "
                                 f"lacks {', '.join(missing)}")
     return module
-
-
-def perspective_sensor(width: int, height: int, origin, target, up=(0, 1, 0),
-                       fov: float = 40.0) -> dict:
-    """A pinhole camera dict looking from ``origin`` to ``target`` (world units), ``fov`` in
-    degrees along the smaller image axis, with an ``hdrfilm`` of ``width`` x ``height`` pixels."""
-    import mitsuba as mi
-
-    return {
-        "type": "perspective",
-        "fov": fov,
-        "fov_axis": "smaller",
-        "to_world": mi.ScalarTransform4f().look_at(origin=list(origin), target=list(target),
-                                                   up=list(up)),
-        "sampler": {"type": "independent", "sample_count": 16},
-        "film": {"type": "hdrfilm", "width": int(width), "height": int(height),
-                 "pixel_format": "rgb", "component_format": "float32",
-                 "rfilter": {"type": "gaussian"}},
-    }

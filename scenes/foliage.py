@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from scenes import perspective_sensor
-from scenes._geometry import bitmap_texture, diffuse, gradient_sky, mesh_from_arrays
+from mcbench.geometry import (bitmap_texture, diffuse, gradient_sky, mesh_from_arrays,
+                              perspective_sensor)
 
 DESCRIPTION = ("alpha-masked foliage backlit by the sun: leaf edges come from the opacity map, "
                "not geometry, sun speckles through the crown and dappled shadows are "

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from scenes import perspective_sensor
-from scenes._curves import curve_shape, hair_bsdf
+from mcbench.curves import curve_shape, hair_bsdf
+from mcbench.geometry import perspective_sensor
 
 DESCRIPTION = ("sub-pixel fur fibres: thousands of thin strands with anisotropic hair "
                "scattering, heavy geometric aliasing and noisy multiple scattering inside the fur")

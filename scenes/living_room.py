@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from scenes import perspective_sensor
-from scenes._geometry import bitmap_texture, box, diffuse, lathe, mesh_from_arrays, quad
+from mcbench.geometry import (bitmap_texture, box, diffuse, lathe, mesh_from_arrays,
+                              perspective_sensor, quad)
 
 DESCRIPTION = ("a typical interior mixing diffuse walls and furniture with a glossy floor that "
                "reflects them, two light sources of different colour and size, and many "

@@ -3,8 +3,7 @@ ceiling panel."""
 
 from __future__ import annotations
 
-from scenes import perspective_sensor
-from scenes._geometry import box, diffuse, quad
+from mcbench.geometry import box, diffuse, perspective_sensor, quad
 
 DESCRIPTION = ("specular paths: a mirror wall doubles the room, a glossy floor smears "
                "reflections; reflected objects have the mirror's features (normal, depth) but "

@@ -5,8 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from scenes import perspective_sensor
-from scenes._geometry import box, diffuse, mesh_from_arrays
+from mcbench.geometry import box, diffuse, mesh_from_arrays, perspective_sensor
 
 DESCRIPTION = ("physically based sun and sky: a tiny, extremely bright sun disc gives hard "
                "shadows and bright glints next to soft blue skylight in the shadows, a "

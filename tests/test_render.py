@@ -2,18 +2,25 @@
 
 from __future__ import annotations
 
+import types
+
 import numpy as np
 import pytest
 
 from mcbench import BenchError
 from mcbench.buffers import ALL_LAYERS
-from mcbench.render import (MAX_WAVEFRONT, decode_seed, merge_reference_chunks, mitsuba_seed,
-                            passes_for, pick_variant, render_buffers, render_reference_chunk,
-                            render_seed, scalar_seed_stride)
+from mcbench.render import (MAX_WAVEFRONT, film_size, forget_scene, load_scene_dict,
+                            merge_reference_chunks, passes_for, render_buffers, render_dict_buffers,
+                            render_reference_chunk, render_scene_sums)
+from mcbench.seeds import (FIBRE_SEED_BASE, MAX_BASE_SEED, MAX_TRAINING_SEED, TRAINING_BASE_SEED,
+                           decode_seed, decode_training_seed, mitsuba_seed, render_seed,
+                           scalar_seed_stride, training_render_seed)
+from mcbench.variants import pick_variant
 from scenes import UnknownSceneError, available_scenes, load_scene
 
 TINY = (16, 16)
 SCENES = ("cornell_box", "glass_caustics", "envmap_objects")
+CORNELL = load_scene("cornell_box")
 
 
 @pytest.fixture(scope="module")
@@ -40,7 +47,7 @@ def test_unknown_scene_names_the_config_key():
 
 @pytest.mark.parametrize("scene", SCENES)
 def test_every_scene_renders_finite_buffers(scene, variant):
-    layers, meta = render_buffers(scene, 4, resolution=(24, 16))
+    layers, meta = render_buffers(load_scene(scene), 4, resolution=(24, 16))
     assert set(layers) == set(ALL_LAYERS)
     for name, array in layers.items():
         assert array.dtype == np.float32
@@ -59,7 +66,7 @@ def test_every_scene_renders_finite_buffers(scene, variant):
 
 @pytest.fixture(scope="module")
 def cornell_8spp(variant):
-    return render_buffers("cornell_box", 8, resolution=TINY, seed=0)
+    return render_buffers(CORNELL, 8, resolution=TINY, seed=0)
 
 
 def test_full_is_mean_of_halves_and_halves_differ(cornell_8spp):
@@ -78,8 +85,8 @@ def test_full_variance_is_pooled_and_about_half_the_halves(cornell_8spp):
 
 def test_same_seed_same_image_other_seed_other_image(cornell_8spp):
     layers, _ = cornell_8spp
-    again, _ = render_buffers("cornell_box", 8, resolution=TINY, seed=0)
-    other, _ = render_buffers("cornell_box", 8, resolution=TINY, seed=1)
+    again, _ = render_buffers(CORNELL, 8, resolution=TINY, seed=0)
+    other, _ = render_buffers(CORNELL, 8, resolution=TINY, seed=1)
     for name in ALL_LAYERS:
         np.testing.assert_array_equal(layers[name], again[name])
     assert not np.array_equal(layers["color"], other["color"])
@@ -88,14 +95,14 @@ def test_same_seed_same_image_other_seed_other_image(cornell_8spp):
 def test_bad_spp_is_refused():
     for spp in (0, 1, 3):
         with pytest.raises(BenchError, match="spp"):
-            render_buffers("cornell_box", spp, resolution=TINY)
+            render_buffers(CORNELL, spp, resolution=TINY)
 
 
 def test_stored_variance_matches_empirical_variance(variant):
-    """Mean stored variance of the mean vs the variance across 16 independent half images."""
+    """Mean stored variance of the mean vs the variance across 14 independent half images."""
     halves, stored = [], []
-    for seed in range(8):
-        layers, _ = render_buffers("cornell_box", 16, resolution=TINY, seed=seed)
+    for seed in range(MAX_BASE_SEED + 1):
+        layers, _ = render_buffers(CORNELL, 16, resolution=TINY, seed=seed)
         halves += [layers["color_a"], layers["color_b"]]
         stored += [layers["variance_a"], layers["variance_b"]]
     empirical = np.var(np.stack(halves).astype(np.float64), axis=0, ddof=1)
@@ -107,7 +114,7 @@ def test_stored_variance_matches_empirical_variance(variant):
 
 
 def test_spp2_gives_finite_nonnegative_half_variances(variant):
-    layers, _ = render_buffers("cornell_box", 2, resolution=TINY)
+    layers, _ = render_buffers(CORNELL, 2, resolution=TINY)
     for name in ("variance", "variance_a", "variance_b"):
         assert np.all(np.isfinite(layers[name])) and layers[name].min() >= 0
 
@@ -118,9 +125,68 @@ def test_multi_pass_render_matches_its_pass_seeds(variant, monkeypatch):
         pytest.skip("scalar variants render in one pass")
     import mcbench.render as render
     monkeypatch.setattr(render, "MAX_WAVEFRONT", 16 * 16 * 3)   # 3 spp per pass
-    layers, meta = render_buffers("cornell_box", 16, resolution=TINY, seed=2)
+    layers, meta = render_buffers(CORNELL, 16, resolution=TINY, seed=2)
     assert meta["passes"] == "3" and len(meta["seeds_a"].split(",")) == 3
     assert np.all(np.isfinite(layers["color"])) and layers["variance"].min() >= 0
+
+
+# ----------------------------------------------------------------------------- scene dicts
+
+def test_dict_render_equals_module_render_bit_for_bit(variant):
+    """The public scene-dict path reproduces render_buffers exactly, given the same seeds."""
+    layers, meta = render_buffers(CORNELL, 4, resolution=(8, 8), seed=3)
+    desc = CORNELL.build(8, 8)
+    try:
+        again, seeds = render_dict_buffers(
+            desc, 4, lambda half, p: render_seed("noisy", spp=4, half=half, pass_index=p, base_seed=3),
+            key="test-dict-cornell")
+    finally:
+        forget_scene("test-dict-cornell")
+    assert seeds == [int(s) for s in meta["seeds_a"].split(",") + meta["seeds_b"].split(",")]
+    for name in ALL_LAYERS:
+        assert again[name].dtype == layers[name].dtype
+        np.testing.assert_array_equal(again[name], layers[name], err_msg=name)
+
+
+def test_scene_sums_equal_a_reference_chunk_bit_for_bit(variant):
+    """render_scene_sums with a chunk's seeds gives that chunk's sample means: S1 / spp."""
+    chunk, meta = render_reference_chunk(CORNELL, 6, 2, resolution=(8, 8))
+    try:
+        sums, seeds = render_scene_sums(CORNELL.build(8, 8), 6,
+                                        lambda p: render_seed("reference", chunk=2, pass_index=p),
+                                        key="test-sums-cornell")
+    finally:
+        forget_scene("test-sums-cornell")
+    assert ",".join(map(str, seeds)) == meta["seeds"]
+    assert sums["color"][0].dtype == np.float64 and sums["depth"][0].shape == (8, 8, 1)
+    np.testing.assert_array_equal((sums["color"][0] / 6).astype(np.float32), chunk["color"])
+    np.testing.assert_array_equal((sums["color"][1] / 6).astype(np.float32), chunk["color_m2"])
+    np.testing.assert_array_equal((sums["depth"][0][..., 0] / 6).astype(np.float32), chunk["depth"])
+
+
+def test_load_scene_dict_caches_by_key_leaves_the_dict_alone_and_forgets(variant):
+    desc = CORNELL.build(8, 6)
+    integrator, film = desc["integrator"], dict(desc["sensor"]["film"])
+    assert film_size(desc) == (8, 6)
+    try:
+        scene, own = load_scene_dict(desc, key="test-cache")
+        assert own == integrator and desc["integrator"] is integrator and desc["sensor"]["film"] == film
+        assert load_scene_dict(desc, key="test-cache")[0] is scene           # cached
+        sensor = scene.sensors()[0]                                          # wrapped for rendering
+        assert "m2_nested.integrator.R" in str(scene.integrator()) and "nested.dd.T" in str(scene.integrator())
+        assert str(sensor.film().rfilter()).startswith("BoxFilter") and sensor.sampler().sample_count() == 1
+        forget_scene("test-cache")
+        assert load_scene_dict(desc, key="test-cache")[0] is not scene       # loaded again
+    finally:
+        forget_scene("test-cache")
+
+
+def test_a_film_of_the_wrong_size_names_the_scene(variant):
+    wrong = types.ModuleType("scenes.wrong_size")
+    wrong.RESOLUTION = (8, 8)
+    wrong.build = lambda width, height: CORNELL.build(width + 1, height)
+    with pytest.raises(BenchError, match=r"wrong_size.*build\(8, 8\) made a 9x8 film"):
+        render_buffers(wrong, 2)
 
 
 # ----------------------------------------------------------------------------- seeds
@@ -128,8 +194,8 @@ def test_multi_pass_render_matches_its_pass_seeds(variant, monkeypatch):
 def test_seed_fields_round_trip():
     seed = render_seed("noisy", spp=4096, half=1, pass_index=7, base_seed=5)
     assert decode_seed(seed) == {"base_seed": 5, "kind": "noisy", "pass_index": 7, "spp": 4096, "half": 1}
-    seed = render_seed("reference", chunk=255, pass_index=3, base_seed=7)
-    assert decode_seed(seed) == {"base_seed": 7, "kind": "reference", "pass_index": 3, "chunk": 255}
+    seed = render_seed("reference", chunk=255, pass_index=3, base_seed=6)
+    assert decode_seed(seed) == {"base_seed": 6, "kind": "reference", "pass_index": 3, "chunk": 255}
     assert 0 <= seed < 2 ** 32
 
 
@@ -150,7 +216,7 @@ def _all_seeds(base_seed, width=128, height=128):
 
 def test_seeds_never_overlap():
     everything = []
-    for base_seed in range(8):
+    for base_seed in range(MAX_BASE_SEED + 1):
         seeds = _all_seeds(base_seed)
         assert len(set(seeds)) == len(seeds)
         everything += seeds
@@ -160,13 +226,76 @@ def test_seeds_never_overlap():
     assert len(passes_for(32768, 128, 128, "llvm_ad_rgb")) == 32768 * 128 * 128 // MAX_WAVEFRONT
 
 
+def _random_render_seeds(rng, n):
+    """``n`` seeds of render_seed drawn uniformly over every field it accepts."""
+    codes = rng.integers(0, 2047, n)                    # spp codes 0..1023 and 1025..2047
+    spps = np.where(codes < 1024, 2 * (codes + 1), 2048 * np.maximum(codes - 1023, 1))
+    out = []
+    for base, kind, spp, half, chunk, p in zip(rng.integers(0, MAX_BASE_SEED + 1, n),
+                                              rng.integers(0, 2, n), spps, rng.integers(0, 2, n),
+                                              rng.integers(0, 4096, n), rng.integers(0, 1 << 16, n)):
+        out.append(render_seed("noisy", spp=int(spp), half=int(half), pass_index=int(p), base_seed=int(base))
+                   if kind == 0 else
+                   render_seed("reference", chunk=int(chunk), pass_index=int(p), base_seed=int(base)))
+    return out
+
+
+def _random_training_seeds(rng, n):
+    """``n`` seeds of training_render_seed drawn uniformly over every field it accepts."""
+    out = []
+    for scene, kind, log_spp, half, p in zip(rng.integers(0, MAX_TRAINING_SEED + 1, n),
+                                            rng.integers(0, 2, n), rng.integers(1, 16, n),
+                                            rng.integers(0, 2, n), rng.integers(0, 4096, n)):
+        out.append(training_render_seed(int(scene), "noisy", 1 << int(log_spp), int(half), int(p) % 128)
+                   if kind == 0 else training_render_seed(int(scene), "target", pass_index=int(p)))
+    return out
+
+
+def test_both_seed_layouts_decode_back():
+    rng = np.random.default_rng(11)
+    for seed in _random_render_seeds(rng, 3000):
+        fields = decode_seed(seed)
+        kind = fields.pop("kind")
+        assert 0 <= seed < 2 ** 32 and render_seed(kind, **fields) == seed
+    for seed in _random_training_seeds(rng, 3000):
+        fields = decode_training_seed(seed)
+        assert 0 <= seed < 2 ** 32 and training_render_seed(fields.pop("scene_seed"), fields.pop("kind"),
+                                                           **fields) == seed
+    assert decode_training_seed(training_render_seed(FIBRE_SEED_BASE + 5, "noisy", 32768, 1, 127)) == {
+        "scene_seed": FIBRE_SEED_BASE + 5, "kind": "noisy", "spp": 32768, "half": 1, "pass_index": 127}
+
+
+def test_no_training_seed_is_a_render_seed():
+    """Brute force over a uniform sample of both layouts' full ranges, then the structural
+    argument: render seeds have top bits (base seed) 0..6 at every field extreme, training
+    seeds 7, and render_seed refuses base seed 7."""
+    rng = np.random.default_rng(12)
+    render = set(_random_render_seeds(rng, 20000))
+    training = set(_random_training_seeds(rng, 20000))
+    assert len(render) > 19000 and len(training) > 19000
+    assert not render & training
+    assert {s >> 29 for s in render} == set(range(MAX_BASE_SEED + 1))
+    assert {s >> 29 for s in training} == {TRAINING_BASE_SEED}
+    extremes = [render_seed("noisy", spp=spp, half=h, pass_index=p, base_seed=b)
+                for spp in (2, 2048, 4096, 2048 * 1024) for h in (0, 1) for p in (0, 65535)
+                for b in (0, MAX_BASE_SEED)]
+    extremes += [render_seed("reference", chunk=c, pass_index=p, base_seed=b)
+                 for c in (0, 4095) for p in (0, 65535) for b in (0, MAX_BASE_SEED)]
+    assert max(extremes) < TRAINING_BASE_SEED << 29
+    assert min(training_render_seed(0, "noisy", 2, 0, 0), training_render_seed(0, "target")) \
+        >= TRAINING_BASE_SEED << 29
+    assert training_render_seed(MAX_TRAINING_SEED, "target", pass_index=4095) == 2 ** 32 - 1
+    with pytest.raises(BenchError, match="reserved for training"):
+        render_seed("noisy", spp=4, half=0, base_seed=TRAINING_BASE_SEED)
+
+
 def test_scalar_pixel_seed_ranges_are_disjoint():
     """Scalar Mitsuba seeds pixels with mitsuba_seed * W*H + [0, blocks*B^2): intervals must not
     overlap for any two renders (one pass each) that the scheme allows."""
     width, height = 24, 16
     used = blocks = scalar_seed_stride(width, height) * width * height
     intervals = []
-    for base_seed in range(8):
+    for base_seed in range(MAX_BASE_SEED + 1):
         for spp in (2, 4, 64, 2048, 65536):
             for half in (0, 1):
                 s = render_seed("noisy", spp=spp, half=half, base_seed=base_seed)
@@ -178,12 +307,14 @@ def test_scalar_pixel_seed_ranges_are_disjoint():
     assert all(b - a >= used for a, b in zip(intervals, intervals[1:]))
     assert intervals[-1] + blocks <= 2 ** 32
     with pytest.raises(BenchError, match="variant"):
-        mitsuba_seed(render_seed("reference", chunk=0, base_seed=7), "scalar_rgb", 1024, 1024)
+        mitsuba_seed(render_seed("reference", chunk=0, base_seed=6), "scalar_rgb", 1024, 1024)
 
 
 def test_bad_seed_arguments_are_refused():
     with pytest.raises(BenchError, match="seed"):
         render_seed("noisy", spp=4, half=0, base_seed=8)
+    with pytest.raises(BenchError, match="reserved for training"):
+        render_seed("reference", chunk=0, base_seed=TRAINING_BASE_SEED)
     with pytest.raises(BenchError, match="spp"):
         render_seed("noisy", spp=3000, half=0)
     with pytest.raises(BenchError):
@@ -193,7 +324,7 @@ def test_bad_seed_arguments_are_refused():
 # ----------------------------------------------------------------------------- references
 
 def test_reference_chunks_render_and_merge(variant):
-    chunks = [render_reference_chunk("cornell_box", spp, chunk, resolution=TINY)
+    chunks = [render_reference_chunk(CORNELL, spp, chunk, resolution=TINY)
               for chunk, spp in ((0, 4), (1, 8))]
     for layers, meta in chunks:
         assert set(layers) == {"color", "color_m2", "albedo", "normal", "depth"}
@@ -246,7 +377,7 @@ def test_nan_from_mitsuba_raises_naming_scene_and_spp(variant, monkeypatch):
 
     monkeypatch.setattr(render, "_render_pass", pass_with_nan)
     with pytest.raises(BenchError, match=r"cornell_box.*6 spp"):
-        render_buffers("cornell_box", 6, resolution=TINY)
+        render_buffers(CORNELL, 6, resolution=TINY)
 
 
 def test_thread_count_does_not_change_the_image(cornell_8spp):
@@ -254,7 +385,7 @@ def test_thread_count_does_not_change_the_image(cornell_8spp):
 
     before = dr.thread_count()
     try:
-        layers, _ = render_buffers("cornell_box", 8, resolution=TINY, seed=0, threads=1)
+        layers, _ = render_buffers(CORNELL, 8, resolution=TINY, seed=0, threads=1)
         assert dr.thread_count() == 1
     finally:
         dr.set_thread_count(before)

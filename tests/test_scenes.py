@@ -2,13 +2,14 @@
 at the lowest spp (2: one sample per half buffer) and a moderate one; the configs name only
 existing scenes."""
 
+import ast
 from pathlib import Path
 
 import numpy as np
 import pytest
-import yaml
-
-from mcbench.render import pick_variant, render_buffers
+from mcbench.config import read_config_file
+from mcbench.render import render_buffers
+from mcbench.variants import pick_variant
 from scenes import available_scenes, load_scene
 
 REPO = Path(__file__).resolve().parents[1]
@@ -24,6 +25,19 @@ def test_scene_declares_contract(scene):
     assert width >= 16 and height >= 16
 
 
+def test_scenes_import_only_core_building_blocks():
+    """Scene modules build on core (mcbench.geometry, mcbench.curves), never on scenes/ helpers
+    or on each other."""
+    for path in sorted((REPO / "scenes").glob("[!_]*.py")):
+        tree = ast.parse(path.read_text())
+        imported = {node.module for node in ast.walk(tree) if isinstance(node, ast.ImportFrom)}
+        imported |= {alias.name for node in ast.walk(tree) if isinstance(node, ast.Import)
+                     for alias in node.names}
+        assert not {name for name in imported if name.split(".")[0] == "scenes"}, path.name
+        assert "mcbench.geometry" in imported or path.stem == "cornell_box", path.name
+    assert not list((REPO / "scenes").glob("_[!_]*.py"))     # no private helper modules left
+
+
 @pytest.mark.parametrize("scene", SCENES)
 def test_scene_renders_finite_at_every_spp(scene):
     """All of the paper's spp levels (and 2, one sample per half buffer) at 16x12 pixels."""
@@ -32,7 +46,7 @@ def test_scene_renders_finite_at_every_spp(scene):
     described = repr(module.build(16, 12))
     uses_medium = "'homogeneous'" in described or "'heterogeneous'" in described
     for spp in (2, 4, 8, 16, 32, 64, 128, 256, 512, 1024):
-        layers, metadata = render_buffers(scene, spp, resolution=(16, 12))
+        layers, metadata = render_buffers(module, spp, resolution=(16, 12))
         for name, layer in layers.items():
             assert np.all(np.isfinite(layer)), f"{scene} at {spp} spp: layer {name} not finite"
             assert layer.shape[:2] == (12, 16)
@@ -43,6 +57,6 @@ def test_scene_renders_finite_at_every_spp(scene):
 
 @pytest.mark.parametrize("config", ["config.yaml", "workflow/configs/smoke.yaml", "workflow/configs/paper.yaml"])
 def test_configs_name_existing_scenes(config):
-    scenes = yaml.safe_load((REPO / config).read_text())["scenes"]
+    scenes = read_config_file(REPO / config)["scenes"]       # schema defaults filled in
     missing = sorted(set(scenes) - set(SCENES))
     assert not missing, f"{config} names scenes without a module: {missing}"

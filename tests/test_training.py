@@ -1,4 +1,4 @@
-"""Procedural training scenes (mcbench.training): reproducible, finite, disjoint crops, targets
+"""Procedural training scenes (mcbench.training_data): reproducible, finite, disjoint crops, targets
 much less noisy than the inputs, scenes distinct from each other and from every test scene, and
 render seeds disjoint from the test renders' seeds."""
 
@@ -6,15 +6,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import yaml
 
 from mcbench import BenchError
 from mcbench.buffers import ALL_LAYERS
-from mcbench.render import decode_seed, pick_variant, render_buffers, render_seed
-from mcbench.training import (FIBRE_SEED_BASE, TRAINING_BASE_SEED, crop_boxes,
-                              decode_training_seed, forget, is_fibre_seed, main, random_scene,
-                              render_dict_buffers, scene_fingerprint, training_example,
-                              training_render_seed, training_scene_fingerprint, training_seeds)
+from mcbench.config import read_config_file
+from mcbench.seeds import (FIBRE_SEED_BASE, TRAINING_BASE_SEED, decode_seed, decode_training_seed,
+                           is_fibre_seed, render_seed, training_render_seed, training_seeds)
+from mcbench.training_data import (crop_boxes, random_scene, render_target, scene_fingerprint,
+                                   training_example, training_scene_fingerprint)
+from mcbench.variants import pick_variant
 from scenes import available_scenes, load_scene
 
 REPO = Path(__file__).resolve().parents[1]
@@ -81,16 +81,25 @@ def test_crops_inside_image_and_disjoint(example_3):
         crop_boxes(0, 32, 24, 16, 3)
 
 
-def test_dict_renderer_matches_render_buffers():
-    """The scene-dict path reproduces render_buffers bit for bit given the same seeds."""
-    reference, _ = render_buffers("cornell_box", 4, resolution=(8, 6))
-    desc = load_scene("cornell_box").build(8, 6)
-    layers, _ = render_dict_buffers(
-        desc, 4, lambda half, p: render_seed("noisy", spp=4, half=half, pass_index=p),
-        key="test-cornell")
-    forget("test-cornell")
-    for name in ALL_LAYERS:
-        np.testing.assert_array_equal(layers[name], reference[name], err_msg=name)
+def test_target_is_the_mean_of_its_samples_with_the_variance_of_that_mean():
+    """render_target against independent truth: its mean over 4 disjoint seed sets (4 x 64 spp)
+    equals the 256-spp target up to noise, and the variance of that mean predicts the spread."""
+    pick_variant("auto")
+    desc = random_scene(3, 12, 10)
+    means, variances = [], []
+    for k in range(4):
+        mean, variance, seeds = render_target(desc, 64, lambda p, k=k: 1000 * k + p, key="test-target")
+        means.append(mean.astype(np.float64))
+        variances.append(variance.astype(np.float64))
+    big, big_variance, _ = render_target(desc, 256, lambda p: 9000 + p, key="test-target")
+    from mcbench.render import forget_scene
+    forget_scene("test-target")
+    spread = np.var(np.stack(means), axis=0, ddof=1)                  # of one 64-spp mean
+    predicted = np.mean(np.stack(variances), axis=0)
+    mask = predicted > 0
+    assert 0.5 < spread[mask].mean() / predicted[mask].mean() < 2.0
+    # 256 spp: a quarter of the 64-spp variance
+    assert 0.15 < big_variance[mask].mean() / predicted[mask].mean() < 0.4
 
 
 def test_same_seed_same_dict():
@@ -105,8 +114,8 @@ def test_fingerprint_same_in_another_process():
     import subprocess
     import sys
 
-    code = ("from mcbench.render import pick_variant; pick_variant('auto'); "
-            "from mcbench.training import training_scene_fingerprint as f; print(f(32784))")
+    code = ("from mcbench.variants import pick_variant; pick_variant('auto'); "
+            "from mcbench.training_data import training_scene_fingerprint as f; print(f(32784))")
     runs = {subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True,
                            check=True).stdout.strip() for _ in range(2)}
     pick_variant("auto")
@@ -127,13 +136,17 @@ def test_training_fingerprints_distinct_and_not_test_scenes():
 def test_training_seeds_object_then_fibre_family():
     settings = {"first_seed": 5, "count": 3, "fibre_count": 2}
     assert training_seeds(settings) == [5, 6, 7, FIBRE_SEED_BASE, FIBRE_SEED_BASE + 1]
-    assert training_seeds({"first_seed": 0, "count": 4}) == [0, 1, 2, 3]
+    assert training_seeds({"first_seed": 0, "count": 4, "fibre_count": 0}) == [0, 1, 2, 3]
     with pytest.raises(BenchError, match="training.first_seed"):
-        training_seeds({"first_seed": FIBRE_SEED_BASE - 2, "count": 3})
+        training_seeds({"first_seed": FIBRE_SEED_BASE - 2, "count": 3, "fibre_count": 0})
     with pytest.raises(BenchError, match="training.fibre_count"):
         training_seeds({"first_seed": 0, "count": 1, "fibre_count": FIBRE_SEED_BASE + 1})
-    config = yaml.safe_load((REPO / "config.yaml").read_text())["training"]
-    assert sum(map(is_fibre_seed, training_seeds(config))) == config["fibre_count"] > 0
+    with pytest.raises(BenchError, match="missing training.fibre_count"):
+        training_seeds({"first_seed": 0, "count": 1})          # no second default here
+    config = read_config_file(REPO / "config.yaml")["training"]
+    seeds = training_seeds(config)
+    assert sum(map(is_fibre_seed, seeds)) == config["fibre_count"] > 0
+    assert len(seeds) == config["count"] + config["fibre_count"]
 
 
 def test_fibre_scenes_add_thin_curves_to_an_object_scene():
@@ -158,14 +171,21 @@ def test_fibre_scenes_add_thin_curves_to_an_object_scene():
     assert scene_fingerprint(scene) == scene_fingerprint(random_scene(seed, 16, 12))
 
 
-def test_generator_imports_only_scene_helpers():
-    source = (REPO / "mcbench" / "training.py").read_text()
-    imported = {line.split()[1] for line in source.splitlines()
-                if line.strip().startswith(("from scenes", "import scenes"))}
-    assert imported <= {"scenes", "scenes._geometry", "scenes._curves"}, imported
-    for line in source.splitlines():
-        if line.strip().startswith("from scenes import"):
-            assert line.split("import", 1)[1].split() == ["perspective_sensor"], line
+def test_training_data_imports_no_scene_module():
+    """Training data is core: it builds on mcbench.geometry / mcbench.curves, never on scenes/."""
+    import ast
+
+    package = REPO / "mcbench" / "training_data"
+    for path in sorted(package.glob("*.py")):
+        tree = ast.parse(path.read_text())
+        imported = {node.module for node in ast.walk(tree) if isinstance(node, ast.ImportFrom)}
+        imported |= {alias.name for node in ast.walk(tree) if isinstance(node, ast.Import)
+                     for alias in node.names}
+        assert not {m for m in imported if m.split(".")[0] in ("scenes", "methods")}, path.name
+        assert "mcbench.render" not in imported or path.name == "examples.py", path.name
+    assert "mcbench.geometry" in {node.module for node in
+                                  ast.walk(ast.parse((package / "generator.py").read_text()))
+                                  if isinstance(node, ast.ImportFrom)}
 
 
 def test_training_seeds_disjoint_from_test_render_seeds():
@@ -173,7 +193,7 @@ def test_training_seeds_disjoint_from_test_render_seeds():
     for config in ("config.yaml", "workflow/configs/smoke.yaml", "workflow/configs/paper.yaml"):
         path = REPO / config
         if path.exists():
-            seed = int((yaml.safe_load(path.read_text()) or {}).get("seed", 0))
+            seed = read_config_file(path)["seed"]
             assert 0 <= seed < TRAINING_BASE_SEED, f"{config}: seed {seed} collides with training"
     seeds = set()
     for scene_seed in (0, 1, 77, 65535):
@@ -205,17 +225,3 @@ def test_training_seeds_disjoint_from_test_render_seeds():
         training_render_seed(65536, "target")
     with pytest.raises(BenchError):
         training_render_seed(0, "noisy", 12, 0)      # not a power of two
-
-
-def test_cli_writes_one_exr_per_crop(tmp_path):
-    from mcbench.exr import read_layers, read_metadata
-
-    rc = main(["--out", str(tmp_path), "--first-seed", "8", "--count", "1", "--resolution", "24",
-               "16", "--crop", "8", "--crops", "2", "--spp", "4", "--target-spp", "32"])
-    assert rc == 0
-    files = sorted(p.name for p in tmp_path.iterdir())
-    assert files == ["example_8_0.exr", "example_8_1.exr"]
-    layers = read_layers(tmp_path / "example_8_1.exr")
-    assert layers["target"].shape == (8, 8, 3) and "depth_b_spp4" in layers
-    meta = read_metadata(tmp_path / "example_8_1.exr")
-    assert meta["seed"] == "8" and meta["crop"] == "1"

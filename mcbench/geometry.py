@@ -1,7 +1,8 @@
-"""Shared building blocks for the Python-built scenes (no files anywhere).
+"""Building blocks of Python-built Mitsuba scene dicts (no files anywhere).
 
-Stable API (other scene modules may import these; call them only after a Mitsuba variant is
-set, e.g. inside a scene's ``build``):
+Core, not a scene: the test scenes (``scenes/*.py``) and the procedural training scenes
+(:mod:`mcbench.training_data`) both build on these. Call them only after a Mitsuba variant is
+set (e.g. inside a scene's ``build``):
 
 * :func:`rgb` -- ``{"type": "rgb", "value": [...]}``;
 * :func:`diffuse` -- a diffuse BSDF dict of an RGB colour or a texture dict;
@@ -12,7 +13,8 @@ set, e.g. inside a scene's ``build``):
   bodies), to feed :func:`mesh_from_arrays`;
 * :func:`gradient_sky` -- a lat-long HDR sky array (horizon-to-zenith gradient, ground, optional
   Gaussian sun) for ``{"type": "envmap", "bitmap": mi.Bitmap(array)}``;
-* :func:`thinlens_sensor` -- like :func:`scenes.perspective_sensor`, with a thin lens;
+* :func:`perspective_sensor` -- a pinhole camera dict with an ``hdrfilm``;
+* :func:`thinlens_sensor` -- like :func:`perspective_sensor`, with a thin lens;
 * :func:`quad` -- a ``rectangle`` dict from a centre and two half-edge vectors;
 * :func:`box` -- a ``cube`` dict from a centre, half sizes and a rotation about +Y;
 * :func:`torus` -- vertices/faces/normals/uv of a torus about +Y (handles, rings).
@@ -25,7 +27,7 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = ["rgb", "diffuse", "bitmap_texture", "mesh_from_arrays", "lathe", "gradient_sky",
-           "thinlens_sensor", "quad", "box", "torus"]
+           "perspective_sensor", "thinlens_sensor", "quad", "box", "torus"]
 
 
 def rgb(*value) -> dict:
@@ -191,12 +193,29 @@ def gradient_sky(height: int = 64, zenith=(0.2, 0.35, 0.85), horizon=(1.0, 0.95,
     return np.ascontiguousarray(env, dtype=np.float32)
 
 
+def perspective_sensor(width: int, height: int, origin, target, up=(0, 1, 0),
+                       fov: float = 40.0) -> dict:
+    """A pinhole camera dict looking from ``origin`` to ``target`` (world units), ``fov`` in
+    degrees along the smaller image axis, with an ``hdrfilm`` of ``width`` x ``height`` pixels."""
+    import mitsuba as mi
+
+    return {
+        "type": "perspective",
+        "fov": fov,
+        "fov_axis": "smaller",
+        "to_world": mi.ScalarTransform4f().look_at(origin=list(origin), target=list(target),
+                                                   up=list(up)),
+        "sampler": {"type": "independent", "sample_count": 16},
+        "film": {"type": "hdrfilm", "width": int(width), "height": int(height),
+                 "pixel_format": "rgb", "component_format": "float32",
+                 "rfilter": {"type": "gaussian"}},
+    }
+
+
 def thinlens_sensor(width: int, height: int, origin, target, up=(0, 1, 0), fov: float = 40.0,
                     aperture_radius: float = 0.05, focus_distance: float | None = None) -> dict:
     """A ``thinlens`` camera dict (depth of field) with an ``hdrfilm`` of ``width`` x ``height``;
     ``focus_distance`` defaults to the distance from ``origin`` to ``target``."""
-    from scenes import perspective_sensor
-
     sensor = perspective_sensor(width, height, origin, target, up=up, fov=fov)
     if focus_distance is None:
         focus_distance = float(np.linalg.norm(np.subtract(target, origin)))

@@ -1,4 +1,4 @@
-"""Helpers for the batch-B scenes: hair curves and triangle meshes built from NumPy arrays.
+"""Hair curves and triangle meshes built from NumPy arrays, for scene dicts (test and training scenes).
 
 Curves: Mitsuba 3.9.1's ``linearcurve`` and ``bsplinecurve`` plugins can only be constructed
 from a file (the ``filename`` property is mandatory; ``control_points`` exists only as a
