@@ -20,6 +20,16 @@ ensemble z = (w.y^A, w.y^B) with one base denoiser through the two-denoiser clos
 (Eq. 29) and update w <- (1 - alpha) w + alpha e_i (Eq. 31); the denoiser is chosen cycling
 through all N in a freshly shuffled order per cycle; stop when no weight moved by more
 than ``tolerance`` over a whole cycle or after ``max_iterations`` iterations.
+**Departure (away steps):** the paper clips alpha to [0, 1], so weight only ever moves *towards*
+the chosen denoiser and a denoiser that should get weight 0 fades geometrically slowly (with
+[0, 1] only 67 % of pixel-channels of random 4-denoiser problems ended within 1e-6 s^2 of the
+optimum of Eq. 13 after 1024 iterations, 94 % after 16384; tests/test_ensemble.py). We clip
+alpha to the whole feasible segment of the line through w and e_i, [-w_i / (1 - w_i), 1]: a
+negative alpha is the same closed form moving weight *off* denoiser i, down to w_i = 0
+(exactly 0 at the bound), and w is renormalised after each update against rounding. Every
+step is still the exact minimiser of Eq. 13 on its line, so the objective decreases
+monotonically as in the paper's argument; 99.6 % (random) and 99.96 % (biased-denoiser
+problems) end within 1e-6 s^2 of the optimum, most in under 16 iterations.
 Randomness comes from a counter-based splitmix64 generator seeded from
 (seed, pixel-channel index), not from ``np.random``: inside numba ``prange`` loops
 ``np.random`` draws from per-thread states, so which pixel gets which numbers would depend
@@ -185,23 +195,35 @@ def _iterative_one(ya, yb, xa, xb, w, order, state, max_iterations, tolerance):
             db = zb - yb[i]
             c1 = da * da + db * db
             c2 = (za - xb) * da + (zb - xa) * db
+            # feasible step range on the line w -> e_i: alpha <= 1 keeps the others >= 0, and
+            # alpha >= -w_i / (1 - w_i) keeps w_i >= 0 (an "away" step that moves weight off
+            # denoiser i; the paper's Eq. 29 clips at 0, see the module docstring)
+            lower = 0.0
+            if w[i] < 1.0:
+                lower = -w[i] / (1.0 - w[i])
             alpha = 0.0
             if c1 > 0.0 and np.isfinite(c1):
                 alpha = c2 / c1
-                if not np.isfinite(alpha) or alpha < 0.0:
+                if not np.isfinite(alpha):
                     alpha = 0.0
+                elif alpha < lower:
+                    alpha = lower
                 elif alpha > 1.0:
                     alpha = 1.0
-            if alpha > 0.0:
+            if alpha != 0.0:
+                total = 0.0
                 for j in range(n):
-                    old = w[j]
-                    nw = (1.0 - alpha) * old
+                    nw = (1.0 - alpha) * w[j]
                     if j == i:
-                        nw += alpha
-                    ch = abs(nw - old)
-                    if ch > max_change:
-                        max_change = ch
+                        nw = 0.0 if alpha == lower else max(nw + alpha, 0.0)   # exact 0 at the face
+                    change = abs(nw - w[j])
+                    if change > max_change:
+                        max_change = change
                     w[j] = nw
+                    total += nw
+                # back onto the simplex exactly (rounding of (1 - alpha) * w when w_i is near 1)
+                for j in range(n):
+                    w[j] /= total
             it += 1
         if max_change <= tolerance:
             break
