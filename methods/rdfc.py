@@ -246,6 +246,8 @@ def feature_gradient_sq(feature: np.ndarray) -> np.ndarray:
     f = np.asarray(feature, dtype=np.float64)
     out = np.zeros(f.shape[:2])
     for axis in (0, 1):
+        if f.shape[axis] < 2:          # no neighbour along this axis: no gradient (1-pixel images)
+            continue
         d = np.abs(np.diff(f, axis=axis))
         pad_lo = [(0, 0)] * 3
         pad_hi = [(0, 0)] * 3

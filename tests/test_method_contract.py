@@ -22,8 +22,6 @@ COMBINER_CASES = DENOISER_CASES + ("identical_inputs", "input_is_noisy_image")
 
 # (method, case) -> reason; keep in sync with the methods' own limitations
 KNOWN_FAILURES: dict[tuple[str, str], str] = {
-    ("rdfc", "one_pixel"): "rdfc.feature_gradient_sq pads an empty np.diff with mode='edge': "
-                           "ValueError on any image 1 pixel high or wide",
 }
 
 
