@@ -23,7 +23,8 @@ import torch  # noqa: E402
 from mcbench.buffers import RenderBuffers  # noqa: E402
 from mcbench.nn.inference import load_network, run_network  # noqa: E402
 from mcbench.render import render_buffers  # noqa: E402
-from methods import oidn  # noqa: E402
+from methods import load_method, oidn  # noqa: E402
+from scenes import load_scene  # noqa: E402
 from timing import timed  # noqa: E402
 
 NETWORKS = ["kpcn", "mcgan", "optix_ae", "wskpn"]
@@ -38,10 +39,10 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3)
     args = parser.parse_args()
 
-    networks = {name: load_network(name) for name in NETWORKS}
+    networks = {name: load_network(load_method(name)) for name in NETWORKS}
     print(f"{'size':>5} {'threads':>7} {'method':>9} {'seconds':>9} {'vs OIDN':>8}")
     for size in args.sizes:
-        layers, _ = render_buffers(args.scene, args.spp, resolution=(size, size))
+        layers, _ = render_buffers(load_scene(args.scene), args.spp, resolution=(size, size))
         image = RenderBuffers(layers=layers, spp=args.spp).image("full")
         for threads in args.threads:
             torch.set_num_threads(threads)

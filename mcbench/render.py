@@ -290,19 +290,6 @@ def _even_spp(spp, label: str) -> int:
     return int(spp)
 
 
-def _scene_module(scene: ModuleType | str) -> ModuleType:
-    """The scene module itself. TEMPORARY (issue 11): a scene *name* is still resolved here for
-    callers not yet converted to ``scenes.load_scene(name)``; remove with them."""
-    if not isinstance(scene, str):
-        return scene
-    import warnings
-
-    from scenes import load_scene  # the only core import of scenes/, to be removed
-    warnings.warn("mcbench.render: pass scenes.load_scene(name), not a scene name",
-                  DeprecationWarning, stacklevel=3)
-    return load_scene(scene)
-
-
 def _scene_name(module: ModuleType) -> str:
     return module.__name__.rpartition(".")[2]
 
@@ -317,12 +304,12 @@ def _loaded_module(module: ModuleType, width: int, height: int, variant: str):
                    width, height, variant)
 
 
-def render_buffers(scene: ModuleType, spp: int, *, resolution: tuple[int, int] | None = None,
+def render_buffers(scene_module: ModuleType, spp: int, *, resolution: tuple[int, int] | None = None,
                    variant: str = "auto", seed: int = 0, threads: int | None = None
                    ) -> tuple[dict[str, np.ndarray], dict[str, str]]:
     """Render the two independent half buffers A and B (spp/2 samples each) of a test scene.
 
-    ``scene``: the scene module (``scenes.load_scene(name)``; its name is the module's last
+    ``scene_module``: the scene module (``scenes.load_scene(name)``; its name is the module's last
     component); ``resolution``: ``(width, height)``, default the module's ``RESOLUTION``;
     ``seed``: the config's global seed (:func:`mcbench.seeds.render_seed`).
 
@@ -333,7 +320,7 @@ def render_buffers(scene: ModuleType, spp: int, *, resolution: tuple[int, int] |
     Metadata (strings): scene, spp, variant, seed, seeds_a, seeds_b, mitsuba, seconds,
     resolution (``WxH``), integrator, passes.
     """
-    module = _scene_module(scene)
+    module = scene_module
     name = _scene_name(module)
     spp = _even_spp(spp, name)
     width, height = _size(module, resolution)
@@ -356,18 +343,18 @@ def render_buffers(scene: ModuleType, spp: int, *, resolution: tuple[int, int] |
     return layers, metadata
 
 
-def render_reference_chunk(scene: ModuleType, spp: int, chunk: int, *,
+def render_reference_chunk(scene_module: ModuleType, spp: int, chunk: int, *,
                            resolution: tuple[int, int] | None = None, variant: str = "auto",
                            seed: int = 0, threads: int | None = None
                            ) -> tuple[dict[str, np.ndarray], dict[str, str]]:
-    """Render chunk ``chunk`` (0-based) of a reference of scene module ``scene``: ``spp``
+    """Render chunk ``chunk`` (0-based) of a reference of the scene module ``scene_module``: ``spp``
     samples with seeds disjoint from every noisy render and every other chunk.
 
     Layers (float32): ``color`` (H, W, 3) sample mean, ``color_m2`` (H, W, 3) mean of squared
     samples, ``albedo``, ``normal`` (H, W, 3) and ``depth`` (H, W) sample means. Metadata
     (strings): scene, spp, chunk, variant, seed, seeds, mitsuba, seconds, resolution, integrator.
     """
-    module = _scene_module(scene)
+    module = scene_module
     name = _scene_name(module)
     if not isinstance(spp, (int, np.integer)) or spp < 1:
         raise BenchError(f"config key 'reference.spp': scene '{name}' needs spp >= 1, got {spp}")

@@ -7,6 +7,7 @@ so every step can be run and tested without Snakemake.
 from __future__ import annotations
 
 import platform
+import re
 import time
 from pathlib import Path
 
@@ -87,9 +88,32 @@ def compute_case_metrics(scene: str, spp: int, reference_path: str, render_path:
     return frame
 
 
-def gather_tables(paths: list[str], output_path: str) -> pd.DataFrame:
-    """Concatenate per-case CSVs into one tidy table."""
-    frame = pd.concat([pd.read_csv(p) for p in paths], ignore_index=True)
+def read_case_metrics(path: str, *, candidates: list[str], metric_names: list[str],
+                      case: tuple[str, int] | None = None) -> pd.DataFrame:
+    """One per-case metrics CSV, refused (naming the file) unless it is whole: every candidate
+    and metric once with a finite value, and only the case ``(scene, spp)`` when given."""
+    from mcbench.ranking import check_complete
+
+    try:
+        frame = pd.read_csv(path)
+    except (OSError, ValueError, pd.errors.ParserError) as exc:
+        raise BenchError(f"{path}: cannot read metrics CSV ({exc})") from exc
+    check_complete(frame, candidates=candidates, metric_names=metric_names,
+                   cases=None if case is None else [case], source=path)
+    if case is not None and len(frame.groupby(["scene", "spp"])) != 1:
+        raise BenchError(f"{path}: holds more cases than ({case[0]}, {case[1]})")
+    return frame
+
+
+def gather_tables(paths: list[str], output_path: str, *, candidates: list[str], metric_names: list[str],
+                  cases: list[tuple[str, int]]) -> pd.DataFrame:
+    """Concatenate the per-case CSVs (``paths[i]`` holds ``cases[i]``) into one tidy table, after
+    checking each is complete (:func:`read_case_metrics`): no table is ranked over lost rows."""
+    if len(paths) != len(cases):
+        raise BenchError(f"{output_path}: {len(paths)} case files for {len(cases)} cases")
+    frames = [read_case_metrics(path, candidates=candidates, metric_names=metric_names, case=case)
+              for path, case in zip(paths, cases)]
+    frame = pd.concat(frames, ignore_index=True)
     write_csv(output_path, frame)
     return frame
 
@@ -103,13 +127,21 @@ def gather_timings(paths: list[str], output_path: str) -> pd.DataFrame:
     return frame
 
 
-def write_rankings(metrics_csv: str, metric: str, csv_path: str, md_path: str,
-                   order: list[str], labels: dict[str, str]) -> pd.DataFrame:
-    """Score-and-rank table (Zheng et al. Table 3 layout) for one metric, as CSV and Markdown."""
-    from mcbench.ranking import format_markdown, ranking_table
+def write_rankings(metrics_csv: str, metric: str, csv_path: str, md_path: str, *,
+                   candidates: list[str], labels: dict[str, str]) -> pd.DataFrame:
+    """Score-and-rank table (Zheng et al. Table 3 layout) for one metric, as CSV and Markdown.
 
-    metrics = pd.read_csv(metrics_csv)
-    table = ranking_table(metrics, metric, order=None)
+    ``candidates`` (with the noisy input) is the config's list: a metrics table with another
+    set of candidates, or any incomplete case, stops here instead of being ranked."""
+    from mcbench.ranking import check_complete, format_markdown, ranking_table
+
+    try:
+        metrics = pd.read_csv(metrics_csv)
+    except (OSError, ValueError, pd.errors.ParserError) as exc:
+        raise BenchError(f"{metrics_csv}: cannot read metrics CSV ({exc})") from exc
+    check_complete(metrics[metrics["metric"] == metric], candidates=candidates, metric_names=[metric],
+                   source=metrics_csv)
+    table = ranking_table(metrics, metric)
     write_csv(csv_path, table.reset_index(), float_format="%.4f")
     n_cases = metrics[metrics["metric"] == metric].groupby(["scene", "spp"]).ngroups
     n_entries = table.shape[0]
@@ -125,9 +157,10 @@ def render_noisy(scene: str, spp: int, output_path: str, *, resolution=None, var
                  seed: int = 0, threads: int | None = None) -> None:
     """Render the full image and the two half buffers of one (scene, spp) to a multi-layer EXR."""
     from mcbench.render import render_buffers
+    from scenes import load_scene
 
-    layers, metadata = render_buffers(scene, spp, resolution=_resolution(resolution), variant=variant,
-                                      seed=seed, threads=threads)
+    layers, metadata = render_buffers(load_scene(scene), spp, resolution=_resolution(resolution),
+                                      variant=variant, seed=seed, threads=threads)
     check_finite(f"{output_path} (render of scene '{scene}' at {spp} spp)", layers)
     write_layers(output_path, layers, metadata=metadata)
 
@@ -136,8 +169,9 @@ def render_reference_chunk(scene: str, spp: int, chunk: int, output_path: str, *
                            variant: str = "auto", seed: int = 0, threads: int | None = None) -> None:
     """Render one chunk of a reference with its own seeds (never overlapping the noisy renders)."""
     from mcbench.render import render_reference_chunk as render_chunk
+    from scenes import load_scene
 
-    layers, metadata = render_chunk(scene, spp, chunk, resolution=_resolution(resolution),
+    layers, metadata = render_chunk(load_scene(scene), spp, chunk, resolution=_resolution(resolution),
                                     variant=variant, seed=seed, threads=threads)
     check_finite(f"{output_path} (reference chunk {chunk} of scene '{scene}')", layers)
     write_layers(output_path, layers, metadata=metadata)
@@ -164,30 +198,39 @@ def _resolution(resolution):
     return tuple(int(v) for v in resolution)
 
 
-def _benchmark_cpu_hours(paths: list[Path]) -> float:
-    """Sum of Snakemake benchmark ``cpu_time`` (seconds) over existing TSVs, in hours."""
+def _benchmark_cpu_hours(paths: list[str]) -> float:
+    """Sum of Snakemake benchmark ``cpu_time`` (seconds, last repeat) over TSVs, in hours."""
     total = 0.0
     for path in paths:
-        if path.exists():
+        try:
             frame = pd.read_csv(path, sep="\t")
-            if "cpu_time" in frame and len(frame):
-                total += float(frame["cpu_time"].iloc[-1])
+        except (OSError, ValueError, pd.errors.ParserError) as exc:
+            raise BenchError(f"{path}: cannot read benchmark record ({exc})") from exc
+        if "cpu_time" not in frame or not len(frame):
+            raise BenchError(f"{path}: benchmark record without a cpu_time row")
+        total += float(frame["cpu_time"].iloc[-1])
     return total / 3600.0
 
 
+def _records_of(scene: str, paths: list[str]) -> list[str]:
+    """The benchmark records of ``scene`` among ``paths`` (file names ``<scene>_spp<N>.tsv`` /
+    ``<scene>_chunk<K>.tsv``)."""
+    return [p for p in paths if re.fullmatch(rf"{re.escape(scene)}_(spp|chunk)\d+\.tsv", Path(p).name)]
+
+
 def write_scene_table(metrics_csv: str, reference_paths: dict[str, str], reference_spp: dict[str, int],
-                      benchmarks_dir: str, csv_path: str, md_path: str) -> pd.DataFrame:
+                      csv_path: str, md_path: str, *, noisy_records: list[str],
+                      reference_records: list[str]) -> pd.DataFrame:
     """Scene table with reference noise floors (issue: trustworthy references) and render costs.
 
-    Render costs come from the Snakemake ``benchmark:`` records of the render and reference jobs
-    under ``benchmarks_dir`` (read, not declared as inputs: they are side records of those jobs).
+    Render costs come from the Snakemake ``benchmark:`` records of the noisy render jobs
+    (``noisy_records``) and reference chunk jobs (``reference_records``), inputs of the rule.
     """
     from mcbench.reports import reference_relmse_floor, scene_markdown, scene_rows
     from scenes import load_scene
 
     metrics = pd.read_csv(metrics_csv)
     floors, info, costs = {}, {}, {}
-    bench = Path(benchmarks_dir)
     for scene, path in reference_paths.items():
         layers = read_layers(path, ["color", "variance"])
         check_finite(path, layers)
@@ -197,8 +240,8 @@ def write_scene_table(metrics_csv: str, reference_paths: dict[str, str], referen
         info[scene] = {"category": module.CATEGORY, "description": module.DESCRIPTION,
                        "resolution": meta.get("resolution", ""), "reference_spp": reference_spp[scene]}
         costs[scene] = {
-            "render_cpu_hours": _benchmark_cpu_hours(sorted(bench.glob(f"render_noisy/{scene}_spp*.tsv"))),
-            "reference_cpu_hours": _benchmark_cpu_hours(sorted(bench.glob(f"render_reference/{scene}_chunk*.tsv"))),
+            "render_cpu_hours": _benchmark_cpu_hours(_records_of(scene, noisy_records)),
+            "reference_cpu_hours": _benchmark_cpu_hours(_records_of(scene, reference_records)),
         }
     table = scene_rows(metrics, floors, info, costs)
     write_csv(csv_path, table, float_format="%.6g")
@@ -220,9 +263,9 @@ def write_gallery(reference_paths: dict[str, str], png_path: str) -> None:
 
 def write_training_example(seed: int, output_paths: list[str], *, spp_levels, target_spp: int, resolution,
                            crop_size: int, variant: str = "auto", threads: int | None = None) -> None:
-    """Render training scene ``seed`` (mcbench.training) and write one EXR per crop."""
-    from mcbench.render import set_threads
-    from mcbench.training import training_example
+    """Render training scene ``seed`` (mcbench.training_data) and write one EXR per crop."""
+    from mcbench.training_data import training_example
+    from mcbench.variants import set_threads
 
     set_threads(threads)
     crops = training_example(seed, list(spp_levels), target_spp, _resolution(resolution), crop_size,
@@ -230,3 +273,29 @@ def write_training_example(seed: int, output_paths: list[str], *, spp_levels, ta
     for path, (layers, metadata) in zip(output_paths, crops):
         check_finite(f"{path} (training scene {seed})", layers)
         write_layers(path, layers, metadata=metadata)
+
+
+def learned_method(name: str):
+    """``methods/<name>.py`` checked to be a learned method (NETWORK, TRAINING, build_network)."""
+    from mcbench.weights import check_learned_method
+    from methods import load_method
+
+    return check_learned_method(load_method(name, kind="denoiser", config_key=f"network '{name}'"))
+
+
+def train_learned_method(name: str, *args, **kwargs):
+    """Train ``methods/<name>.py`` (:func:`mcbench.nn.train.train_network`; the step resolves
+    the name, core never imports methods)."""
+    from mcbench.nn.train import train_network
+
+    return train_network(learned_method(name), *args, **kwargs)
+
+
+if __name__ == "__main__":
+    # python -m mcbench.steps evaluate <name>  (or train <name>): mcbench.nn.train's command line
+    # with the methods registry, e.g. to re-evaluate committed weights on the validation crops.
+    import sys
+
+    from mcbench.nn.train import main
+
+    sys.exit(main(load_method=learned_method))

@@ -11,6 +11,17 @@ A method module declares
 * a combiner: ``combine(buffers: RenderBuffers, inputs: list[Denoised], **params) -> Denoised``;
   its output may feed another combiner like any base denoiser output.
 
+Config parameters are the keyword-only parameters of ``denoise``/``combine``, each annotated
+(``int``, ``float``, ``bool``, ``str`` or ``typing.Literal[...]`` for a choice): when the DAG is
+parsed, :func:`method_table` checks every config entry's ``params`` against them
+(:func:`check_params`), so a misspelt key or a value outside the choices stops the run before any
+job, naming e.g. ``combiners[3].params.solvr``.
+
+A learned method imports torch only inside ``build_network``/``denoise``: its ``nn.Module``
+classes are defined by a cached ``network_classes()`` function on first use, so importing the
+module (as parsing the DAG does) never imports torch; its ``denoise`` calls
+``mcbench.nn.inference.denoise_with_network(sys.modules[__name__], buffers)``.
+
 Adding a method is one new file here plus one line in ``config.yaml``.
 """
 
@@ -25,10 +36,11 @@ import typing
 from types import ModuleType
 from typing import Callable
 
-import numpy as np
-
 from mcbench import BenchError
-from mcbench.buffers import Denoised, ImageBuffers, RenderBuffers
+from mcbench.buffers import denoise_each_buffer  # re-exported: single-image methods call it
+
+__all__ = ["KINDS", "NOISY", "NOISY_LABEL", "UnknownMethodError", "available_methods", "load_method",
+           "denoise_each_buffer", "method_parameters", "check_params", "method_table"]
 
 KINDS = {"denoiser": "denoise", "combiner": "combine"}
 
@@ -60,11 +72,6 @@ def load_method(name: str, kind: str | None = None, config_key: str = "config") 
     if not callable(getattr(module, KINDS[module_kind], None)):
         raise UnknownMethodError(f"{config_key}: methods/{name}.py lacks {KINDS[module_kind]}()")
     return module
-
-
-# Re-export: single-image methods call ``methods.denoise_each_buffer``; it lives in core
-# (mcbench.buffers) so that core code (mcbench.nn.inference) never imports this package.
-from mcbench.buffers import denoise_each_buffer  # noqa: E402, F401
 
 
 # ---------------------------------------------------------------------------------------------

@@ -148,7 +148,6 @@ def test_no_import_cycle_in_core():
     assert not found, f"import cycles in mcbench/: {found}"
 
 
-@pytest.mark.xfail(strict=False, reason="other engineers are removing these imports (issue 11)")
 def test_core_does_not_import_plugins():
     offending = []
     for name, path in core_modules().items():
@@ -230,8 +229,9 @@ def test_private_finder_finds_known_patterns():
         "imports mcbench.exr._open", "uses mcbench.render._load", "uses mcbench.render._scene_cache"]
 
 
-@pytest.mark.xfail(strict=False, reason="other engineers are replacing these uses (issue 11)")
 def test_no_private_names_of_other_modules():
+    """Core, methods and scenes alike: no module calls another's private names."""
     known = project_modules()
-    uses = [use for path in core_modules().values() for use in private_uses(path, known)]
+    paths = sorted(p for package in PROJECT_PACKAGES for p in (ROOT / package).rglob("*.py"))
+    uses = [use for path in paths for use in private_uses(path, known)]
     assert not uses, "private names used across modules:\n" + "\n".join(uses)

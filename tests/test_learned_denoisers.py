@@ -154,8 +154,8 @@ def test_inference_is_deterministic_and_finite_on_hard_cases(name, noisy_buffers
 @pytest.fixture(scope="module")
 def validation_scene():
     """A validation scene rendered afresh with the settings recorded with the weights."""
-    from mcbench.render import pick_variant
-    from mcbench.training import training_example
+    from mcbench.variants import pick_variant
+    from mcbench.training_data import training_example
 
     data = read_json(record_path("kpcn"))["data"]
     for name in LEARNED:
@@ -181,8 +181,8 @@ def test_committed_weights_reproduce_their_validation_loss(name, validation_scen
 
 
 def test_no_test_scene_is_a_training_scene():
-    from mcbench.render import pick_variant
-    from mcbench.training import scene_fingerprint, training_scene_fingerprint
+    from mcbench.variants import pick_variant
+    from mcbench.training_data import scene_fingerprint, training_scene_fingerprint
     from scenes import available_scenes, load_scene
 
     seeds = set()

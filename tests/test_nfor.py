@@ -122,13 +122,14 @@ def test_flat_black_and_fireflies_stay_finite(make_render_buffers):
 def test_consistency_on_renders():
     """relMSE against a high-spp reference falls as spp grows."""
     from mcbench.render import merge_reference_chunks, render_buffers, render_reference_chunk
+    from scenes import load_scene
 
     resolution = (40, 40)
     reference, _ = merge_reference_chunks(
-        [render_reference_chunk("cornell_box", 4096, c, resolution=resolution) for c in range(2)])
+        [render_reference_chunk(load_scene("cornell_box"), 4096, c, resolution=resolution) for c in range(2)])
     errors = []
     for spp in (16, 64, 256, 1024):
-        layers, _ = render_buffers("cornell_box", spp, resolution=resolution)
+        layers, _ = render_buffers(load_scene("cornell_box"), spp, resolution=resolution)
         out = nfor.denoise(RenderBuffers(layers=layers, spp=spp))
         assert np.isfinite(out.full).all()
         errors.append(relmse(out.full, reference["color"]))

@@ -128,10 +128,11 @@ def test_flat_black_and_fireflies_stay_finite(make_render_buffers):
 @pytest.fixture(scope="module")
 def cornell_series():
     from mcbench.render import merge_reference_chunks, render_buffers, render_reference_chunk
+    from scenes import load_scene
     resolution = (48, 48)
-    reference, _ = merge_reference_chunks([render_reference_chunk("cornell_box", 4096, chunk, resolution=resolution)
+    reference, _ = merge_reference_chunks([render_reference_chunk(load_scene("cornell_box"), 4096, chunk, resolution=resolution)
                                            for chunk in range(2)])
-    renders = {spp: RenderBuffers(layers=render_buffers("cornell_box", spp, resolution=resolution)[0], spp=spp)
+    renders = {spp: RenderBuffers(layers=render_buffers(load_scene("cornell_box"), spp, resolution=resolution)[0], spp=spp)
                for spp in (16, 64, 256, 1024)}
     return reference["color"], renders
 

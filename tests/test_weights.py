@@ -4,7 +4,6 @@ or scene plugins, and no module of mcbench imports one that imports it back."""
 
 from __future__ import annotations
 
-import ast
 import os
 import subprocess
 import sys
@@ -136,90 +135,3 @@ def test_reasons_drop_torch_advice_but_keep_the_cause():
     assert weights.safe_failure_reason(error) == \
         "RuntimeError: Unsupported global: GLOBAL os.system was not an allowed global by default."
     assert weights.safe_failure_reason(EOFError()) == "EOFError"
-
-
-# ----------------------------------------------------------------------------- import structure
-
-def _imports(path: Path, package_root: Path) -> set[str]:
-    """Every module a file imports, at any depth (function-level imports count), as dotted names."""
-    tree = ast.parse(path.read_text(), filename=str(path))
-    module = ".".join(path.relative_to(package_root).with_suffix("").parts)
-    package = module if path.name == "__init__.py" else module.rpartition(".")[0]
-    package = package.removesuffix(".__init__")
-    names = set()
-    for node in ast.walk(tree):
-        if isinstance(node, ast.Import):
-            names.update(alias.name for alias in node.names)
-        elif isinstance(node, ast.ImportFrom):
-            base = node.module or ""
-            if node.level:
-                parent = package.rsplit(".", node.level - 1)[0] if node.level > 1 else package
-                base = f"{parent}.{base}" if base else parent
-            names.add(base)
-            names.update(f"{base}.{alias.name}" for alias in node.names)
-    return names
-
-
-def _core_graph() -> dict[str, set[str]]:
-    """{module of mcbench: the modules of mcbench it imports}; ``from a import b`` counts as
-    importing ``a.b`` when that is a module, else ``a``."""
-    files = {".".join(p.relative_to(ROOT).with_suffix("").parts).removesuffix(".__init__"): p
-             for p in (ROOT / "mcbench").rglob("*.py")}
-    graph = {}
-    for name, path in files.items():
-        graph[name] = {m for m in _imports(path, ROOT) if m in files and m != name}
-    return graph
-
-
-def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
-    """Strongly connected components with more than one module (Tarjan)."""
-    index, low, stack, on_stack, found = {}, {}, [], set(), []
-
-    def visit(node):
-        index[node] = low[node] = len(index)
-        stack.append(node)
-        on_stack.add(node)
-        for other in graph[node]:
-            if other not in index:
-                visit(other)
-                low[node] = min(low[node], low[other])
-            elif other in on_stack:
-                low[node] = min(low[node], index[other])
-        if low[node] == index[node]:
-            component = []
-            while True:
-                member = stack.pop()
-                on_stack.discard(member)
-                component.append(member)
-                if member == node:
-                    break
-            if len(component) > 1:
-                found.append(sorted(component))
-
-    for node in sorted(graph):
-        if node not in index:
-            visit(node)
-    return found
-
-
-def test_cycle_finder_finds_a_hidden_cycle():
-    assert _cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
-    assert _cycles({"a": {"b"}, "b": set()}) == []
-
-
-def test_no_import_cycle_in_mcbench():
-    graph = _core_graph()
-    assert {"mcbench.nn.train", "mcbench.nn.inference", "mcbench.weights"} <= set(graph)
-    assert "mcbench.weights" in graph["mcbench.nn.inference"]
-    assert _cycles(graph) == []
-
-
-def test_core_never_imports_methods_or_scenes():
-    offenders = {}
-    for path in (ROOT / "mcbench").rglob("*.py"):
-        if path.name == "steps.py" and path.parent.name == "mcbench":
-            continue                              # the steps layer sits above the plugins
-        bad = sorted(m for m in _imports(path, ROOT) if m.split(".")[0] in ("methods", "scenes"))
-        if bad:
-            offenders[str(path.relative_to(ROOT))] = bad
-    assert offenders == {}

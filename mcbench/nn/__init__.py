@@ -5,7 +5,7 @@
 * :mod:`mcbench.nn.kernels` -- applying per-pixel kernels (KPCN) and weight-shared kernels
   (Fan et al. 2021);
 * :mod:`mcbench.nn.losses` -- the training losses (L1 in log space, SMAPE, gradient L1);
-* :mod:`mcbench.nn.data` -- training crops from :mod:`mcbench.training` as tensors, the
+* :mod:`mcbench.nn.data` -- training crops from :mod:`mcbench.training_data` as tensors, the
   train/validation split, seeded augmented batches;
 * :mod:`mcbench.nn.train` -- the seeded, resumable training loop with checkpoints, the optional
   adversarial critic, validation, and the weights + record it writes;

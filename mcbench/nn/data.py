@@ -1,4 +1,4 @@
-"""Training crops (from :mod:`mcbench.training`) as arrays, the train/validation split and
+"""Training crops (from :mod:`mcbench.training_data`) as arrays, the train/validation split and
 seeded, augmented batches.
 
 A crop file ``example_<seed>_<k>.exr`` holds, for every noisy level N, the layers
@@ -74,7 +74,7 @@ class CropSet:
 
     @classmethod
     def from_layers(cls, crops: list[tuple[dict, dict]], source: str = "<memory>") -> "CropSet":
-        """Build from ``(layers, metadata)`` pairs as :func:`mcbench.training.training_example` returns."""
+        """Build from ``(layers, metadata)`` pairs as :func:`mcbench.training_data.training_example` returns."""
         if not crops:
             raise BenchError(f"{source}: no training crops")
         levels = None

@@ -305,7 +305,7 @@ def evaluate_committed(module: ModuleType, crops: CropSet) -> dict:
 def main(argv: list[str] | None = None, *, load_method: Callable[[str], ModuleType]) -> int:
     """Command line: ``train <name>`` or ``evaluate <name>``; ``load_method`` resolves a method
     name to its module (the caller's, e.g. ``methods.load_method``: core never imports ``methods``)."""
-    parser = argparse.ArgumentParser(prog="mcbench.nn.train",
+    parser = argparse.ArgumentParser(prog="python -m mcbench.steps",
                                      description="Train a learned denoiser, or evaluate its committed weights.")
     parser.add_argument("command", choices=["train", "evaluate"])
     parser.add_argument("name", help="method module in methods/ (kpcn, mcgan, optix_ae, wskpn, ...)")
@@ -327,6 +327,6 @@ def main(argv: list[str] | None = None, *, load_method: Callable[[str], ModuleTy
             print(f"{args.name}: validation loss {result['loss']:.6f} (recorded {recorded:.6f}, "
                   f"ratio {result['loss'] / recorded:.4f}), relMSE {result['relmse']:.6f}")
     except BenchError as exc:
-        print(f"mcbench.nn.train: {exc}", file=sys.stderr)
+        print(f"mcbench.steps: {exc}", file=sys.stderr)
         return 1
     return 0

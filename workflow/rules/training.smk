@@ -1,4 +1,4 @@
-# Training crops from the seeded procedural scene generator (mcbench.training), disjoint from
+# Training crops from the seeded procedural scene generator (mcbench.training_data), disjoint from
 # the test scenes, and the learned denoisers trained on them (mcbench.nn). Not part of `all`:
 #   snakemake --cores 2 training_data     # render the crops
 #   snakemake --cores 2 train_kpcn        # train one network when its weights are missing
