@@ -156,17 +156,10 @@ def _clip_normalise(w):
 def _iterative_one(ya, yb, xa, xb, w, order, state, max_iterations, tolerance):
     n = ya.shape[0]
     # random start in [0, 1]^N, normalised (Sec. 4.1.2)
-    total = 0.0
     for j in range(n):
         state, bits = _next(state)
         w[j] = _uniform(bits)
-        total += w[j]
-    if total > 0.0:
-        for j in range(n):
-            w[j] /= total
-    else:
-        for j in range(n):
-            w[j] = 1.0 / n
+    _clip_normalise(w)
     it = 0
     while it < max_iterations:
         # freshly shuffled cycle (Fisher-Yates)
@@ -211,19 +204,16 @@ def _iterative_one(ya, yb, xa, xb, w, order, state, max_iterations, tolerance):
                 elif alpha > 1.0:
                     alpha = 1.0
             if alpha != 0.0:
-                total = 0.0
                 for j in range(n):
                     nw = (1.0 - alpha) * w[j]
                     if j == i:
-                        nw = 0.0 if alpha == lower else max(nw + alpha, 0.0)   # exact 0 at the face
+                        nw = 0.0 if alpha == lower else nw + alpha   # exactly 0 at the face
                     change = abs(nw - w[j])
                     if change > max_change:
                         max_change = change
                     w[j] = nw
-                    total += nw
                 # back onto the simplex exactly (rounding of (1 - alpha) * w when w_i is near 1)
-                for j in range(n):
-                    w[j] /= total
+                _clip_normalise(w)
             it += 1
         if max_change <= tolerance:
             break

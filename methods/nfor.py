@@ -165,6 +165,26 @@ def _weights_block(guide, variance, y0, y1, radius, patch, k, alpha, eps, clamp_
 
 
 @cached_njit()
+def _design_row(xrow, features, qy, qx, y, x, nf):
+    """Row of the first-order design matrix of neighbour (qy, qx) about centre (y, x):
+    [1, dx, dy, f(q) - f(centre)...] (first-order regression of Bitterli et al. 2016)."""
+    xrow[0] = 1.0
+    xrow[1] = qx - x
+    xrow[2] = qy - y
+    for f in range(nf):
+        xrow[3 + f] = features[qy, qx, f] - features[y, x, f]
+
+
+@cached_njit()
+def _minus_kept_products(value, lmat, keep, i, j):
+    """value - sum over kept columns m < j of lmat[i, m] lmat[j, m] (Cholesky update), in order."""
+    for m in range(j):
+        if keep[m]:
+            value -= lmat[i, m] * lmat[j, m]
+    return value
+
+
+@cached_njit()
 def _solve_normal_equations(a, b, d, nch, tol, beta):
     """Solve a beta = b (a: (d, d) SPD-ish, b: (d, nch)) by Cholesky on the diagonally scaled
     matrix, dropping columns whose pivot is below ``tol`` (their coefficients are 0)."""
@@ -176,10 +196,7 @@ def _solve_normal_equations(a, b, d, nch, tol, beta):
     for j in range(d):
         if scale[j] <= 0.0:
             continue
-        s = a[j, j] / (scale[j] * scale[j])
-        for m in range(j):
-            if keep[m]:
-                s -= lmat[j, m] * lmat[j, m]
+        s = _minus_kept_products(a[j, j] / (scale[j] * scale[j]), lmat, keep, j, j)
         if s <= tol:
             continue
         keep[j] = True
@@ -188,10 +205,7 @@ def _solve_normal_equations(a, b, d, nch, tol, beta):
         for i in range(j + 1, d):
             if scale[i] <= 0.0:
                 continue
-            t = a[i, j] / (scale[i] * scale[j])
-            for m in range(j):
-                if keep[m]:
-                    t -= lmat[i, m] * lmat[j, m]
+            t = _minus_kept_products(a[i, j] / (scale[i] * scale[j]), lmat, keep, i, j)
             lmat[i, j] = t / ljj
     z = np.zeros(d)
     for ch in range(nch):
@@ -259,11 +273,7 @@ def _collaborative_regression(color, guide, guide_variance, features, radius, pa
                         if wt <= 0.0:
                             continue
                         wsum += wt
-                        xrow[0] = 1.0
-                        xrow[1] = qx - x
-                        xrow[2] = qy - y
-                        for f in range(nf):
-                            xrow[3 + f] = features[qy, qx, f] - features[y, x, f]
+                        _design_row(xrow, features, qy, qx, y, x, nf)
                         for i in range(d):
                             wi = wt * xrow[i]
                             for j in range(i, d):
@@ -289,11 +299,7 @@ def _collaborative_regression(color, guide, guide_variance, features, radius, pa
                         wt = weights[(qy - y + radius) * side + (qx - x + radius), y - y0, x]
                         if wt <= 0.0:
                             continue
-                        xrow[0] = 1.0
-                        xrow[1] = qx - x
-                        xrow[2] = qy - y
-                        for f in range(nf):
-                            xrow[3 + f] = features[qy, qx, f] - features[y, x, f]
+                        _design_row(xrow, features, qy, qx, y, x, nf)
                         for ch in range(nch):
                             pred = 0.0
                             for i in range(d):
