@@ -163,3 +163,14 @@ def test_every_method_param_annotation_is_checkable():
             hint = hints.get(parameter)
             assert hint is not None, f"methods/{name}.py: parameter '{parameter}' has no annotation"
             assert hint in simple or typing.get_origin(hint) is typing.Literal, (name, parameter, hint)
+
+
+def test_schema_training_overrides_are_the_training_settings():
+    """training.networks.<name> accepts exactly the settings mcbench.nn.train knows (threads
+    come from the rule) and the losses it implements."""
+    from mcbench.nn.losses import LOSSES
+    from mcbench.nn.train import DEFAULT_SETTINGS
+
+    overrides = load_schema()["properties"]["training"]["properties"]["networks"]["additionalProperties"]
+    assert set(overrides["properties"]) == set(DEFAULT_SETTINGS) - {"threads"}
+    assert overrides["properties"]["loss"]["enum"] == list(LOSSES)
