@@ -24,6 +24,7 @@ include: "workflow/rules/methods.smk"
 include: "workflow/rules/metrics.smk"
 include: "workflow/rules/report.smk"
 include: "workflow/rules/training.smk"
+include: "workflow/rules/viewer.smk"
 
 
 rule all:

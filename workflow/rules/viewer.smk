@@ -1,0 +1,1 @@
+# Viewer rules (issue 17): filled in by the viewer work.
