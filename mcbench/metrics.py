@@ -3,6 +3,9 @@
 All take ``image`` and ``reference`` of shape (H, W, 3): linear HDR radiance, float.
 Accumulation is in float64; the result is a Python float. ``image`` must be finite
 (callers validate inputs); the denominators below are guarded by their 0.01 terms.
+FLIP (HDR-FLIP of Andersson et al. 2021, NVIDIA's ``flip-evaluator``) validates its inputs
+itself, since the package's C++ core ends the process on inputs it cannot handle.
+The per-pixel maps (``relmse_map``, ``flip_map``) are for the report's viewer.
 """
 
 from __future__ import annotations
@@ -10,7 +13,8 @@ from __future__ import annotations
 import numpy as np
 from skimage.metrics import structural_similarity
 
-__all__ = ["relmse", "smape", "dssim", "aces_filmic", "srgb_encode", "tonemap", "METRICS", "DSSIM_MIN_SIZE"]
+__all__ = ["relmse", "relmse_map", "smape", "dssim", "flip", "flip_map", "flip_exposure_range",
+           "aces_filmic", "srgb_encode", "tonemap", "METRICS", "DSSIM_MIN_SIZE", "FLIP_MIN_LUMINANCE"]
 
 RELMSE_EPSILON = 0.01
 SMAPE_EPSILON = 0.01
@@ -29,14 +33,26 @@ def _pair(image, reference):
     return image, reference
 
 
+def _relmse_terms(image, reference) -> np.ndarray:
+    y, r = _pair(image, reference)
+    return (y - r) ** 2 / (r * r + RELMSE_EPSILON)
+
+
+def relmse_map(image, reference) -> np.ndarray:
+    """Per-pixel relative MSE, (H, W) float64: mean over the 3 channels of (y - r)² / (r² + 0.01).
+
+    The terms of :func:`relmse` before the mean over pixels (its mean is ``relmse``).
+    """
+    return np.mean(_relmse_terms(image, reference), axis=-1)
+
+
 def relmse(image, reference) -> float:
     """Relative MSE: mean over pixels and channels of (y - r)² / (r² + 0.01).
 
     The relMSE of Rousselle et al. 2011 as used by KPCN (Bako et al. 2017) and
     Zheng et al. 2021 (Sec. 5.3.2), computed on linear HDR values without tone mapping.
     """
-    y, r = _pair(image, reference)
-    return float(np.mean((y - r) ** 2 / (r * r + RELMSE_EPSILON)))
+    return float(np.mean(_relmse_terms(image, reference)))
 
 
 def smape(image, reference) -> float:
@@ -83,4 +99,122 @@ def dssim(image, reference) -> float:
     return float(1.0 - ssim)
 
 
-METRICS = {"relmse": relmse, "smape": smape, "dssim": dssim}
+# --- HDR-FLIP -------------------------------------------------------------------------------
+# Rec. 709 luminance weights and ACES coefficients of FLIP's exposure range (Andersson et al.
+# 2021, "Visualizing Errors in Rendered High Dynamic Range Images", Sec. 4): FLIP's ACES is
+# Narkowicz's fit with a 0.6 pre-exposure, tm(x) = (a2 x² + a1 x) / (b2 x² + b1 x + b0).
+FLIP_LUMINANCE_WEIGHTS = np.array([0.2126, 0.7152, 0.0722])
+_FLIP_ACES = {"a2": 0.6 * 0.6 * 2.51, "a1": 0.6 * 0.03, "b2": 0.6 * 0.6 * 2.43, "b1": 0.6 * 0.59, "b0": 0.14}
+# The tone-mapped value the exposure range aims at: c_start brings the brightest pixel of the
+# reference to 0.85, c_stop brings its median pixel there.
+FLIP_TARGET = 0.85
+# FLIP clamps the median luminance from below at float32's machine epsilon before the log.
+FLIP_MEDIAN_FLOOR = float(np.finfo(np.float32).eps)
+# Below this maximum luminance an image is "black" for HDR-FLIP's automatic exposure range:
+# the package's own range (from the reference) is reversed when the reference's maximum
+# luminance is under FLIP_MEDIAN_FLOOR, and its C++ core then calls exit(). 2^-20 leaves a
+# factor 8 of margin over that floor (float32 rounding of the package's luminance).
+FLIP_MIN_LUMINANCE = 2.0 ** -20
+
+
+def _flip_exposure_of(luminance_max: float, luminance_median: float) -> tuple[float, float]:
+    a = _FLIP_ACES["a2"] - FLIP_TARGET * _FLIP_ACES["b2"]
+    b = _FLIP_ACES["a1"] - FLIP_TARGET * _FLIP_ACES["b1"]
+    c = -FLIP_TARGET * _FLIP_ACES["b0"]
+    # larger root of a x² + b x + c = 0: the radiance that tone-maps to FLIP_TARGET
+    x_target = (-b + np.sqrt(b * b - 4.0 * a * c)) / (2.0 * a) if a != 0.0 else -c / b
+    start = float(np.log2(x_target / luminance_max))
+    stop = float(np.log2(x_target / max(luminance_median, FLIP_MEDIAN_FLOOR)))
+    return start, stop
+
+
+def flip_exposure_range(image) -> tuple[float, float]:
+    """HDR-FLIP's exposure range (c_start, c_stop) in stops, computed from ``image`` (H, W, 3).
+
+    Andersson et al. 2021 (Sec. 4): with Y the Rec. 709 luminance, Y_max its maximum and Y_med
+    its median (the element at index N // 2 of the sorted values, as FLIP does), and x* the
+    radiance that FLIP's ACES maps to 0.85, c_start = log2(x* / Y_max) and
+    c_stop = log2(x* / max(Y_med, eps_float32)). FLIP evaluates its LDR metric at
+    max(2, ceil(c_stop - c_start)) exposures evenly spaced in [c_start, c_stop] and keeps the
+    per-pixel maximum. Raises ``ValueError`` when Y_max < FLIP_MIN_LUMINANCE (no range exists).
+    """
+    luminance = np.maximum(np.asarray(image, dtype=np.float64), 0.0) @ FLIP_LUMINANCE_WEIGHTS
+    values = luminance.ravel()
+    luminance_max = float(values.max()) if values.size else 0.0
+    if not luminance_max >= FLIP_MIN_LUMINANCE:
+        raise ValueError(f"no HDR-FLIP exposure range for an image whose maximum luminance "
+                         f"{luminance_max:.3g} is below {FLIP_MIN_LUMINANCE:.3g}")
+    median = float(np.partition(values, values.size // 2)[values.size // 2])
+    return _flip_exposure_of(luminance_max, median)
+
+
+def _flip_inputs(image, reference) -> tuple[np.ndarray, np.ndarray]:
+    """Validated float32 (H, W, 3) copies for flip_evaluator, negatives clamped to 0."""
+    y, r = _pair(image, reference)
+    if y.ndim != 3 or y.shape[2] != 3 or y.shape[0] < 1 or y.shape[1] < 1:
+        raise ValueError(f"FLIP needs (H, W, 3) images with H, W >= 1, got shape {y.shape}")
+    largest = float(np.finfo(np.float32).max)
+    for name, value in (("image", y), ("reference", r)):
+        if not np.all(np.isfinite(value)):
+            raise ValueError(f"FLIP: {name} holds NaN or Inf values")
+        if value.size and value.max() > largest:
+            raise ValueError(f"FLIP: {name} holds values beyond float32's range ({largest:.3g})")
+    # HDR-FLIP is defined on non-negative linear radiance: negative values (denoiser
+    # undershoot) are clamped to 0, as the tone mapping of DSSIM does.
+    y32 = np.ascontiguousarray(np.maximum(y, 0.0), dtype=np.float32)
+    r32 = np.ascontiguousarray(np.maximum(r, 0.0), dtype=np.float32)
+    return y32, r32
+
+
+def _flip_evaluate(image, reference) -> tuple[np.ndarray, float]:
+    """(per-pixel HDR-FLIP (H, W) float64, the package's mean FLIP) for a validated pair.
+
+    The exposure range is the package's own (from the reference) when the reference is not
+    black (maximum luminance >= FLIP_MIN_LUMINANCE). Degenerate cases, documented choices:
+    a black reference with a non-black image takes the range from the image
+    (:func:`flip_exposure_range`), passed explicitly; two black images are given the range of
+    a uniform image of luminance FLIP_MIN_LUMINANCE (start = stop, 2 exposures), so identical
+    black images score 0 and any difference is seen at an exposure that makes
+    FLIP_MIN_LUMINANCE bright (0.85 after tone mapping). The call never reaches the package's
+    exit() paths: "HDR" is fixed, no viewing-condition options are passed, and start <= stop.
+    """
+    import flip_evaluator
+
+    y32, r32 = _flip_inputs(image, reference)
+    parameters = {}
+    try:
+        flip_exposure_range(r32)
+    except ValueError:
+        try:
+            start, stop = flip_exposure_range(y32)
+        except ValueError:
+            start, stop = _flip_exposure_of(FLIP_MIN_LUMINANCE, FLIP_MIN_LUMINANCE)
+        parameters = {"startExposure": start, "stopExposure": max(stop, start)}
+    error_map, mean, _ = flip_evaluator.evaluate(r32, y32, "HDR", applyMagma=False, computeMeanError=True,
+                                                 parameters=parameters)
+    error_map = np.asarray(error_map, dtype=np.float64).reshape(y32.shape[:2])
+    if not (np.all(np.isfinite(error_map)) and np.isfinite(mean)):
+        raise ValueError("FLIP returned a non-finite error (flip_evaluator)")
+    return error_map, float(mean)
+
+
+def flip_map(image, reference) -> np.ndarray:
+    """Per-pixel HDR-FLIP error, (H, W) float64 in [0, 1], no colour map applied.
+
+    HDR-FLIP (Andersson et al. 2021) through NVIDIA's ``flip_evaluator.evaluate(reference,
+    image, "HDR", applyMagma=False)`` with its defaults: ACES tone mapping, 67 pixels per
+    degree, automatic exposure range from the reference (see :func:`_flip_evaluate` for the
+    black-image cases). Negative radiance is clamped to 0; NaN/Inf raise ``ValueError``.
+    """
+    return _flip_evaluate(image, reference)[0]
+
+
+def flip(image, reference) -> float:
+    """Mean HDR-FLIP error over pixels (the package's own mean of :func:`flip_map`), in [0, 1].
+
+    0 for identical images; perceptual, on linear HDR radiance (Andersson et al. 2021).
+    """
+    return _flip_evaluate(image, reference)[1]
+
+
+METRICS = {"relmse": relmse, "smape": smape, "dssim": dssim, "flip": flip}

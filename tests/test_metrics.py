@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from mcbench.metrics import aces_filmic, dssim, relmse, smape, srgb_encode, tonemap
+from mcbench.metrics import (FLIP_MIN_LUMINANCE, METRICS, aces_filmic, dssim, flip, flip_exposure_range, flip_map,
+                             relmse, relmse_map, smape, srgb_encode, tonemap)
 
 
 def test_relmse_hand_computed():
@@ -108,3 +109,130 @@ def test_dssim_of_constant_images_is_the_ssim_luminance_term():
 def test_shape_mismatch_is_refused():
     with pytest.raises(ValueError, match="shape"):
         relmse(np.zeros((4, 4, 3)), np.zeros((4, 5, 3)))
+
+
+def test_relmse_map_hand_computed_and_its_mean_is_relmse():
+    reference = np.zeros((1, 2, 3))
+    reference[0, 0] = 1.0
+    image = reference.copy()
+    image[0, 0, 0] = 2.0   # pixel 0: (1 / 1.01 + 0 + 0) / 3
+    image[0, 1, 2] = 0.5   # pixel 1: (0 + 0 + 25) / 3
+    expected = np.array([[1.0 / 1.01 / 3.0, 25.0 / 3.0]])
+    values = relmse_map(image, reference)
+    assert values.shape == (1, 2) and values.dtype == np.float64
+    np.testing.assert_allclose(values, expected, rtol=1e-12)
+    rng = np.random.default_rng(4)
+    reference = rng.gamma(1.0, 1.0, size=(9, 7, 3))
+    image = reference + rng.normal(0, 0.2, size=reference.shape)
+    assert np.mean(relmse_map(image, reference)) == pytest.approx(relmse(image, reference), rel=1e-12)
+
+
+def flip_pair(seed=5, shape=(24, 20, 3), noise=0.2):
+    """A non-degenerate HDR pair: gamma-distributed radiance (median ~0.7, a long bright tail)
+    and the same image with additive Gaussian noise clamped at 0."""
+    rng = np.random.default_rng(seed)
+    reference = rng.gamma(1.0, 1.0, size=shape)
+    image = np.maximum(reference + rng.normal(0, noise, size=shape), 0.0)
+    return image, reference
+
+
+def test_flip_equals_the_package_on_a_known_pair():
+    import flip_evaluator
+
+    image, reference = flip_pair()
+    expected_map, expected_mean, _ = flip_evaluator.evaluate(reference.astype(np.float32), image.astype(np.float32),
+                                                             "HDR", applyMagma=False)
+    assert flip(image, reference) == expected_mean
+    values = flip_map(image, reference)
+    assert values.shape == image.shape[:2] and values.dtype == np.float64
+    np.testing.assert_array_equal(values, expected_map[..., 0])
+    # the map's mean is the scalar (the package accumulates in another precision)
+    assert np.mean(values) == pytest.approx(flip(image, reference), rel=1e-6)
+    assert 0.0 < flip(image, reference) < 1.0
+
+
+def test_flip_is_zero_for_identical_images_and_grows_with_the_perturbation():
+    _, reference = flip_pair()
+    assert flip(reference, reference) == 0.0
+    assert np.all(flip_map(reference, reference) == 0.0)
+    values = [flip(flip_pair(noise=noise)[0], reference) for noise in (0.02, 0.1, 0.3, 1.0)]
+    assert all(a < b for a, b in zip(values, values[1:])), values
+    # HDR-FLIP's exposure range follows the reference: scaling both images by 2^k changes nothing
+    image, reference = flip_pair()
+    assert flip(8.0 * image, 8.0 * reference) == pytest.approx(flip(image, reference), rel=1e-4)
+
+
+def test_flip_exposure_range_is_the_packages_own():
+    """Our c_start, c_stop (Andersson et al. 2021 Sec. 4, used for black references) equal
+    the range the package computes from a reference, on odd and even pixel counts."""
+    import flip_evaluator
+
+    for shape in [(7, 9, 3), (8, 8, 3), (5, 40, 3)]:
+        image, reference = flip_pair(shape=shape)
+        _, _, used = flip_evaluator.evaluate(reference, image, "HDR", applyMagma=False)
+        start, stop = flip_exposure_range(reference)
+        assert start == pytest.approx(used["startExposure"], abs=1e-5)
+        assert stop == pytest.approx(used["stopExposure"], abs=1e-5)
+    # more than half the pixels black: the median is floored at float32's epsilon (2^-23)
+    reference = np.zeros((4, 4, 3))
+    reference[0] = 1.0
+    start, stop = flip_exposure_range(reference)
+    assert stop - start == pytest.approx(23.0, abs=1e-9)
+    with pytest.raises(ValueError, match="luminance"):
+        flip_exposure_range(np.zeros((4, 4, 3)))
+
+
+def test_flip_degenerate_inputs_give_finite_values_in_this_process():
+    """Inputs on which flip_evaluator's C++ core calls exit() (a black or near-black reference:
+    "Start exposure must be smaller than stop exposure!") return a value here; if the process
+    had exited, this test would not report at all."""
+    import flip_evaluator
+
+    black = np.zeros((16, 16, 3))
+    assert flip(black, black) == 0.0
+    assert flip(black + 0.1 * FLIP_MIN_LUMINANCE, black) == pytest.approx(flip(black, black + 0.1 * FLIP_MIN_LUMINANCE))
+    image, _ = flip_pair(shape=(16, 16, 3))
+    # black reference, non-black image: the exposure range comes from the image
+    start, stop = flip_exposure_range(image)
+    _, expected, _ = flip_evaluator.evaluate(black.astype(np.float32), image.astype(np.float32), "HDR",
+                                             applyMagma=False, parameters={"startExposure": start,
+                                                                           "stopExposure": stop})
+    assert flip(image, black) == pytest.approx(expected, rel=1e-6)
+    assert 0.5 < flip(image, black) <= 1.0
+    # a dim reference (below FLIP_MIN_LUMINANCE, where the package's own range is reversed)
+    assert np.isfinite(flip(image, black + 1e-30))
+    # both nearly black but different: the range of a uniform FLIP_MIN_LUMINANCE image
+    tiny = np.zeros((16, 16, 3))
+    tiny[4:8, 4:8] = 0.5 * FLIP_MIN_LUMINANCE
+    assert 0.0 < flip(tiny, black) <= 1.0
+    np.testing.assert_array_equal(np.isfinite(flip_map(tiny, black)), True)
+    # a single pixel, and negative radiance clamped to 0
+    assert 0.0 < flip(np.full((1, 1, 3), 0.5), np.ones((1, 1, 3))) < 1.0
+    negative = image.copy()
+    negative[0, 0] = -3.0
+    clamped = negative.copy()
+    clamped[0, 0] = 0.0
+    assert flip(negative, image) == flip(clamped, image)
+
+
+def test_flip_refuses_what_it_cannot_compare():
+    image, reference = flip_pair(shape=(8, 8, 3))
+    bad = image.copy()
+    bad[1, 1, 1] = np.nan
+    with pytest.raises(ValueError, match="NaN or Inf"):
+        flip(bad, reference)
+    with pytest.raises(ValueError, match="NaN or Inf"):
+        flip_map(image, np.where(bad > 0, np.inf, reference))
+    with pytest.raises(ValueError, match="float32"):
+        flip(image * 1e300, reference)
+    with pytest.raises(ValueError, match="shape"):
+        flip(image[:, :4], reference)
+    with pytest.raises(ValueError, match=r"\(H, W, 3\)"):
+        flip(image[..., :2], reference[..., :2])
+    with pytest.raises(ValueError, match=r"\(H, W, 3\)"):
+        flip(np.zeros((0, 4, 3)), np.zeros((0, 4, 3)))
+
+
+def test_metrics_registry_order():
+    assert list(METRICS) == ["relmse", "smape", "dssim", "flip"]
+    assert METRICS["flip"] is flip
