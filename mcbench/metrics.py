@@ -14,7 +14,7 @@ import numpy as np
 from skimage.metrics import structural_similarity
 
 __all__ = ["relmse", "relmse_map", "smape", "dssim", "flip", "flip_map", "flip_exposure_range",
-           "aces_filmic", "srgb_encode", "tonemap", "METRICS", "DSSIM_MIN_SIZE", "FLIP_MIN_LUMINANCE"]
+           "aces_filmic", "srgb_encode", "tonemap", "METRICS", "METRIC_LABELS", "DSSIM_MIN_SIZE", "FLIP_MIN_LUMINANCE"]
 
 RELMSE_EPSILON = 0.01
 SMAPE_EPSILON = 0.01
@@ -218,3 +218,5 @@ def flip(image, reference) -> float:
 
 
 METRICS = {"relmse": relmse, "smape": smape, "dssim": dssim, "flip": flip}
+# How tables, captions and the viewer name each metric (keys: those of METRICS).
+METRIC_LABELS = {"relmse": "relMSE", "smape": "SMAPE", "dssim": "DSSIM", "flip": "HDR-FLIP"}

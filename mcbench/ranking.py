@@ -8,13 +8,16 @@ Scores are averaged across scenes per spp, then across spp for the overall colum
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pandas as pd
 from scipy.stats import rankdata
 
 from mcbench import BenchError
 
-__all__ = ["IncompleteMetricsError", "check_complete", "case_scores", "ranking_table", "format_markdown"]
+__all__ = ["IncompleteMetricsError", "check_complete", "case_scores", "ranking_table", "format_markdown",
+           "format_latex", "latex_escape"]
 
 COLUMNS = ["scene", "spp", "candidate", "metric", "value"]
 
@@ -91,14 +94,74 @@ def ranking_table(metrics: pd.DataFrame, metric: str) -> pd.DataFrame:
     return per_spp
 
 
+def _best_per_column(table: pd.DataFrame) -> pd.DataFrame:
+    """Boolean frame: True where a score equals its column's maximum (``np.isclose``: ties all)."""
+    values = table.to_numpy(dtype=np.float64)
+    if not np.all(np.isfinite(values)):
+        raise ValueError("ranking table holds NaN or Inf scores")
+    return pd.DataFrame(np.isclose(values, values.max(axis=0, initial=-np.inf)),
+                        index=table.index, columns=table.columns)
+
+
 def format_markdown(table: pd.DataFrame, labels: dict[str, str] | None = None, digits: int = 1) -> str:
     """Markdown rendering of a ranking table; the best score of each column is bold."""
     labels = labels or {}
     shown = table.copy()
-    best = table.max(axis=0)
+    best = _best_per_column(table)
     for column in table.columns:
-        shown[column] = [f"**{v:.{digits}f}**" if np.isclose(v, best[column]) else f"{v:.{digits}f}"
-                         for v in table[column]]
+        shown[column] = [f"**{v:.{digits}f}**" if is_best else f"{v:.{digits}f}"
+                         for v, is_best in zip(table[column], best[column])]
     shown.index = [labels.get(c, c) for c in table.index]
     shown.index.name = "candidate"
     return shown.to_markdown()
+
+
+# Characters with a meaning in LaTeX text mode, and the dagger of our stand-in labels.
+_LATEX_ESCAPES = {"\\": r"\textbackslash{}", "&": r"\&", "%": r"\%", "$": r"\$", "#": r"\#", "_": r"\_",
+                  "{": r"\{", "}": r"\}", "~": r"\textasciitilde{}", "^": r"\textasciicircum{}", "†": r"\dag{}"}
+_LATEX_LABEL = re.compile(r"[A-Za-z0-9:._-]+")
+
+
+def latex_escape(text: str) -> str:
+    """``text`` as LaTeX text-mode source: ``\\ & % $ # _ { } ~ ^`` escaped, ``†`` as ``\\dag{}``."""
+    return "".join(_LATEX_ESCAPES.get(char, char) for char in str(text))
+
+
+def format_latex(table: pd.DataFrame, labels: dict[str, str] | None = None, *, caption: str, label: str,
+                 digits: int = 1) -> str:
+    """A ranking table as a LaTeX ``table`` with booktabs rules (``\\usepackage{booktabs}``).
+
+    One row per candidate (``labels`` maps names to shown labels, escaped with
+    :func:`latex_escape`), one column per spp (header ``<N> spp``) and ``Avg.``; scores with
+    ``digits`` decimals, the best of each column in ``\\textbf{}`` (ties all bold, as in
+    :func:`format_markdown`). ``caption`` is plain text (escaped); ``label`` is the
+    ``\\label`` key (letters, digits, ``:._-``).
+    """
+    if not _LATEX_LABEL.fullmatch(label):
+        raise ValueError(f"LaTeX label {label!r} may hold only letters, digits and ':._-'")
+    labels = labels or {}
+    best = _best_per_column(table)
+    header = ["Candidate"] + [f"{c} spp" if str(c).isdigit() else str(c) for c in table.columns]
+    rows = []
+    for candidate in table.index:
+        cells = [latex_escape(labels.get(candidate, candidate))]
+        for column in table.columns:
+            number = f"{table.loc[candidate, column]:.{digits}f}"
+            cells.append(rf"\textbf{{{number}}}" if best.loc[candidate, column] else number)
+        rows.append("    " + " & ".join(cells) + r" \\")
+    lines = [
+        r"% Requires \usepackage{booktabs}. Written by mcbench (mcbench.ranking.format_latex).",
+        r"\begin{table}",
+        r"  \centering",
+        rf"  \caption{{{latex_escape(caption)}}}",
+        rf"  \label{{{label}}}",
+        r"  \begin{tabular}{l" + "r" * len(table.columns) + "}",
+        r"    \toprule",
+        "    " + " & ".join(latex_escape(h) for h in header) + r" \\",
+        r"    \midrule",
+        *rows,
+        r"    \bottomrule",
+        r"  \end{tabular}",
+        r"\end{table}",
+    ]
+    return "\n".join(lines) + "\n"

@@ -128,12 +128,14 @@ def gather_timings(paths: list[str], output_path: str) -> pd.DataFrame:
 
 
 def write_rankings(metrics_csv: str, metric: str, csv_path: str, md_path: str, *,
-                   candidates: list[str], labels: dict[str, str]) -> pd.DataFrame:
-    """Score-and-rank table (Zheng et al. Table 3 layout) for one metric, as CSV and Markdown.
+                   candidates: list[str], labels: dict[str, str], tex_path: str | None = None) -> pd.DataFrame:
+    """Score-and-rank table (Zheng et al. Table 3 layout) for one metric, as CSV and Markdown,
+    and as a LaTeX booktabs table at ``tex_path`` when given (label ``tab:ranking-<metric>``).
 
     ``candidates`` (with the noisy input) is the config's list: a metrics table with another
     set of candidates, or any incomplete case, stops here instead of being ranked."""
-    from mcbench.ranking import check_complete, format_markdown, ranking_table
+    from mcbench.metrics import METRIC_LABELS
+    from mcbench.ranking import check_complete, format_latex, format_markdown, ranking_table
 
     try:
         metrics = pd.read_csv(metrics_csv)
@@ -145,11 +147,15 @@ def write_rankings(metrics_csv: str, metric: str, csv_path: str, md_path: str, *
     write_csv(csv_path, table.reset_index(), float_format="%.4f")
     n_cases = metrics[metrics["metric"] == metric].groupby(["scene", "spp"]).ngroups
     n_entries = table.shape[0]
-    header = (f"# Ranking by {metric}\n\nScores per Zheng et al. 2021 Sec. 5.3.3: in each of the "
-              f"{n_cases} test cases the {n_entries} entries (candidates and the noisy input) get "
-              f"linearly spaced scores from {n_entries} (lowest error) to 1; columns are the mean over "
-              f"scenes per spp, `Avg.` the mean over spp. Higher is better.\n\n")
-    write_text(md_path, header + format_markdown(table, labels) + "\n")
+    scoring = (f"Scores per Zheng et al. 2021 Sec. 5.3.3: in each of the "
+               f"{n_cases} test cases the {n_entries} entries (candidates and the noisy input) get "
+               f"linearly spaced scores from {n_entries} (lowest error) to 1; columns are the mean over "
+               f"scenes per spp, `Avg.` the mean over spp. Higher is better.")
+    write_text(md_path, f"# Ranking by {metric}\n\n{scoring}\n\n" + format_markdown(table, labels) + "\n")
+    if tex_path is not None:
+        caption = (f"Ranking by {METRIC_LABELS.get(metric, metric)}. " + scoring.replace("`", "")
+                   + " Best per column in bold.")
+        write_text(tex_path, format_latex(table, labels, caption=caption, label=f"tab:ranking-{metric}"))
     return table
 
 

@@ -129,3 +129,88 @@ def test_write_rankings_refuses_a_table_with_other_candidates(tmp_path):
     with pytest.raises(BenchError, match=r"missing \[\('c', 'relmse'\)\]"):
         write_rankings(path, "relmse", str(tmp_path / "r2.csv"), str(tmp_path / "r2.md"),
                        candidates=["noisy", "a", "b", "c"], labels={})
+
+
+# --- LaTeX tables ------------------------------------------------------------------------------
+
+def _latex_toy_table():
+    """Three candidates, two scenes, two spp, scores by hand: spp 4: a 3, noisy 1.5, b_x 1.5;
+    spp 64: b_x 3, a 1.5, noisy 1.5; Avg.: a and b_x tie at 2.25 (both bold), noisy 1.5."""
+    rows = [("s", 4, "a", "relmse", 1.0), ("s", 4, "noisy", "relmse", 2.0), ("s", 4, "b_x", "relmse", 3.0),
+            ("s", 64, "a", "relmse", 3.0), ("s", 64, "noisy", "relmse", 2.5), ("s", 64, "b_x", "relmse", 1.0),
+            ("t", 4, "a", "relmse", 1.0), ("t", 4, "noisy", "relmse", 3.0), ("t", 4, "b_x", "relmse", 2.0),
+            ("t", 64, "a", "relmse", 2.0), ("t", 64, "noisy", "relmse", 3.0), ("t", 64, "b_x", "relmse", 1.0)]
+    return ranking_table(_tidy(rows), "relmse")
+
+
+def _body_rows(text):
+    body = text.split("\\midrule\n")[1].split("\\bottomrule")[0]
+    return [line.strip() for line in body.strip().splitlines()]
+
+
+def _cells(row):
+    assert row.endswith(r"\\")
+    return [cell.strip() for cell in row[:-2].split(" & ")]
+
+
+def test_latex_table_is_booktabs_with_one_row_per_candidate_and_bold_at_each_column_max():
+    from mcbench.ranking import format_latex
+
+    table = _latex_toy_table()
+    labels = {"a": "#1 KPCN† (ours; 50% & more)", "b_x": "Ensemble (oidn+jbf)"}
+    text = format_latex(table, labels, caption="Ranking by relMSE_x.", label="tab:ranking-relmse")
+    # structure: balanced braces, environments opened and closed, rules in booktabs order
+    assert text.count("{") == text.count("}")
+    depth = 0
+    for char in text.replace(r"\{", "").replace(r"\}", ""):
+        depth += {"{": 1, "}": -1}.get(char, 0)
+        assert depth >= 0
+    for env in ("table", "tabular"):
+        assert text.count(rf"\begin{{{env}}}") == text.count(rf"\end{{{env}}}") == 1
+    assert text.index(r"\toprule") < text.index(r"\midrule") < text.index(r"\bottomrule")
+    assert r"\begin{tabular}{lrrr}" in text
+    assert r"\caption{Ranking by relMSE\_x.}" in text and r"\label{tab:ranking-relmse}" in text
+    header = text.split("\\toprule\n")[1].split("\\midrule")[0].strip()
+    assert _cells(header) == ["Candidate", "4 spp", "64 spp", "Avg."]
+    rows = _body_rows(text)
+    assert len(rows) == len(table) == 3
+    assert table.loc["a", "4"] == 3.0 and table.loc["b_x", "64"] == 3.0
+    assert table.loc["a", "Avg."] == table.loc["b_x", "Avg."] == 2.25 and table.loc["noisy", "Avg."] == 1.5
+    shown = {"a": r"\#1 KPCN\dag{} (ours; 50\% \& more)", "b_x": "Ensemble (oidn+jbf)", "noisy": "noisy"}
+    for row, candidate in zip(rows, table.index):
+        cells = _cells(row)
+        assert cells[0] == shown[candidate]
+        for cell, column in zip(cells[1:], table.columns):
+            value = table.loc[candidate, column]
+            is_max = value == table[column].max()
+            assert cell == (rf"\textbf{{{value:.1f}}}" if is_max else f"{value:.1f}"), (candidate, column)
+    # the toy table has a strict best in the spp columns (so bold is not everywhere)
+    assert table["4"].tolist().count(table["4"].max()) == 1
+    assert sum(r"\textbf" in _cells(r)[1] for r in rows) == 1
+
+
+def test_latex_escapes_and_refuses_a_bad_label():
+    from mcbench.ranking import format_latex, latex_escape
+
+    assert latex_escape("a_b & c% #1 $x$ {y} ~^\\ †+") == (r"a\_b \& c\% \#1 \$x\$ \{y\} \textasciitilde{}"
+                                                          r"\textasciicircum{}\textbackslash{} \dag{}+")
+    with pytest.raises(ValueError, match="label"):
+        format_latex(_latex_toy_table(), caption="x", label="tab:bad label}")
+    assert r"\textbf{3.000}" in format_latex(_latex_toy_table(), caption="x", label="t", digits=3)
+
+
+def test_write_rankings_writes_the_latex_table(tmp_path):
+    from mcbench.steps import write_rankings
+
+    path = _write_case(tmp_path / "metrics.csv", _full_case())
+    table = write_rankings(path, "dssim", str(tmp_path / "r.csv"), str(tmp_path / "r.md"),
+                           candidates=["noisy", "a", "b"], labels={"a": "Method_A"},
+                           tex_path=str(tmp_path / "r.tex"))
+    text = (tmp_path / "r.tex").read_text()
+    assert r"\label{tab:ranking-dssim}" in text and r"\caption{Ranking by DSSIM." in text
+    assert "Higher is better" in text and "Best per column in bold" in text
+    assert len(_body_rows(text)) == len(table) == 3 and r"Method\_A" in text
+    # without tex_path, no LaTeX file
+    write_rankings(path, "dssim", str(tmp_path / "q.csv"), str(tmp_path / "q.md"),
+                   candidates=["noisy", "a", "b"], labels={})
+    assert not (tmp_path / "q.tex").exists()

@@ -11,6 +11,7 @@ rule ranking_table:
             category="Ranking",
         ),
         md=f"{RESULTS}/tables/ranking_{{metric}}.md",
+        tex=f"{RESULTS}/tables/ranking_{{metric}}.tex",
     params:
         candidates=[NOISY] + CANDIDATES,
         labels=LABELS,
