@@ -44,6 +44,7 @@ import numpy as np
 
 from mcbench import BenchError
 from mcbench.buffers import ALL_LAYERS
+from mcbench.progress import eta_seconds, progress_line
 from mcbench.seeds import SCALAR_BLOCK_SIZE, mitsuba_seed, render_seed
 from mcbench.variants import pick_variant, set_threads
 
@@ -190,13 +191,17 @@ def _render_pass(scene_object, spp: int, seed: int) -> np.ndarray:
 
 
 def _moment_sums(label: str, scene_object, spp: int, seed_of: SeedOfPass, variant: str,
-                 width: int, height: int, label_spp: int) -> tuple[dict[str, tuple], list[int]]:
+                 width: int, height: int, label_spp: int,
+                 progress: str | None = None) -> tuple[dict[str, tuple], list[int]]:
     """Render ``spp`` samples in the passes of :func:`passes_for`, pass ``p`` seeded with
-    ``seed_of(p)``; per quantity float64 sums (S1, S2), each (H, W, C), and the seeds used."""
+    ``seed_of(p)``; per quantity float64 sums (S1, S2), each (H, W, C), and the seeds used.
+    With ``progress`` (a label), prints a :func:`mcbench.progress.progress_line` after each pass
+    (passes done, elapsed time, ETA from the samples done so far)."""
     pass_spp = passes_for(spp, width, height, variant)
     seeds = [seed_of(p) for p in range(len(pass_spp))]
     sums = {}
-    for spp, seed in zip(pass_spp, seeds):
+    started = time.perf_counter()
+    for done, (spp, seed) in enumerate(zip(pass_spp, seeds), start=1):
         image = _render_pass(scene_object, spp, mitsuba_seed(seed, variant, width, height))
         index = _channel_indices(scene_object)
         color = image[..., index["color"][0]]
@@ -210,6 +215,11 @@ def _moment_sums(label: str, scene_object, spp: int, seed_of: SeedOfPass, varian
                 sums[quantity] = (sums[quantity][0] + s1, sums[quantity][1] + s2)
             else:
                 sums[quantity] = (s1, s2)
+        if progress:
+            elapsed = time.perf_counter() - started
+            samples = sum(pass_spp[:done])
+            print(progress_line(progress, f"pass {done}/{len(pass_spp)} ({samples}/{sum(pass_spp)} spp)",
+                                elapsed, eta_seconds(elapsed, samples, sum(pass_spp))), flush=True)
     return sums, seeds
 
 
@@ -367,7 +377,7 @@ def render_reference_chunk(scene_module: ModuleType, spp: int, chunk: int, *,
     sums, seeds = _moment_sums(
         name, scene_object, spp,
         lambda p: render_seed("reference", chunk=chunk, pass_index=p, base_seed=seed),
-        variant, width, height, spp)
+        variant, width, height, spp, progress=f"reference {name} chunk {chunk} ({width}x{height}, {variant})")
     layers = {"color": sums["color"][0] / spp, "color_m2": sums["color"][1] / spp}
     for quantity in FEATURES:
         layers[quantity] = _squeeze(sums[quantity][0] / spp)

@@ -70,6 +70,7 @@ from numba import prange
 from mcbench.buffers import Denoised, RenderBuffers
 from mcbench.jit import cached_njit
 from mcbench.nlmeans import nl_means_filter
+from mcbench.progress import StageLog
 
 KIND = "denoiser"
 LABEL = "#4 NFOR"
@@ -383,9 +384,11 @@ def denoise(buffers: RenderBuffers, *, second_pass_variance_scale: float = 1.0) 
     color, variance = f64("color"), np.maximum(f64("variance"), 0.0)
     color_a, color_b = f64("color_a"), f64("color_b")
     var_a, var_b = np.maximum(f64("variance_a"), 0.0), np.maximum(f64("variance_b"), 0.0)
+    stage_done = StageLog.for_image("nfor", *color.shape[:2])    # prints on large images only
 
     # 1. feature cross-prefiltering (Sec. 5.1)
     feat_a, feat_b = prefilter_features(_features(buffers, "_a"), _features(buffers, "_b"))
+    stage_done("feature prefiltering (Sec. 5.1)")
 
     # 2. cross-filtered regression for each bandwidth (Sec. 5.2) and 3. MSE estimates (Sec. 5.3)
     cand_a, cand_b, mses = [], [], []
@@ -397,6 +400,7 @@ def denoise(buffers: RenderBuffers, *, second_pass_variance_scale: float = 1.0) 
         mses.append(0.5 * (mse_a + mse_b) - 0.25 * (fa - fb) ** 2)
         cand_a.append(fa)
         cand_b.append(fb)
+        stage_done(f"regression of A and B at k = {k} (Sec. 5.2)")
     filtered_mse = nl_means_filter(np.concatenate(mses, axis=2), color, variance, alpha=NLM_ALPHA,
                                    epsilon=NLM_EPSILON, **MSE_FILTER)
     raw_selection = (filtered_mse[..., 3:] <= filtered_mse[..., :3]).astype(np.float64)
@@ -405,6 +409,7 @@ def denoise(buffers: RenderBuffers, *, second_pass_variance_scale: float = 1.0) 
     selection = np.clip(selection, 0.0, 1.0)
     result_a = (1.0 - selection) * cand_a[0] + selection * cand_a[1]
     result_b = (1.0 - selection) * cand_b[0] + selection * cand_b[1]
+    stage_done("MSE filtering and bandwidth selection (Sec. 5.3)")
 
     # 4. second pass (Sec. 5.4)
     combined_features = 0.5 * (feat_a + feat_b)
@@ -416,7 +421,9 @@ def denoise(buffers: RenderBuffers, *, second_pass_variance_scale: float = 1.0) 
                                                  epsilon=NLM_EPSILON, **SECOND_PASS_FEATURES)
     combined = 0.5 * (result_a + result_b)
     combined_var = second_pass_variance_scale * 0.25 * (result_a - result_b) ** 2
+    stage_done("second-pass features (Sec. 5.4)")
     full = collaborative_regression(combined, combined, combined_var, final_features, k=SECOND_PASS_K)
+    stage_done("second-pass regression (Sec. 5.4)")
 
     f32 = lambda x: np.ascontiguousarray(x, dtype=np.float32)
     return Denoised(full=f32(full), a=f32(result_a), b=f32(result_b),

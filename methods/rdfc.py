@@ -73,6 +73,7 @@ from scipy.ndimage import uniform_filter
 from mcbench.buffers import Denoised, RenderBuffers
 from mcbench.jit import cached_njit
 from mcbench.nlmeans import nl_means_filter
+from mcbench.progress import StageLog
 
 KIND = "denoiser"
 LABEL = "#8 RDFC"
@@ -398,13 +399,16 @@ def denoise(buffers: RenderBuffers, *, radius: int = WINDOW_RADIUS):
     variances = {w: np.maximum(np.nan_to_num(np.asarray(buffers.layers["variance" + s],
                                                         dtype=np.float64)), 0.0)
                  for w, s in (("a", "_a"), ("b", "_b"))}
+    stage_done = StageLog.for_image("rdfc", *colors["a"].shape[:2])    # prints on large images only
     feats = prefilter_features(buffers)
+    stage_done("feature prefiltering")
     first, first_var = {}, {}
     for which in ("a", "b"):
         y, v = colors[which], variances[which]
         filt, deriv, ovar = candidate_filters(y, v, *feats[which], radius=radius)
         errors = sure(filt, deriv, y, v).sum(axis=3)
         first[which], first_var[which], _ = select_and_blend(filt, ovar, errors, y, v)
+        stage_done(f"first pass of half buffer {which.upper()}")
     final = {}
     for which, other in (("a", "b"), ("b", "a")):
         y, v = colors[which], variances[which]
@@ -412,6 +416,7 @@ def denoise(buffers: RenderBuffers, *, radius: int = WINDOW_RADIUS):
                                               guide_variance=first_var[other], radius=radius)
         errors = sure(filt, deriv, y, v).sum(axis=3)
         final[which], _, _ = select_and_blend(filt, ovar, errors, first[other], first_var[other])
+        stage_done(f"second pass of half buffer {which.upper()}")
     a = np.nan_to_num(final["a"]).astype(np.float32)
     b = np.nan_to_num(final["b"]).astype(np.float32)
     full = ((a.astype(np.float64) + b) / 2.0).astype(np.float32)

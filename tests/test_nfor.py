@@ -134,3 +134,29 @@ def test_consistency_on_renders():
         assert np.isfinite(out.full).all()
         errors.append(relmse(out.full, reference["color"]))
     assert all(e1 < e0 for e0, e1 in zip(errors, errors[1:])), errors
+
+
+def test_stage_lines_on_large_images_only_and_outputs_unchanged(make_render_buffers, monkeypatch, capsys):
+    """NFOR prints one line per stage with the elapsed time when the image has more than
+    mcbench.progress.LARGE_IMAGE_PIXELS pixels (threshold lowered here to reach a small image),
+    and stays quiet below it; the output is bit-identical either way."""
+    import re
+
+    import mcbench.progress as progress
+
+    truth, albedo, normal, depth = synthetic_scene(16, 20)
+    buffers = make_render_buffers(truth, albedo=albedo, normal=normal, depth=depth, half_std=0.05, spp=8)
+    capsys.readouterr()
+    quiet = nfor.denoise(buffers)
+    assert capsys.readouterr().out == ""
+    monkeypatch.setattr(progress, "LARGE_IMAGE_PIXELS", 16 * 20 - 1)
+    loud = nfor.denoise(buffers)
+    lines = capsys.readouterr().out.splitlines()
+    stages = ["feature prefiltering (Sec. 5.1)", "regression of A and B at k = 0.5 (Sec. 5.2)",
+              "regression of A and B at k = 1.0 (Sec. 5.2)", "MSE filtering and bandwidth selection (Sec. 5.3)",
+              "second-pass features (Sec. 5.4)", "second-pass regression (Sec. 5.4)"]
+    assert len(lines) == len(stages)
+    for line, stage in zip(lines, stages):
+        assert re.fullmatch(rf"nfor \(20x16\): {re.escape(stage)} done, elapsed \d+\.\d s", line), line
+    for name in ("full", "a", "b"):
+        np.testing.assert_array_equal(getattr(loud, name), getattr(quiet, name))

@@ -368,3 +368,29 @@ def test_damaged_checkpoint_is_refused_naming_it(crop_files, tmp_path, damage):
         train_network(kpcn, crop_files, tmp_path / "k.pt", tmp_path / "k.json", checkpoint, TINY, log=lambda m: None)
     assert "weights_only" not in "".join(traceback.format_exception(caught.value))
     assert not (tmp_path / "pwned").exists() and not (tmp_path / "k.pt").exists()
+
+
+def test_training_prints_loss_and_time_per_interval_and_at_each_validation(tmp_path, crop_files, monkeypatch):
+    """Progress of a tiny training (6 steps, validation every 3): with an interval of 2 steps,
+    one line per interval with the interval's mean training loss, its seconds and seconds per
+    step, elapsed time and ETA (0 at the end), and a timed line per validation."""
+    import re
+
+    import mcbench.nn.train as train
+    import methods.optix_ae as module
+
+    monkeypatch.setattr(train, "LOG_EVERY", 2)
+    messages = []
+    record = train.train_network(module, crop_files, tmp_path / "w.pt", tmp_path / "w.json", tmp_path / "ck.pt",
+                                 TINY, log=messages.append)
+    interval = re.compile(r"optix_ae: step (\d)/6 loss (\d+\.\d{5}) lr \S+, (\d+\.\d) s for 2 steps "
+                          r"\((\d+\.\d{3}) s/step\), elapsed (\d+\.\d) s, eta (\d+\.\d) s")
+    lines = [interval.fullmatch(m) for m in messages if re.match(r"optix_ae: step \d/6 loss", m)]
+    assert all(lines) and [int(m.group(1)) for m in lines] == [2, 4, 6]
+    assert lines[-1].group(6) == "0.0"
+    assert all(float(m.group(2)) > 0 for m in lines)
+    validations = [m for m in messages if re.match(r"optix_ae: step \d validation ", m)]
+    assert [int(re.search(r"step (\d)", m).group(1)) for m in validations] == [3, 6]
+    assert all(re.search(r"relMSE \d+\.\d{5} \(\d+\.\d s, elapsed \d+\.\d s\)$", m) for m in validations)
+    # the printed validation loss is the record's
+    assert f"{record['history'][-1]['validation_loss']:.5f}" in validations[-1]

@@ -157,3 +157,29 @@ def test_tiling_is_exact():
     tiled = rdfc.candidate_filters(*args, radius=3, tile=16)
     for a, b in zip(whole, tiled):
         np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-15)
+
+
+def test_stage_lines_on_large_images_only_and_outputs_unchanged(make_render_buffers, monkeypatch, capsys):
+    """RDFC prints one line per stage (prefilter, two passes per half buffer) with elapsed time
+    above mcbench.progress.LARGE_IMAGE_PIXELS pixels (lowered here), nothing below; output
+    bit-identical either way."""
+    import re
+
+    import mcbench.progress as progress
+
+    truth, albedo = piecewise_smooth(12, 14)
+    buffers = make_render_buffers(truth, albedo=albedo, **flat_features(12, 14), half_std=0.05, spp=4)
+    outputs, printed = [], []
+    for threshold in (progress.LARGE_IMAGE_PIXELS, 12 * 14 - 1):
+        monkeypatch.setattr(progress, "LARGE_IMAGE_PIXELS", threshold)
+        capsys.readouterr()
+        outputs.append(rdfc.denoise(buffers, radius=SMALL_RADIUS))
+        printed.append(capsys.readouterr().out.splitlines())
+    assert printed[0] == []
+    stages = ["feature prefiltering", "first pass of half buffer A", "first pass of half buffer B",
+              "second pass of half buffer A", "second pass of half buffer B"]
+    assert len(printed[1]) == len(stages)
+    for line, stage in zip(printed[1], stages):
+        assert re.fullmatch(rf"rdfc \(14x12\): {stage} done, elapsed \d+\.\d s", line), line
+    for name in ("full", "a", "b"):
+        np.testing.assert_array_equal(getattr(outputs[1], name), getattr(outputs[0], name))

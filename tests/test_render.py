@@ -390,3 +390,49 @@ def test_thread_count_does_not_change_the_image(cornell_8spp):
     finally:
         dr.set_thread_count(before)
     np.testing.assert_array_equal(layers["color"], cornell_8spp[0]["color"])
+
+
+def test_a_reference_chunk_prints_its_passes_with_elapsed_time_and_eta(variant, monkeypatch, capsys):
+    """Progress of a reference chunk: one line per pass (to stdout, which run_logged sends to
+    the job log), passes and samples counted up, the last pass with nothing left (eta 0)."""
+    import re
+
+    import mcbench.render as render
+
+    monkeypatch.setattr(render, "MAX_WAVEFRONT", 8 * 8 * 2)     # 2 spp per pass at 8x8
+    expected = passes_for(7, 8, 8, variant)
+    assert len(expected) == (1 if variant.startswith("scalar") else 4)
+    capsys.readouterr()
+    render_reference_chunk(CORNELL, 7, 3, resolution=(8, 8), variant=variant)
+    lines = [line for line in capsys.readouterr().out.splitlines() if "pass" in line]
+    assert len(lines) == len(expected)
+    pattern = (r"reference cornell_box chunk 3 \(8x8, [a-z_]+\): pass (\d+)/(\d+) \((\d+)/7 spp\), "
+               r"elapsed (\d+\.\d) s, eta (\d+\.\d|unknown)( s)?")
+    parsed = [re.fullmatch(pattern, line) for line in lines]
+    assert all(parsed), lines
+    assert [int(m.group(1)) for m in parsed] == list(range(1, len(expected) + 1))
+    assert {int(m.group(2)) for m in parsed} == {len(expected)}
+    assert [int(m.group(3)) for m in parsed] == list(np.cumsum(expected))
+    assert parsed[-1].group(5) == "0.0"
+    elapsed = [float(m.group(4)) for m in parsed]
+    assert elapsed == sorted(elapsed)
+
+
+def test_progress_eta_and_stage_lines(capsys):
+    from mcbench.progress import LARGE_IMAGE_PIXELS, StageLog, eta_seconds, progress_line
+
+    assert eta_seconds(10.0, 2, 8) == 30.0          # 5 s per unit, 6 units left
+    assert eta_seconds(10.0, 8, 8) == 0.0 and eta_seconds(0.0, 0, 8) == float("inf")
+    assert progress_line("job", "step 2/8", 10.0, 30.0) == "job: step 2/8, elapsed 10.0 s, eta 30.0 s"
+    assert progress_line("job", "step 0/8", 0.0, float("inf")).endswith("eta unknown")
+    ticks = iter([100.0, 101.5, 104.25])
+    log = StageLog("nfor", clock=lambda: next(ticks))
+    log("prefilter")
+    log("regression")
+    assert capsys.readouterr().out.splitlines() == ["nfor: prefilter done, elapsed 1.5 s",
+                                                    "nfor: regression done, elapsed 4.2 s"]
+    side = int(LARGE_IMAGE_PIXELS ** 0.5)
+    StageLog.for_image("rdfc", side, side)("quiet")            # exactly 256 x 256: quiet
+    assert capsys.readouterr().out == ""
+    StageLog.for_image("rdfc", side, side + 1)("loud")
+    assert capsys.readouterr().out.startswith(f"rdfc ({side + 1}x{side}): loud done, elapsed ")

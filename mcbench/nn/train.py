@@ -53,6 +53,7 @@ from mcbench import BenchError
 from mcbench.io import read_json, write_json
 from mcbench.nn.data import CropSet, crop_paths, load_crops, sample_batch, validation_batches
 from mcbench.nn.losses import LOSSES
+from mcbench.progress import eta_seconds, progress_line
 from mcbench.weights import CHECKPOINT_KEYS, check_learned_method, load_weights, method_name, record_path, weights_path
 from mcbench.weights import is_learned_method  # noqa: F401  re-export for workflow/rules/common.smk (moving to mcbench.weights)
 
@@ -74,6 +75,8 @@ DEFAULT_SETTINGS = {
 }
 # Settings that may change between a run and its resumption without changing the result's meaning.
 RESUMABLE_CHANGES = ("threads", "validate_every", "checkpoint_every")
+# Steps between two progress lines (mean training loss over the interval, its seconds, ETA).
+LOG_EVERY = 50
 
 
 def training_settings(module, overrides: dict | None = None) -> dict:
@@ -205,6 +208,7 @@ def train_network(module: ModuleType, crop_files: list[str | Path], weights_out:
 
     network.train()
     started = time.perf_counter() - elapsed
+    session_started = interval_started = time.perf_counter()
     running = []
     for step in range(start_step, int(settings["steps"])):
         for group in optimizer.param_groups:
@@ -242,16 +246,26 @@ def train_network(module: ModuleType, crop_files: list[str | Path], weights_out:
             raise BenchError(f"{name}: training loss became {loss_value} at step {step}; lower learning_rate")
         running.append(loss_value)
         done = step + 1
-        if done % 50 == 0:
-            log(f"{name}: step {done}/{settings['steps']} loss {np.mean(running[-50:]):.5f} "
-                f"lr {learning_rate(settings, step):.2e} {time.perf_counter() - started:.0f} s")
+        if done % LOG_EVERY == 0 or done == settings["steps"]:
+            now = time.perf_counter()
+            steps_in_interval = min(len(running), done % LOG_EVERY or LOG_EVERY)
+            eta = eta_seconds(now - session_started, done - start_step, int(settings["steps"]) - start_step)
+            log(progress_line(name, f"step {done}/{settings['steps']} loss {np.mean(running[-steps_in_interval:]):.5f} "
+                                    f"lr {learning_rate(settings, step):.2e}, {now - interval_started:.1f} s for "
+                                    f"{steps_in_interval} steps "
+                                    f"({(now - interval_started) / steps_in_interval:.3f} s/step)",
+                              now - started, eta))
+            interval_started = now
         if done % settings["validate_every"] == 0 or done == settings["steps"]:
+            validation_started = time.perf_counter()
             result = evaluate(network, validation_set, settings["loss"])
             history.append({"step": done, "train_loss": float(np.mean(running[-settings["validate_every"]:])),
                             "validation_loss": result["loss"], "validation_relmse": result["relmse"],
                             "seconds": time.perf_counter() - started})
             log(f"{name}: step {done} validation {settings['loss']} {result['loss']:.5f} "
-                f"relMSE {result['relmse']:.5f}")
+                f"relMSE {result['relmse']:.5f} ({time.perf_counter() - validation_started:.1f} s, "
+                f"elapsed {time.perf_counter() - started:.1f} s)")
+            interval_started += time.perf_counter() - validation_started
         if done % settings["checkpoint_every"] == 0 or done == settings["steps"]:
             save_checkpoint(done, time.perf_counter() - started)
     seconds = time.perf_counter() - started
