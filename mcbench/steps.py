@@ -297,6 +297,39 @@ def train_learned_method(name: str, *args, **kwargs):
     return train_network(learned_method(name), *args, **kwargs)
 
 
+def _read_result_table(path: str, columns: list[str]) -> pd.DataFrame:
+    """A CSV the workflow wrote, with the columns a figure needs; errors name the file."""
+    try:
+        frame = pd.read_csv(path)
+    except (OSError, ValueError, pd.errors.ParserError) as exc:
+        raise BenchError(f"{path}: cannot read CSV ({exc})") from exc
+    missing = [column for column in columns if column not in frame.columns]
+    if missing:
+        raise BenchError(f"{path}: missing column(s) {', '.join(missing)}")
+    return frame
+
+
+def write_error_curves(metrics_csv: str, metric: str, png_path: str, *, labels: dict[str, str]) -> None:
+    """Error against spp of every candidate, per scene and averaged, for one metric
+    (mcbench.figures, like Fig. 13 of Zheng et al.); ``labels``: candidate -> legend label."""
+    from mcbench.figures import error_curves, error_curves_figure
+
+    metrics = _read_result_table(metrics_csv, ["scene", "spp", "candidate", "metric", "value"])
+    error_curves_figure(error_curves(metrics, metric=metric), png_path, metric=metric, labels=labels)
+
+
+def write_speed_error(metrics_csv: str, timings_csv: str, png_path: str, *, metric: str,
+                      labels: dict[str, str], inputs: dict[str, list[str]]) -> None:
+    """Each method's mean compute time (timings.csv; a combiner's with the ``inputs`` it takes)
+    against its mean ``metric`` error (metrics.csv), as a labelled log-log scatter."""
+    from mcbench.figures import speed_error_figure, speed_error_points
+
+    metrics = _read_result_table(metrics_csv, ["scene", "spp", "candidate", "metric", "value"])
+    timings = _read_result_table(timings_csv, ["scene", "spp", "method", "seconds"])
+    points = speed_error_points(metrics, timings, metric=metric, inputs=inputs)
+    speed_error_figure(points, png_path, metric=metric, labels=labels)
+
+
 if __name__ == "__main__":
     # python -m mcbench.steps evaluate <name>  (or train <name>): mcbench.nn.train's command line
     # with the methods registry, e.g. to re-evaluate committed weights on the validation crops.

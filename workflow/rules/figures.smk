@@ -1,0 +1,50 @@
+# Figures of the report (mcbench.figures): error against spp per scene for each metric, and
+# each method's speed against its error.
+
+# the speed-against-error figure's metric: relMSE (the paper's), or the first metric configured
+SPEED_METRIC = "relmse" if "relmse" in METRIC_NAMES else METRIC_NAMES[0]
+
+
+rule error_curves:
+    input:
+        metrics=rules.gather_metrics.output[0],
+    output:
+        report(
+            f"{RESULTS}/figures/error_{{metric}}.png",
+            caption="../report/error_curves.rst",
+            category="Figures",
+            subcategory="Error against spp",
+            labels={"metric": "{metric}", "figure": "error against spp, per scene"},
+        ),
+    params:
+        labels=LABELS,
+    conda:
+        "../envs/mcbench.yaml"
+    log:
+        f"{RESULTS}/logs/figures/error_{{metric}}.log",
+    script:
+        "../scripts/figures.py"
+
+
+rule speed_error:
+    input:
+        metrics=rules.gather_metrics.output[0],
+        timings=rules.gather_timings.output[0],
+    output:
+        report(
+            f"{RESULTS}/figures/speed_error.png",
+            caption="../report/speed_error.rst",
+            category="Figures",
+            subcategory="Speed against error",
+            labels={"metric": SPEED_METRIC, "figure": "speed against error"},
+        ),
+    params:
+        labels=LABELS,
+        inputs={name: list(spec["inputs"]) for name, spec in METHODS.items()},
+        metric=SPEED_METRIC,
+    conda:
+        "../envs/mcbench.yaml"
+    log:
+        f"{RESULTS}/logs/figures/speed_error.log",
+    script:
+        "../scripts/figures.py"
