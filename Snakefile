@@ -3,6 +3,7 @@
 #
 #   snakemake --cores 2                       # the default study (config.yaml)
 #   snakemake --cores 2 --configfile workflow/configs/smoke.yaml
+#   snakemake --report results/report.zip      # the report (add the run's --configfile)
 #
 # A --configfile is the whole configuration: config.yaml is read only when none is given, and
 # what a config leaves out comes from the schema's defaults (mcbench.config), so the same command
@@ -11,6 +12,9 @@
 from snakemake.utils import min_version
 
 min_version("9.0")
+
+
+report: "workflow/report/workflow.rst"
 
 
 if not workflow.overwrite_configfiles:
@@ -25,6 +29,7 @@ include: "workflow/rules/metrics.smk"
 include: "workflow/rules/report.smk"
 include: "workflow/rules/training.smk"
 include: "workflow/rules/viewer.smk"
+include: "workflow/rules/figures.smk"
 
 
 rule all:
@@ -34,4 +39,6 @@ rule all:
         expand(rules.ranking_table.output, metric=config["metrics"]),
         rules.scene_table.output,
         rules.gallery.output,
+        expand(rules.error_curves.output, metric=config["metrics"]),
+        rules.speed_error.output,
     default_target: True

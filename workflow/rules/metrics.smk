@@ -25,7 +25,13 @@ rule gather_metrics:
     input:
         all_case_metrics,
     output:
-        f"{RESULTS}/metrics.csv",
+        report(
+            f"{RESULTS}/metrics.csv",
+            caption="../report/metrics.rst",
+            category="Data",
+            subcategory="Errors",
+            labels={"table": "metrics.csv", "rows": "scene, spp, candidate, metric"},
+        ),
     params:
         candidates=[NOISY] + CANDIDATES,
         metrics=METRIC_NAMES,
@@ -42,7 +48,13 @@ rule gather_timings:
     input:
         all_timing_records,
     output:
-        f"{RESULTS}/timings.csv",
+        report(
+            f"{RESULTS}/timings.csv",
+            caption="../report/timings.rst",
+            category="Data",
+            subcategory="Timings",
+            labels={"table": "timings.csv", "rows": "scene, spp, method"},
+        ),
     conda:
         "../envs/mcbench.yaml"
     log:

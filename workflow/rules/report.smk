@@ -8,7 +8,9 @@ rule ranking_table:
         csv=report(
             f"{RESULTS}/tables/ranking_{{metric}}.csv",
             caption="../report/ranking.rst",
-            category="Ranking",
+            category="Rankings",
+            subcategory="Score-and-rank tables",
+            labels={"metric": "{metric}", "table": "score and rank per spp"},
         ),
         md=f"{RESULTS}/tables/ranking_{{metric}}.md",
         tex=f"{RESULTS}/tables/ranking_{{metric}}.tex",
@@ -29,7 +31,13 @@ rule scene_table:
         metrics=rules.gather_metrics.output[0],
         references=list(reference_paths().values()),
     output:
-        csv=report(f"{RESULTS}/tables/scenes.csv", caption="../report/scenes.rst", category="Scenes"),
+        csv=report(
+            f"{RESULTS}/tables/scenes.csv",
+            caption="../report/scenes.rst",
+            category="Scenes",
+            subcategory="Scene table",
+            labels={"table": "scenes", "metric": "relmse"},
+        ),
         md=f"{RESULTS}/tables/scenes.md",
     params:
         references=reference_paths(),
@@ -46,7 +54,13 @@ rule gallery:
     input:
         list(reference_paths().values()),
     output:
-        report(f"{RESULTS}/figures/gallery.png", caption="../report/gallery.rst", category="Scenes"),
+        report(
+            f"{RESULTS}/figures/gallery.png",
+            caption="../report/gallery.rst",
+            category="Scenes",
+            subcategory="Gallery",
+            labels={"figure": "references", "scene": "all"},
+        ),
     params:
         references=reference_paths(),
     conda:
