@@ -50,13 +50,13 @@ def smoke_run(tmp_path_factory):
 
 def test_tables_exist_and_ensemble_beats_noisy(smoke_run):
     workdir, config = smoke_run
-    for metric in ("relmse", "smape", "dssim"):
+    for metric in ("relmse", "smape", "dssim", "flip"):
         table = pd.read_csv(workdir / f"results/tables/ranking_{metric}.csv")
         assert set(table["candidate"]) == {"noisy", "oidn", "jbf", "kpcn", "ensemble", "ensemble_exact"}
         assert list(table.columns) == ["candidate", "4", "64", "Avg."]
         assert (workdir / f"results/tables/ranking_{metric}.md").read_text().startswith("# Ranking")
     metrics = pd.read_csv(workdir / "results/metrics.csv")
-    assert len(metrics) == 3 * 2 * 6 * 3  # scenes × spp × (candidates + noisy) × metrics
+    assert len(metrics) == 3 * 2 * 6 * 4  # scenes × spp × (candidates + noisy) × metrics
     assert np.isfinite(metrics["value"]).all()
     relmse = metrics[metrics.metric == "relmse"].pivot_table(index=["scene", "spp"], columns="candidate", values="value")
     # At 32x32 the denoisers' blur of the Cornell box's light edge can cost more relMSE than
@@ -69,7 +69,7 @@ def test_tables_exist_and_ensemble_beats_noisy(smoke_run):
     assert (relmse["ensemble"] <= relmse[["oidn", "jbf"]].max(axis=1)).all(), relmse
     # every ranking value recomputed independently from metrics.csv (Sec. 5.3.3 by counting):
     # score = 1 + (number of entries with a larger error) + (ties) / 2
-    for metric in ("relmse", "smape", "dssim"):
+    for metric in ("relmse", "smape", "dssim", "flip"):
         values = metrics[metrics.metric == metric].pivot_table(index=["scene", "spp"], columns="candidate",
                                                                values="value")
         scores = values.apply(lambda row: row.map(lambda v: 1 + (row > v).sum() + ((row == v).sum() - 1) / 2),
