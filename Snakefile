@@ -41,4 +41,5 @@ rule all:
         rules.gallery.output,
         expand(rules.error_curves.output, metric=config["metrics"]),
         rules.speed_error.output,
+        rules.viewer.output,
     default_target: True

@@ -21,6 +21,18 @@ elif ! have_llvm19; then
     fi
 fi
 
+# Debian's Chromium and its chromedriver for the browser test of the report (tests/test_report.py;
+# Selenium is given both binaries and downloads nothing). Without them that test is skipped.
+if ! command -v chromium >/dev/null 2>&1 || ! command -v chromedriver >/dev/null 2>&1; then
+    if [ "$(id -u)" = "0" ] && command -v apt-get >/dev/null 2>&1; then
+        echo "setup: installing Debian's chromium and chromium-driver for the report's browser test"
+        (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium chromium-driver >/dev/null) \
+            || echo "setup: notice: could not install chromium/chromium-driver; the report's browser test will be skipped"
+    else
+        echo "setup: notice: chromium or chromedriver not found and not root; the report's browser test will be skipped"
+    fi
+fi
+
 PYTHON="${PYTHON:-python3.11}"
 command -v "$PYTHON" >/dev/null 2>&1 || PYTHON=python3
 if [ ! -x .venv/bin/python ]; then

@@ -8,12 +8,21 @@ Use it through the ``make_render_buffers`` fixture::
 The synthetic case has known statistics: each half buffer is ``truth`` plus independent
 Gaussian noise of standard deviation ``half_std`` (A and B independent of each other), the full
 image is their mean, and the variance layers state the true variance of the mean.
+
+The slow end-to-end tests share one finished smoke run through the session fixture
+``smoke_results`` (``(workdir, config)``); ``run_snakemake`` runs this checkout's Snakefile there.
 """
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
+from pathlib import Path
+
 import numpy as np
 import pytest
+import yaml
 
 from mcbench.buffers import REQUIRED_LAYERS, RenderBuffers
 
@@ -110,3 +119,34 @@ def build_render_buffers(truth=None, *, height: int = 16, width: int = 16, spp: 
 def make_render_buffers():
     """The builder :func:`build_render_buffers` (see its docstring for the keywords)."""
     return build_render_buffers
+
+
+# --- the smoke run shared by the slow end-to-end tests ----------------------------------------
+
+REPO = Path(__file__).resolve().parents[1]
+SMOKE_CONFIG = REPO / "workflow" / "configs" / "smoke.yaml"
+
+
+def run_snakemake(workdir: Path, *args: str, check: bool = True, timeout: int = 900) -> subprocess.CompletedProcess:
+    """``snakemake`` of this checkout in ``workdir`` with its ``config.yaml`` and 2 cores; a
+    failure (with ``check``) raises AssertionError with the end of Snakemake's output."""
+    command = [sys.executable, "-m", "snakemake", "-s", str(REPO / "Snakefile"), "--directory", str(workdir),
+               "--configfile", str(workdir / "config.yaml"), "--cores", "2", *args]
+    result = subprocess.run(command, capture_output=True, text=True, timeout=timeout)
+    if check and result.returncode != 0:
+        raise AssertionError(f"snakemake {' '.join(args)} failed:\n{result.stdout[-4000:]}\n{result.stderr[-4000:]}")
+    return result
+
+
+@pytest.fixture(scope="session")
+def smoke_results(tmp_path_factory):
+    """A finished run of ``workflow/configs/smoke.yaml``: ``(workdir, config)``, results in
+    ``workdir/results``. Made once per test session; ``$MCBENCH_TEST_SMOKE_DIR`` names a folder
+    to run (or bring up to date) in instead, so that a developer can reuse one between sessions."""
+    given = os.environ.get("MCBENCH_TEST_SMOKE_DIR")
+    workdir = Path(given) if given else tmp_path_factory.mktemp("smoke_results")
+    workdir.mkdir(parents=True, exist_ok=True)
+    config = yaml.safe_load(SMOKE_CONFIG.read_text())
+    (workdir / "config.yaml").write_text(yaml.safe_dump(config))
+    run_snakemake(workdir)
+    return workdir, config
