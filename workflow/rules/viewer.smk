@@ -1,1 +1,58 @@
-# Viewer rules (issue 17): filled in by the viewer work.
+# The static image viewer (issue 17): one job per test case writes its images (tone-mapped at
+# each exposure, relMSE and FLIP error maps, ensemble weight maps) into a case folder, so the
+# cases run in parallel and a new case or method redoes only its own folder; `viewer` copies
+# the page (workflow/report/viewer/) and every case folder into results/viewer with data.js,
+# the manifest holding each case's numbers from metrics.csv.
+
+# The page's static files (copied as they are; editing one rebuilds only the `viewer` job).
+VIEWER_PAGE = [f"{workflow.basedir}/workflow/report/viewer/{name}" for name in ("index.html", "viewer.js", "viewer.css")]
+
+
+rule viewer_case:
+    input:
+        unpack(case_outputs),
+        reference=rules.merge_reference.output[0],
+        render=rules.render_noisy.output[0],
+    output:
+        directory(f"{RESULTS}/viewer_cases/{{scene}}/spp{{spp}}"),
+    params:
+        candidates=CANDIDATES,
+        weight_inputs={name: spec["inputs"] for name, spec in METHODS.items() if spec["inputs"]},
+    conda:
+        "../envs/mcbench.yaml"
+    log:
+        f"{RESULTS}/logs/viewer/{{scene}}_spp{{spp}}.log",
+    benchmark:
+        f"{RESULTS}/benchmarks/viewer/{{scene}}_spp{{spp}}.tsv"
+    script:
+        "../scripts/viewer_case.py"
+
+
+rule viewer:
+    input:
+        metrics=rules.gather_metrics.output[0],
+        cases=expand(rules.viewer_case.output[0], scene=SCENES, spp=SPPS),
+        page=VIEWER_PAGE,
+    output:
+        report(
+            directory(f"{RESULTS}/viewer"),
+            htmlindex="index.html",
+            category="Images",
+            subcategory="Image viewer",
+            labels={"figure": "image viewer", "scene": "all"},
+            caption="../report/viewer.rst",
+        ),
+    params:
+        cases=[{"scene": scene, "spp": spp} for scene in SCENES for spp in SPPS],  # the order of input.cases
+        candidates=CANDIDATES,
+        labels=LABELS,
+        metrics=METRIC_NAMES,
+        static_dir=lambda wildcards, input: str(Path(input.page[0]).parent),
+    conda:
+        "../envs/mcbench.yaml"
+    log:
+        f"{RESULTS}/logs/viewer.log",
+    benchmark:
+        f"{RESULTS}/benchmarks/viewer.tsv"
+    script:
+        "../scripts/viewer.py"
