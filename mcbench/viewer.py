@@ -362,20 +362,20 @@ def manifest_files(manifest: dict) -> list[str]:
 def assemble_viewer(output_dir, *, static_dir, case_dirs: dict, manifest: dict) -> None:
     """Fill ``output_dir``: the static page (every file of ``static_dir``), ``data.js``, the
     legends, and each case folder ``case_dirs[(scene, spp)]`` copied to :func:`case_folder`
-    (without its :data:`CASE_RECORD`). Raises naming the first file the manifest names that is
+    (without its :data:`CASE_RECORD` and hidden files such as Snakemake's timestamp). Raises naming the first file the manifest names that is
     not there afterwards."""
     output_dir, static_dir = Path(output_dir), Path(static_dir)
     if not (static_dir / "index.html").is_file():
         raise BenchError(f"{static_dir}: the viewer's static files (index.html) are missing")
     output_dir.mkdir(parents=True, exist_ok=True)
     for source in sorted(static_dir.iterdir()):
-        if source.is_file():
+        if source.is_file() and not source.name.startswith("."):
             shutil.copyfile(source, output_dir / source.name)
     for name, scale in {**ERROR_SCALES, "weights": WEIGHT_SCALE}.items():
         write_indexed_png(output_dir / manifest["scales"][name]["legend"], legend_indices(), scale)
     for (scene, spp), source in case_dirs.items():
         shutil.copytree(source, output_dir / case_folder(scene, spp), dirs_exist_ok=True,
-                        ignore=shutil.ignore_patterns(CASE_RECORD))
+                        ignore=shutil.ignore_patterns(CASE_RECORD, ".*"))
     (output_dir / "data.js").write_text(manifest_script(manifest))
     for name in manifest_files(manifest):
         if not (output_dir / name).is_file():

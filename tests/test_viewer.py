@@ -308,6 +308,7 @@ def build_viewer(results):
         files = paths[(scene, spp)]
         steps.write_viewer_case(scene, spp, files["reference"], files["render"], files["candidates"],
                                 str(case_dir), weight_inputs={"ens": ["jbf", "oidn"]})
+        (case_dir / ".snakemake_timestamp").write_text("")      # what Snakemake leaves in a directory()
         case_dirs.append(str(case_dir))
     output = root / "viewer"
     manifest = steps.write_viewer(metrics_csv, case_dirs, str(output), cases=cases, candidates=CANDIDATES,
