@@ -18,18 +18,9 @@ import pandas as pd
 import pytest
 import yaml
 
-REPO = Path(__file__).resolve().parents[1]
-SMOKE = REPO / "workflow" / "configs" / "smoke.yaml"
+from conftest import REPO, SMOKE_CONFIG as SMOKE, run_snakemake as snakemake
+
 pytestmark = pytest.mark.slow
-
-
-def snakemake(workdir: Path, *args: str, check: bool = True, timeout: int = 900) -> subprocess.CompletedProcess:
-    command = [sys.executable, "-m", "snakemake", "-s", str(REPO / "Snakefile"), "--directory", str(workdir),
-               "--configfile", str(workdir / "config.yaml"), "--cores", "2", *args]
-    result = subprocess.run(command, capture_output=True, text=True, timeout=timeout)
-    if check and result.returncode != 0:
-        raise AssertionError(f"snakemake failed:\n{result.stdout[-4000:]}\n{result.stderr[-4000:]}")
-    return result
 
 
 def write_config(workdir: Path, **changes) -> dict:
@@ -41,11 +32,9 @@ def write_config(workdir: Path, **changes) -> dict:
 
 
 @pytest.fixture(scope="module")
-def smoke_run(tmp_path_factory):
-    workdir = tmp_path_factory.mktemp("smoke")
-    config = write_config(workdir)
-    snakemake(workdir)
-    return workdir, config
+def smoke_run(smoke_results):
+    """The session's smoke run (tests/conftest.py), shared with the report tests."""
+    return smoke_results
 
 
 def test_tables_exist_and_ensemble_beats_noisy(smoke_run):
