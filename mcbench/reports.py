@@ -92,6 +92,28 @@ def scene_markdown(table: pd.DataFrame) -> str:
             + shown.to_markdown(index=False) + "\n")
 
 
+def scene_latex(table: pd.DataFrame, *, caption: str, label: str = "tab:scenes") -> str:
+    """The scene table as a LaTeX ``table`` with booktabs rules (``\\usepackage{booktabs}``): scene,
+    category, reference spp, the reference's estimated relMSE, the noisy and best candidate's relMSE
+    at the highest spp and their floor ratio; a ratio below 10 (a reference too noisy to rank) is
+    bold. Text is escaped with :func:`mcbench.ranking.latex_escape`."""
+    from mcbench.ranking import latex_escape
+
+    header = ["Scene", "Category", "Ref. spp", "Ref. relMSE", "Noisy relMSE", "Best", "Best relMSE", "Floor ratio"]
+    rows = []
+    for row in table.itertuples():
+        ratio = f"{row.floor_ratio:.1f}"
+        cells = [latex_escape(row.scene), latex_escape(row.category), str(row.reference_spp),
+                 f"{row.reference_relmse:.3g}", f"{row.noisy_relmse:.3g}", latex_escape(row.best_candidate),
+                 f"{row.best_relmse:.3g}", ratio if row.floor_ok else rf"\textbf{{{ratio}}}"]
+        rows.append("    " + " & ".join(cells) + r" \\")
+    lines = [r"% Requires \usepackage{booktabs}. Written by mcbench (mcbench.reports.scene_latex).",
+             r"\begin{table}", r"  \centering", rf"  \caption{{{latex_escape(caption)}}}", rf"  \label{{{label}}}",
+             r"  \begin{tabular}{llrrrlrr}", r"    \toprule", "    " + " & ".join(header) + r" \\", r"    \midrule",
+             *rows, r"    \bottomrule", r"  \end{tabular}", r"\end{table}"]
+    return "\n".join(lines) + "\n"
+
+
 def gallery_figure(references: dict[str, np.ndarray], path: str | Path, columns: int = 6) -> None:
     """A grid of tone-mapped references with their names (like Fig. 3 of Zheng et al.)."""
     import matplotlib

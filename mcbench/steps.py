@@ -226,13 +226,13 @@ def _records_of(scene: str, paths: list[str]) -> list[str]:
 
 def write_scene_table(metrics_csv: str, reference_paths: dict[str, str], reference_spp: dict[str, int],
                       csv_path: str, md_path: str, *, noisy_records: list[str],
-                      reference_records: list[str]) -> pd.DataFrame:
+                      reference_records: list[str], tex_path: str | None = None) -> pd.DataFrame:
     """Scene table with reference noise floors (issue: trustworthy references) and render costs.
 
     Render costs come from the Snakemake ``benchmark:`` records of the noisy render jobs
     (``noisy_records``) and reference chunk jobs (``reference_records``), inputs of the rule.
     """
-    from mcbench.reports import reference_relmse_floor, scene_markdown, scene_rows
+    from mcbench.reports import reference_relmse_floor, scene_latex, scene_markdown, scene_rows
     from scenes import load_scene
 
     metrics = pd.read_csv(metrics_csv)
@@ -252,6 +252,11 @@ def write_scene_table(metrics_csv: str, reference_paths: dict[str, str], referen
     table = scene_rows(metrics, floors, info, costs)
     write_csv(csv_path, table, float_format="%.6g")
     write_text(md_path, scene_markdown(table))
+    if tex_path is not None:
+        write_text(tex_path, scene_latex(table, caption="Test scenes: reference spp and the reference's estimated "
+                                                        "relMSE against the noisy and best candidate's relMSE at the "
+                                                        "highest spp; a floor ratio below 10 (bold) means the "
+                                                        "reference is too noisy to rank there."))
     return table
 
 

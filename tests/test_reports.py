@@ -46,3 +46,24 @@ def test_gallery_writes_png(tmp_path):
     path = tmp_path / "gallery.png"
     gallery_figure(images, path, columns=3)
     assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_scene_table_as_latex_escapes_text_and_bolds_too_noisy_references():
+    import pandas as pd
+
+    from mcbench.reports import scene_latex
+
+    table = pd.DataFrame([
+        {"scene": "cornell_box", "category": "diffuse", "reference_spp": 65536, "reference_relmse": 5e-6,
+         "noisy_relmse": 0.0048, "best_candidate": "ens_oidn_nfor", "best_relmse": 5e-4, "floor_ratio": 100.0,
+         "floor_ok": True},
+        {"scene": "fog_beams", "category": "media & fog", "reference_spp": 16384, "reference_relmse": 5e-5,
+         "noisy_relmse": 0.0048, "best_candidate": "kpcn", "best_relmse": 2e-4, "floor_ratio": 4.0, "floor_ok": False},
+    ])
+    text = scene_latex(table, caption="Scenes 100% & more")
+    body = [line for line in text[text.index(r"\midrule"):text.index(r"\bottomrule")].splitlines()[1:] if line.strip()]
+    assert len(body) == 2 and all(line.count(" & ") == 7 and line.rstrip().endswith(r"\\") for line in body)
+    assert r"cornell\_box" in body[0] and r"ens\_oidn\_nfor" in body[0] and r"\textbf" not in body[0]
+    assert body[1].rstrip().endswith(r"\textbf{4.0} \\") and r"media \& fog" in body[1]
+    assert r"\caption{Scenes 100\% \& more}" in text and text.count("{") == text.count("}")
+    assert text.index(r"\toprule") < text.index(r"\midrule") < text.index(r"\bottomrule")

@@ -39,6 +39,7 @@ rule scene_table:
             labels={"table": "scenes", "metric": "relmse"},
         ),
         md=f"{RESULTS}/tables/scenes.md",
+        tex=f"{RESULTS}/tables/scenes.tex",
     params:
         references=reference_paths(),
         reference_spp=REFERENCE_SPP,
