@@ -9,13 +9,13 @@ killed mid-write never leaves a truncated EXR behind that Snakemake would trust.
 from __future__ import annotations
 
 import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 import OpenEXR
 
 from mcbench import BenchError
+from mcbench.io import write_atomically
 
 __all__ = ["ExrError", "NonFiniteError", "read_layers", "write_layers", "read_metadata", "check_finite"]
 
@@ -53,15 +53,11 @@ def write_layers(path: str | os.PathLike, layers: dict[str, np.ndarray],
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
     for key, value in (metadata or {}).items():
         header[f"mcbench.{key}"] = str(value)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp.exr", dir=path.parent)
-    os.close(fd)
-    try:
+    def save(tmp):
         with OpenEXR.File(header, channels) as exr:
             exr.write(tmp)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+
+    write_atomically(path, save, suffix=".tmp.exr")
 
 
 def _open(path: Path) -> OpenEXR.File:

@@ -19,11 +19,12 @@ The plotting functions draw with matplotlib's Agg backend and write PNGs atomica
 from __future__ import annotations
 
 import math
-import os
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
+
+from mcbench.io import write_atomically
 
 MEAN_PANEL = "all scenes (mean)"
 
@@ -110,15 +111,8 @@ def save_figure(figure, path: str | Path, *, dpi: int = 110) -> None:
     and close it."""
     import matplotlib.pyplot as plt
 
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp.png")
     try:
-        figure.savefig(tmp, dpi=dpi)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+        write_atomically(path, lambda tmp: figure.savefig(tmp, dpi=dpi, format="png"), suffix=".tmp.png")
     finally:
         plt.close(figure)
 

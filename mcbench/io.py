@@ -9,18 +9,31 @@ from pathlib import Path
 
 import pandas as pd
 
+from mcbench import BenchError
 
-def _atomic_text(path: str | os.PathLike, text: str) -> None:
+
+def write_atomically(path: str | os.PathLike, save, *, suffix: str = ".tmp") -> None:
+    """Write ``path`` atomically: ``save(tmp)`` writes a temporary file in the same folder (its
+    name ends in ``suffix``, e.g. ``.tmp.png`` for writers that infer the format), which then
+    replaces ``path``; on any failure the temporary file is removed and ``path`` is untouched."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix, dir=path.parent)
+    os.close(fd)
     try:
-        with os.fdopen(fd, "w") as handle:
-            handle.write(text)
+        save(tmp)
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+def _atomic_text(path: str | os.PathLike, text: str) -> None:
+    def save(tmp):
+        with open(tmp, "w") as handle:
+            handle.write(text)
+
+    write_atomically(path, save)
 
 
 def write_csv(path, frame: pd.DataFrame, **kwargs) -> None:
@@ -40,3 +53,16 @@ def write_json(path, record: dict) -> None:
 def read_json(path) -> dict:
     with open(path) as handle:
         return json.load(handle)
+
+
+def read_table(path, *, columns=(), sep: str = ",") -> pd.DataFrame:
+    """A CSV/TSV the workflow wrote, refused with the file named when it cannot be parsed or
+    lacks one of ``columns``."""
+    try:
+        frame = pd.read_csv(path, sep=sep)
+    except (OSError, ValueError, pd.errors.ParserError) as exc:
+        raise BenchError(f"{path}: cannot read table ({exc})") from exc
+    missing = [column for column in columns if column not in frame.columns]
+    if missing:
+        raise BenchError(f"{path}: missing column(s) {', '.join(missing)}")
+    return frame

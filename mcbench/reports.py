@@ -121,6 +121,8 @@ def gallery_figure(references: dict[str, np.ndarray], path: str | Path, columns:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from mcbench.figures import save_figure
+
     names = list(references)
     columns = max(1, min(columns, len(names)))
     rows = math.ceil(len(names) / columns)
@@ -131,8 +133,4 @@ def gallery_figure(references: dict[str, np.ndarray], path: str | Path, columns:
         axis.imshow(tonemap(references[name]), interpolation="nearest")
         axis.set_title(name.replace("_", " "), fontsize=8)
     figure.tight_layout()
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(path).with_name(f".{Path(path).name}.tmp.png")
-    figure.savefig(tmp, dpi=100)
-    plt.close(figure)
-    tmp.replace(path)
+    save_figure(figure, path, dpi=100)

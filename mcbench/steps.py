@@ -17,7 +17,7 @@ import pandas as pd
 from mcbench import BenchError
 from mcbench.buffers import Denoised, RenderBuffers
 from mcbench.exr import check_finite, read_layers, read_metadata, write_layers
-from mcbench.io import read_json, write_csv, write_json, write_text
+from mcbench.io import read_json, read_table, write_csv, write_json, write_text
 from mcbench.metrics import METRICS
 
 NOISY = "noisy"
@@ -94,10 +94,7 @@ def read_case_metrics(path: str, *, candidates: list[str], metric_names: list[st
     and metric once with a finite value, and only the case ``(scene, spp)`` when given."""
     from mcbench.ranking import check_complete
 
-    try:
-        frame = pd.read_csv(path)
-    except (OSError, ValueError, pd.errors.ParserError) as exc:
-        raise BenchError(f"{path}: cannot read metrics CSV ({exc})") from exc
+    frame = read_table(path)
     check_complete(frame, candidates=candidates, metric_names=metric_names,
                    cases=None if case is None else [case], source=path)
     if case is not None and len(frame.groupby(["scene", "spp"])) != 1:
@@ -137,10 +134,7 @@ def write_rankings(metrics_csv: str, metric: str, csv_path: str, md_path: str, *
     from mcbench.metrics import METRIC_LABELS
     from mcbench.ranking import check_complete, format_latex, format_markdown, ranking_table
 
-    try:
-        metrics = pd.read_csv(metrics_csv)
-    except (OSError, ValueError, pd.errors.ParserError) as exc:
-        raise BenchError(f"{metrics_csv}: cannot read metrics CSV ({exc})") from exc
+    metrics = read_table(metrics_csv)
     check_complete(metrics[metrics["metric"] == metric], candidates=candidates, metric_names=[metric],
                    source=metrics_csv)
     table = ranking_table(metrics, metric)
@@ -208,11 +202,8 @@ def _benchmark_cpu_hours(paths: list[str]) -> float:
     """Sum of Snakemake benchmark ``cpu_time`` (seconds, last repeat) over TSVs, in hours."""
     total = 0.0
     for path in paths:
-        try:
-            frame = pd.read_csv(path, sep="\t")
-        except (OSError, ValueError, pd.errors.ParserError) as exc:
-            raise BenchError(f"{path}: cannot read benchmark record ({exc})") from exc
-        if "cpu_time" not in frame or not len(frame):
+        frame = read_table(path, sep="\t", columns=["cpu_time"])
+        if not len(frame):
             raise BenchError(f"{path}: benchmark record without a cpu_time row")
         total += float(frame["cpu_time"].iloc[-1])
     return total / 3600.0
@@ -235,7 +226,7 @@ def write_scene_table(metrics_csv: str, reference_paths: dict[str, str], referen
     from mcbench.reports import reference_relmse_floor, scene_latex, scene_markdown, scene_rows
     from scenes import load_scene
 
-    metrics = pd.read_csv(metrics_csv)
+    metrics = read_table(metrics_csv, columns=["scene", "spp", "candidate", "metric", "value"])
     floors, info, costs = {}, {}, {}
     for scene, path in reference_paths.items():
         layers = read_layers(path, ["color", "variance"])
@@ -302,24 +293,12 @@ def train_learned_method(name: str, *args, **kwargs):
     return train_network(learned_method(name), *args, **kwargs)
 
 
-def _read_result_table(path: str, columns: list[str]) -> pd.DataFrame:
-    """A CSV the workflow wrote, with the columns a figure needs; errors name the file."""
-    try:
-        frame = pd.read_csv(path)
-    except (OSError, ValueError, pd.errors.ParserError) as exc:
-        raise BenchError(f"{path}: cannot read CSV ({exc})") from exc
-    missing = [column for column in columns if column not in frame.columns]
-    if missing:
-        raise BenchError(f"{path}: missing column(s) {', '.join(missing)}")
-    return frame
-
-
 def write_error_curves(metrics_csv: str, metric: str, png_path: str, *, labels: dict[str, str]) -> None:
     """Error against spp of every candidate, per scene and averaged, for one metric
     (mcbench.figures, like Fig. 13 of Zheng et al.); ``labels``: candidate -> legend label."""
     from mcbench.figures import error_curves, error_curves_figure
 
-    metrics = _read_result_table(metrics_csv, ["scene", "spp", "candidate", "metric", "value"])
+    metrics = read_table(metrics_csv, columns=["scene", "spp", "candidate", "metric", "value"])
     error_curves_figure(error_curves(metrics, metric=metric), png_path, metric=metric, labels=labels)
 
 
@@ -329,8 +308,8 @@ def write_speed_error(metrics_csv: str, timings_csv: str, png_path: str, *, metr
     against its mean ``metric`` error (metrics.csv), as a labelled log-log scatter."""
     from mcbench.figures import speed_error_figure, speed_error_points
 
-    metrics = _read_result_table(metrics_csv, ["scene", "spp", "candidate", "metric", "value"])
-    timings = _read_result_table(timings_csv, ["scene", "spp", "method", "seconds"])
+    metrics = read_table(metrics_csv, columns=["scene", "spp", "candidate", "metric", "value"])
+    timings = read_table(timings_csv, columns=["scene", "spp", "method", "seconds"])
     points = speed_error_points(metrics, timings, metric=metric, inputs=inputs)
     speed_error_figure(points, png_path, metric=metric, labels=labels)
 
@@ -377,10 +356,7 @@ def write_viewer(metrics_csv: str, case_dirs: list[str], output_dir: str, *, cas
 
     if len(case_dirs) != len(cases):
         raise BenchError(f"{output_dir}: {len(case_dirs)} case folders for {len(cases)} cases")
-    try:
-        metrics = pd.read_csv(metrics_csv)
-    except (OSError, ValueError, pd.errors.ParserError) as exc:
-        raise BenchError(f"{metrics_csv}: cannot read metrics CSV ({exc})") from exc
+    metrics = read_table(metrics_csv)
     entries = [NOISY] + list(candidates)
     fragments, numbers = {}, {}
     for (scene, spp), case_dir in zip(cases, case_dirs):

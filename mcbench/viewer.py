@@ -29,9 +29,7 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import shutil
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -39,6 +37,7 @@ import numpy as np
 
 from mcbench import BenchError
 from mcbench import metrics as error_metrics
+from mcbench.io import write_atomically
 
 __all__ = ["EXPOSURES_EV", "JPEG_QUALITY", "LEVELS", "REFERENCE", "REFERENCE_LABEL", "CASE_RECORD",
            "ColourScale", "RELMSE_SCALE", "FLIP_SCALE", "WEIGHT_SCALE", "ERROR_SCALES",
@@ -181,18 +180,6 @@ def error_maps(image, reference) -> dict[str, np.ndarray]:
             "flip": error_metrics.flip_map(image, reference)}
 
 
-def _atomic_save(path: Path, save) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
-    try:
-        save(tmp)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
 def write_jpeg(path, rgb, *, quality: int = JPEG_QUALITY) -> None:
     """Write (H, W, 3) uint8 sRGB ``rgb`` as a baseline JPEG with 4:4:4 chroma, atomically."""
     from PIL import Image
@@ -201,7 +188,7 @@ def write_jpeg(path, rgb, *, quality: int = JPEG_QUALITY) -> None:
     if rgb.ndim != 3 or rgb.shape[2] != 3:
         raise ValueError(f"{path}: a JPEG needs (H, W, 3) pixels, got {rgb.shape}")
     image = Image.frombytes("RGB", (rgb.shape[1], rgb.shape[0]), rgb.tobytes())
-    _atomic_save(Path(path), lambda tmp: image.save(tmp, format="JPEG", quality=quality, subsampling=0))
+    write_atomically(path, lambda tmp: image.save(tmp, format="JPEG", quality=quality, subsampling=0))
 
 
 def write_indexed_png(path, indices, scale: ColourScale) -> None:
@@ -213,7 +200,7 @@ def write_indexed_png(path, indices, scale: ColourScale) -> None:
         raise ValueError(f"{path}: an indexed PNG needs (H, W) indices, got {indices.shape}")
     image = Image.frombytes("P", (indices.shape[1], indices.shape[0]), indices.tobytes())
     image.putpalette(palette(scale).ravel().tolist())
-    _atomic_save(Path(path), lambda tmp: image.save(tmp, format="PNG", optimize=True))
+    write_atomically(path, lambda tmp: image.save(tmp, format="PNG", optimize=True))
 
 
 def _check_image(name: str, image, shape) -> np.ndarray:

@@ -55,7 +55,6 @@ from mcbench.nn.data import CropSet, crop_paths, load_crops, sample_batch, valid
 from mcbench.nn.losses import LOSSES
 from mcbench.progress import eta_seconds, progress_line
 from mcbench.weights import CHECKPOINT_KEYS, check_learned_method, load_weights, method_name, record_path, weights_path
-from mcbench.weights import is_learned_method  # noqa: F401  re-export for workflow/rules/common.smk (moving to mcbench.weights)
 
 DEFAULT_SETTINGS = {
     "steps": 4000,
