@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import shutil
 from dataclasses import dataclass
 from pathlib import Path
@@ -346,11 +347,23 @@ def manifest_files(manifest: dict) -> list[str]:
     return sorted(files)
 
 
+def _link_or_copy(source, target) -> None:
+    """A hard link where the file system allows one (the case images are written once and
+    replaced, never edited in place, so a link is a snapshot), else a copy: the viewer then
+    takes no second copy of its ~80 MB of images on disk."""
+    Path(target).unlink(missing_ok=True)     # a stale file of an earlier assembly
+    try:
+        os.link(source, target)
+    except OSError:
+        shutil.copy2(source, target)
+
+
 def assemble_viewer(output_dir, *, static_dir, case_dirs: dict, manifest: dict) -> None:
     """Fill ``output_dir``: the static page (every file of ``static_dir``), ``data.js``, the
     legends, and each case folder ``case_dirs[(scene, spp)]`` copied to :func:`case_folder`
-    (without its :data:`CASE_RECORD` and hidden files such as Snakemake's timestamp). Raises naming the first file the manifest names that is
-    not there afterwards."""
+    (without its :data:`CASE_RECORD` and hidden files such as Snakemake's timestamp; files are
+    hard-linked where possible). Raises naming the first file the manifest names that is not
+    there afterwards."""
     output_dir, static_dir = Path(output_dir), Path(static_dir)
     if not (static_dir / "index.html").is_file():
         raise BenchError(f"{static_dir}: the viewer's static files (index.html) are missing")
@@ -362,7 +375,7 @@ def assemble_viewer(output_dir, *, static_dir, case_dirs: dict, manifest: dict) 
         write_indexed_png(output_dir / manifest["scales"][name]["legend"], legend_indices(), scale)
     for (scene, spp), source in case_dirs.items():
         shutil.copytree(source, output_dir / case_folder(scene, spp), dirs_exist_ok=True,
-                        ignore=shutil.ignore_patterns(CASE_RECORD, ".*"))
+                        ignore=shutil.ignore_patterns(CASE_RECORD, ".*"), copy_function=_link_or_copy)
     (output_dir / "data.js").write_text(manifest_script(manifest))
     for name in manifest_files(manifest):
         if not (output_dir / name).is_file():

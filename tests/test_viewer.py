@@ -352,6 +352,26 @@ def test_viewer_folder_from_a_results_folder(results):
     assert np.median(noisy) > 1e-3
     # 4 cases of 16 x 16 with 4 entries: well under 1 MB
     assert viewer.directory_bytes(output) < 1_000_000
+    # case images are hard links of the case folders' files (no second copy on disk)
+    image = case["images"]["jbf"][next(iter(case["images"]["jbf"]))]
+    source = results[0] / "viewer_cases" / "room" / "spp16" / Path(image).name
+    assert (output / image).stat().st_ino == source.stat().st_ino
+
+
+def test_assembling_again_replaces_stale_files_and_keeps_the_case_files(results):
+    """Assembling into an existing viewer replaces a stale file by the case's image again (as a
+    link), and the case folder's file keeps its bytes."""
+    output, manifest = build_viewer(results)
+    case = manifest["cases"]["room"]["16"]
+    image = case["images"]["jbf"][next(iter(case["images"]["jbf"]))]
+    source = results[0] / "viewer_cases" / "room" / "spp16" / Path(image).name
+    before = source.read_bytes()
+    (output / image).unlink()
+    (output / image).write_bytes(b"edited in the viewer only")
+    case_dirs = {("room", 16): str(source.parent)}
+    viewer.assemble_viewer(output, static_dir=PAGE, case_dirs=case_dirs, manifest=manifest)
+    assert source.read_bytes() == before and (output / image).read_bytes() == before
+    assert (output / image).stat().st_ino == source.stat().st_ino
 
 
 def test_viewer_refuses_a_case_record_of_another_case(results):
