@@ -9,6 +9,16 @@ Conventions (all arrays float32, linear HDR radiance, row-major (H, W[, 3])):
   no surface was hit), ``depth`` (H, W) distance along the camera ray (zero where no hit).
 * Features come in full/A/B versions too, so a half-buffer denoise sees only its own samples
   (the dual-buffer estimate of the ensemble, Zheng et al. 2021 Eq. 10, assumes it).
+* Sample bins (sample binning of Back et al. 2020 Sec. 4.4): renders whose spp is a multiple of 4
+  also hold four quarter-sample bins ``color_bin{j}``/``variance_bin{j}`` (j = 0..3, spp/4
+  disjoint samples each), bins 0-1 making half buffer A and bins 2-3 half buffer B:
+  ``color_a = (color_bin0 + color_bin1) / 2``. So every image has two disjoint *sub-buffers* of
+  its own samples (:data:`SUB_BUFFERS`): the full image has A and B, A has bins 0 and 1, B has
+  bins 2 and 3, and a result computed for A from A's sub-buffers never sees B's samples. At
+  4 spp a bin holds one sample; its variance is then ``(b0 - b1)^2 / 2`` from the two bins of its
+  half (the unbiased one-sample variance, the same for both). Renders without bins (spp not a
+  multiple of 4, files written before bins existed) load as before; only methods that need
+  sub-buffers refuse them (:meth:`RenderBuffers.sub_images`).
 """
 
 from __future__ import annotations
@@ -19,6 +29,7 @@ from typing import Callable
 
 import numpy as np
 
+from mcbench import BenchError
 from mcbench.exr import check_finite, read_layers, read_metadata
 
 BUFFER_SUFFIXES = {"full": "", "a": "_a", "b": "_b"}
@@ -28,6 +39,14 @@ QUANTITIES = ("color", "variance", "albedo", "normal", "depth",
 REQUIRED_LAYERS = ("color", "color_a", "color_b", "variance", "variance_a", "variance_b",
                    "albedo", "normal", "depth")
 ALL_LAYERS = tuple(q + s for q in QUANTITIES for s in BUFFER_SUFFIXES.values())
+BINS = 4
+BIN_LAYERS = tuple(f"{q}_bin{j}" for q in ("color", "variance") for j in range(BINS))
+# The two disjoint sample subsets of each image: layer suffixes of their colour and variance.
+SUB_BUFFERS = {"full": ("_a", "_b"), "a": ("_bin0", "_bin1"), "b": ("_bin2", "_bin3")}
+# Names under which a method's Denoised.extras holds its result on each image's sub-buffers (the
+# kernel computed from all of the image's samples applied to each sub-buffer; Back et al. Sec. 5).
+SUB_OUTPUTS = {"full": ("color_sub0", "color_sub1"), "a": ("color_a_sub0", "color_a_sub1"),
+               "b": ("color_b_sub0", "color_b_sub1")}
 
 
 @dataclass(frozen=True)
@@ -78,6 +97,23 @@ class RenderBuffers:
                             normal=get("normal"), depth=get("depth"),
                             spp=self.spp if which == "full" else self.spp / 2)
 
+    def has_sub_buffers(self) -> bool:
+        """Whether the render holds the four quarter-sample bins (spp a multiple of 4)."""
+        return all(name in self.layers for name in BIN_LAYERS)
+
+    def sub_images(self, which: str) -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]:
+        """The two disjoint sample subsets of image ``which`` (``"full"``, ``"a"``, ``"b"``; see
+        :data:`SUB_BUFFERS`) as ``((color, variance), (color, variance))``, each (H, W, 3).
+
+        Raises :class:`mcbench.BenchError` naming the file when the render has no bins.
+        """
+        suffixes = SUB_BUFFERS[which]
+        missing = [q + s for s in suffixes for q in ("color", "variance") if q + s not in self.layers]
+        if missing:
+            raise BenchError(f"{self.source}: no sample bins {missing} (renders hold four quarter-sample "
+                             f"bins only when spp is a multiple of 4; this one has {self.spp} spp)")
+        return tuple((self.layers["color" + s], self.layers["variance" + s]) for s in suffixes)
+
     @classmethod
     def load(cls, path: str | Path) -> "RenderBuffers":
         """Read a render EXR, refusing missing layers or NaN/Inf pixels (errors name the file)."""
@@ -102,17 +138,42 @@ class Denoised:
     b: np.ndarray
     extras: dict | None = None  # optional named layers (weight maps, selection maps, ...)
 
+    source: str = "<memory>"
+
     def layers(self) -> dict[str, np.ndarray]:
         out = {"color": self.full, "color_a": self.a, "color_b": self.b}
         out.update(self.extras or {})
         return out
 
+    def image(self, which: str) -> np.ndarray:
+        """The result on image ``which``: ``"full"``, ``"a"`` or ``"b"``."""
+        return {"full": self.full, "a": self.a, "b": self.b}[which]
+
+    def sub_outputs(self, which: str) -> tuple[np.ndarray, np.ndarray]:
+        """The method's result on the two sub-buffers of image ``which`` (:data:`SUB_OUTPUTS`),
+        each (H, W, 3); raises :class:`mcbench.BenchError` naming the file when it has none."""
+        names = SUB_OUTPUTS[which]
+        extras = self.extras or {}
+        missing = [n for n in names if n not in extras]
+        if missing:
+            raise BenchError(f"{self.source}: no sub-buffer results {missing} (only methods that expose a "
+                             f"kernel, e.g. kpcn, write them, and only for renders with sample bins)")
+        return extras[names[0]], extras[names[1]]
+
     @classmethod
-    def load(cls, path: str | Path) -> "Denoised":
+    def load(cls, path: str | Path, *, extras: bool = False) -> "Denoised":
+        """A method's output EXR: ``color``, ``color_a``, ``color_b`` and, with ``extras``, every
+        other layer (sub-buffer results, weight maps) as :attr:`extras`."""
         path = Path(path)
-        layers = read_layers(path, ["color", "color_a", "color_b"])
+        layers = read_layers(path) if extras else read_layers(path, ["color", "color_a", "color_b"])
+        missing = [n for n in ("color", "color_a", "color_b") if n not in layers]
+        if missing:
+            from mcbench.exr import ExrError
+            raise ExrError(f"{path}: not a method output, missing layer(s) {missing}")
         check_finite(path, layers)
-        return cls(full=layers["color"], a=layers["color_a"], b=layers["color_b"])
+        extras = {k: v for k, v in layers.items() if k not in ("color", "color_a", "color_b")}
+        return cls(full=layers["color"], a=layers["color_a"], b=layers["color_b"], extras=extras or None,
+                   source=str(path))
 
 
 def denoise_each_buffer(buffers: RenderBuffers,

@@ -43,7 +43,7 @@ from typing import Callable
 import numpy as np
 
 from mcbench import BenchError
-from mcbench.buffers import ALL_LAYERS
+from mcbench.buffers import ALL_LAYERS, BINS
 from mcbench.progress import eta_seconds, progress_line
 from mcbench.seeds import SCALAR_BLOCK_SIZE, mitsuba_seed, render_seed
 from mcbench.variants import pick_variant, set_threads
@@ -51,6 +51,7 @@ from mcbench.variants import pick_variant, set_threads
 __all__ = ["RenderError", "MAX_WAVEFRONT", "passes_for", "load_scene_dict", "forget_scene",
            "render_scene_sums", "render_dict_buffers", "render_buffers", "render_reference_chunk",
            "merge_reference_chunks", "moments_to_mean_variance", "buffers_from_moment_sums",
+           "buffers_from_bin_sums",
            "film_size"]
 
 MAX_WAVEFRONT = 2 ** 22          # samples per mi.render call in vectorised variants (W*H*spp_pass)
@@ -70,7 +71,7 @@ CHANNELS = {
 FEATURES = ("albedo", "normal", "depth")
 
 SeedOfPass = Callable[[int], int]            # pass index -> 32-bit seed
-SeedOfHalfPass = Callable[[int, int], int]   # (half 0 = A / 1 = B, pass index) -> 32-bit seed
+SeedOfBinPass = Callable[[int, int, int], int]   # (half 0 = A / 1 = B, bin 0/1, pass index) -> seed
 
 
 class RenderError(BenchError):
@@ -238,27 +239,36 @@ def render_scene_sums(desc: dict, spp: int, seed_of: SeedOfPass, *, key: str,
     return _moment_sums(key, scene_object, int(spp), seed_of, variant, width, height, int(spp))
 
 
-def _half_buffers(label: str, scene_object, spp: int, seed_of: SeedOfHalfPass, variant: str,
+def _half_buffers(label: str, scene_object, spp: int, seed_of: SeedOfBinPass, variant: str,
                   width: int, height: int) -> tuple[dict[str, np.ndarray], list[int], list[int]]:
-    """Layers of :data:`ALL_LAYERS` from half buffers A and B of ``spp/2`` samples each, and
-    the seeds of A and of B."""
+    """Layers of :data:`ALL_LAYERS` from half buffers A and B of ``spp/2`` samples each (plus
+    :data:`mcbench.buffers.BIN_LAYERS` when ``spp`` is a multiple of 4: each half is then rendered as two bins of
+    ``spp/4`` samples, bin ``j`` of half ``h`` seeded ``seed_of(h, j, p)``), and the seeds of A and
+    of B."""
     half_spp = spp // 2
-    sums, seeds = {}, {}
+    binned = half_spp % 2 == 0
+    sums, seeds = {}, {0: [], 1: []}
     for half in (0, 1):
-        sums[half], seeds[half] = _moment_sums(label, scene_object, half_spp,
-                                               lambda p, half=half: seed_of(half, p),
-                                               variant, width, height, spp)
-    return buffers_from_moment_sums(sums[0], sums[1], half_spp), seeds[0], seeds[1]
+        for j in ((0, 1) if binned else (0,)):
+            sums[2 * half + j], bin_seeds = _moment_sums(
+                label, scene_object, half_spp // 2 if binned else half_spp,
+                lambda p, half=half, j=j: seed_of(half, j, p), variant, width, height, spp)
+            seeds[half] += bin_seeds
+    if binned:
+        return buffers_from_bin_sums([sums[k] for k in range(BINS)], half_spp // 2), seeds[0], seeds[1]
+    return buffers_from_moment_sums(sums[0], sums[2], half_spp), seeds[0], seeds[1]
 
 
 def render_dict_buffers(desc: dict, spp: int, seed_of: SeedOfHalfPass, *, key: str,
                         variant: str = "auto") -> tuple[dict[str, np.ndarray], list[int]]:
     """Noisy buffers of scene dict ``desc`` with the conventions of :func:`render_buffers`.
 
-    ``spp``: even total spp (``spp/2`` per half buffer); ``seed_of(half, pass_index)`` gives the
-    32-bit seed of each pass of half 0 (A) and 1 (B); ``key`` names the scene in errors and in
-    the scene cache (:func:`forget_scene`). Returns the float32 layers of :data:`ALL_LAYERS`
-    (see :func:`buffers_from_moment_sums`) and the seeds used (A's, then B's).
+    ``spp``: even total spp (``spp/2`` per half buffer); ``seed_of(half, bin, pass_index)`` gives
+    the 32-bit seed of each pass of bin 0/1 of half 0 (A) and 1 (B) (bin 0 only when spp is not a
+    multiple of 4); ``key`` names the scene in errors and in the scene cache
+    (:func:`forget_scene`). Returns the float32 layers of :data:`ALL_LAYERS` and, for spp a
+    multiple of 4, :data:`mcbench.buffers.BIN_LAYERS` (see :func:`buffers_from_bin_sums`), and the seeds used
+    (A's, then B's).
     """
     spp = _even_spp(spp, key)
     scene_object, _, variant, width, height = _loaded_dict(desc, key, variant)
@@ -323,7 +333,9 @@ def render_buffers(scene_module: ModuleType, spp: int, *, resolution: tuple[int,
     component); ``resolution``: ``(width, height)``, default the module's ``RESOLUTION``;
     ``seed``: the config's global seed (:func:`mcbench.seeds.render_seed`).
 
-    Returns float32 layers for every name in :data:`mcbench.buffers.ALL_LAYERS`: ``color*``
+    For spp a multiple of 4 each half is rendered as two sample bins of spp/4 (layers
+    :data:`mcbench.buffers.BIN_LAYERS`; A = bins 0-1, B = bins 2-3). Returns float32 layers for
+    every name in :data:`mcbench.buffers.ALL_LAYERS` (and the bins): ``color*``
     (H, W, 3) linear radiance, ``variance*`` (H, W, 3) variance of the mean, ``albedo*``,
     ``normal*`` (H, W, 3), ``depth*`` (H, W) and their ``*_variance`` layers; the full-image
     versions are ``(A + B) / 2`` and the variances from the pooled moments of all spp samples.
@@ -340,7 +352,7 @@ def render_buffers(scene_module: ModuleType, spp: int, *, resolution: tuple[int,
     scene_object, integrator = _loaded_module(module, width, height, variant)
     layers, seeds_a, seeds_b = _half_buffers(
         name, scene_object, spp,
-        lambda half, p: render_seed("noisy", spp=spp, half=half, pass_index=p, base_seed=seed),
+        lambda half, j, p: render_seed("noisy", spp=spp, half=half, bin=j, pass_index=p, base_seed=seed),
         variant, width, height)
     seconds = time.perf_counter() - start
     metadata = {
@@ -391,17 +403,54 @@ def render_reference_chunk(scene_module: ModuleType, spp: int, chunk: int, *,
     return layers, metadata
 
 
-def buffers_from_moment_sums(sums_a: dict, sums_b: dict, half_spp: int) -> dict[str, np.ndarray]:
+def _pooled(first: dict, second: dict) -> dict:
+    return {q: (first[q][0] + second[q][0], first[q][1] + second[q][1]) for q in first}
+
+
+def buffers_from_bin_sums(bin_sums: list[dict], bin_spp: int) -> dict[str, np.ndarray]:
+    """Float32 layers of :data:`ALL_LAYERS` and :data:`mcbench.buffers.BIN_LAYERS` from the moment sums of four
+    sample bins of ``bin_spp`` samples each (bins 0-1 make half buffer A, bins 2-3 make B).
+
+    ``color_bin{j}`` is the bin's mean and ``variance_bin{j}`` the variance of that mean; with one
+    sample per bin (4 spp) it is ``(b0 - b1)^2 / 2`` from the two bins of its half (unbiased for the
+    variance of one sample, the same for both bins). Half buffers and the full image follow
+    :func:`buffers_from_moment_sums` of the pooled sums, except that ``color_a`` is
+    ``(color_bin0 + color_bin1) / 2`` and ``color_b`` ``(color_bin2 + color_bin3) / 2`` computed on
+    the float32 bins, so the identities hold exactly for consumers that recompute them.
+    """
+    if len(bin_sums) != BINS:
+        raise ValueError(f"need {BINS} bins, got {len(bin_sums)}")
+    bins = {}
+    for j, sums in enumerate(bin_sums):
+        s1, s2 = sums["color"]
+        if bin_spp >= 2:
+            mean, variance = moments_to_mean_variance(s1, s2, bin_spp)
+        else:
+            partner = bin_sums[j ^ 1]["color"][0]
+            mean, variance = s1, 0.5 * (s1 - partner) ** 2
+        bins[j] = (mean.astype(np.float32), variance.astype(np.float32))
+    half_means = {"_a": (bins[0][0] + bins[1][0]) / np.float32(2), "_b": (bins[2][0] + bins[3][0]) / np.float32(2)}
+    layers = buffers_from_moment_sums(_pooled(bin_sums[0], bin_sums[1]), _pooled(bin_sums[2], bin_sums[3]),
+                                      2 * bin_spp, half_colors=half_means)
+    for j, (mean, variance) in bins.items():
+        layers[f"color_bin{j}"] = np.ascontiguousarray(mean)
+        layers[f"variance_bin{j}"] = np.ascontiguousarray(variance)
+    return layers
+
+
+def buffers_from_moment_sums(sums_a: dict, sums_b: dict, half_spp: int, *,
+                             half_colors: dict[str, np.ndarray] | None = None) -> dict[str, np.ndarray]:
     """Float32 layers of :data:`ALL_LAYERS` from the per-half moment sums.
 
     ``sums_a[q]``/``sums_b[q]`` = (sum of m1·n, sum of m2·n) over the passes of one half buffer
     of ``half_spp`` samples, for every quantity q of :data:`CHANNELS`. Means and variances of the
-    mean for A, B and the pooled full image (``2 * half_spp`` samples).
+    mean for A, B and the pooled full image (``2 * half_spp`` samples). ``half_colors``
+    (``{"_a": ..., "_b": ...}``, float32 (H, W, 3)) replaces the colour means of the halves (the
+    bins' average, :func:`buffers_from_bin_sums`).
     """
     sums = {"_a": sums_a, "_b": sums_b}
     layers = {}
-    pooled = {q: (sums["_a"][q][0] + sums["_b"][q][0], sums["_a"][q][1] + sums["_b"][q][1])
-              for q in CHANNELS}
+    pooled = _pooled(sums["_a"], sums["_b"])
     for suffix, n, moments in (("_a", half_spp, sums["_a"]), ("_b", half_spp, sums["_b"]),
                                ("", 2 * half_spp, pooled)):
         for quantity in CHANNELS:
@@ -416,6 +465,8 @@ def buffers_from_moment_sums(sums_a: dict, sums_b: dict, half_spp: int) -> dict[
             name_var = ("variance" if quantity == "color" else quantity + "_variance") + suffix
             layers[quantity + suffix] = _squeeze(mean).astype(np.float32)
             layers[name_var] = _squeeze(variance).astype(np.float32)
+    for suffix, color in (half_colors or {}).items():
+        layers["color" + suffix] = np.asarray(color, dtype=np.float32)
     # The full image is by definition (A + B) / 2, computed on the float32 halves so that the
     # identity holds exactly for consumers that recompute it.
     for quantity in CHANNELS:

@@ -8,7 +8,8 @@ Test renders and reference chunks (:func:`render_seed`)::
     bit 31..29  base_seed   global seed from the config (key ``seed``), 0..6
     bit 28      kind        0 = noisy render, 1 = reference chunk
     bit 27..16  field       noisy: (spp_code << 1) | half    reference: chunk (0..4095)
-    bit 15..0   pass        pass index within one buffer / chunk (0..65535)
+    bit 15      bin         noisy: sample bin within the half (0 or 1; 0 for unbinned renders)
+    bit 14..0   pass        pass index within one bin / buffer / chunk (0..32767)
 
 ``spp_code`` (:func:`spp_code`) is ``spp/2 - 1`` for spp <= 2048 (any even spp) and
 ``1023 + spp/2048`` for larger multiples of 2048 up to 2**21; ``half`` is 0 for buffer A and 1
@@ -20,7 +21,7 @@ Training renders of the procedural scenes (:func:`training_render_seed`)::
     bit 28..13  training scene seed, 0..65535
     bit 12      0 = noisy render, 1 = target
     bit 11..0   noisy:  bit 11..8 log2(spp) (spp a power of two, 2..32768), bit 7 half
-                        (0 = A, 1 = B), bit 6..0 pass (0..127)
+                        (0 = A, 1 = B), bit 6 bin within the half, bit 5..0 pass (0..63)
                 target: pass (0..4095)
 
 Why no two renders share a seed
@@ -40,11 +41,12 @@ Scalar variants
 ---------------
 The scalar variant seeds pixel by pixel with ``seed * W * H + block_id * B^2 + i`` (B = block
 size :data:`SCALAR_BLOCK_SIZE`, i = pixel in the block), which would wrap around 2**32 and
-collide for seeds like ours. There each buffer/chunk is rendered in one pass (pass 0), with the
-Mitsuba seed ``(seed >> 16) * m`` where ``m = ceil(blocks * B^2 / (W*H))``
-(:func:`scalar_seed_stride`); renders are refused unless ``((seed >> 16) + 1) * m * W * H <=
+collide for seeds like ours. There each bin/buffer/chunk is rendered in one pass (pass 0), with
+the Mitsuba seed ``(seed >> 15) * m`` where ``m = ceil(blocks * B^2 / (W*H))``
+(:func:`scalar_seed_stride`); renders are refused unless ``((seed >> 15) + 1) * m * W * H <=
 2**32``, so the pixel seed ranges of two different renders are disjoint integer intervals
-(:func:`mitsuba_seed`). These helpers live here, not with the renderer, because they are the
+(:func:`mitsuba_seed`). (Since sample bins took bit 15, scalar references fit up to about
+2**32 / 2**14 = 262144 pixels, i.e. 512x512, at base seed 0; use llvm_ad_rgb beyond.) These helpers live here, not with the renderer, because they are the
 scalar-variant consequence of the render seed layout. Training renders refuse scalar variants
 (their layout cannot keep the pixel ranges disjoint).
 
@@ -87,21 +89,24 @@ def spp_code(spp: int) -> int:
 
 
 def render_seed(kind: str, spp: int | None = None, half: int | None = None, chunk: int | None = None,
-                pass_index: int = 0, base_seed: int = 0) -> int:
+                pass_index: int = 0, base_seed: int = 0, bin: int = 0) -> int:
     """32-bit Mitsuba seed of one test render pass (layout in the module docstring).
 
-    ``kind`` is ``"noisy"`` (needs ``spp`` = total spp of the full image and ``half`` 0 = A,
-    1 = B) or ``"reference"`` (needs ``chunk``). ``base_seed`` is the config's ``seed``,
-    0..:data:`MAX_BASE_SEED` (7 is reserved for training renders). Distinct arguments give
-    distinct seeds.
+    ``kind`` is ``"noisy"`` (needs ``spp`` = total spp of the full image, ``half`` 0 = A,
+    1 = B, and ``bin`` 0/1, the sample bin within the half) or ``"reference"`` (needs
+    ``chunk``). ``base_seed`` is the config's ``seed``, 0..:data:`MAX_BASE_SEED` (7 is reserved
+    for training renders). Distinct arguments give distinct seeds.
     """
     base_seed, pass_index = int(base_seed), int(pass_index)
     if not 0 <= base_seed <= MAX_BASE_SEED:
         raise BenchError(f"config key 'seed': must be in 0..{MAX_BASE_SEED} "
                          f"({TRAINING_BASE_SEED} is reserved for training renders), got {base_seed}")
-    if not 0 <= pass_index < 1 << 16:
-        raise BenchError(f"pass index {pass_index} out of range 0..65535 (too many passes; "
+    if not 0 <= pass_index < 1 << 15:
+        raise BenchError(f"pass index {pass_index} out of range 0..32767 (too many passes; "
                          f"lower the spp or the resolution)")
+    if bin not in (0, 1) or (bin and kind != "noisy"):
+        raise ValueError(f"bin must be 0 or 1 (noisy renders only), got {bin!r}")
+    pass_index |= int(bin) << 15
     if kind == "noisy":
         if half not in (0, 1):
             raise ValueError(f"half must be 0 (A) or 1 (B), got {half!r}")
@@ -118,12 +123,12 @@ def render_seed(kind: str, spp: int | None = None, half: int | None = None, chun
 def decode_seed(seed: int) -> dict:
     """Inverse of :func:`render_seed`: the fields a seed was made from (a training seed decodes
     with ``base_seed`` 7 and meaningless other fields; see :func:`decode_training_seed`)."""
-    base, kind_bit, field, pass_index = seed >> 29, (seed >> 28) & 1, (seed >> 16) & 0xFFF, seed & 0xFFFF
+    base, kind_bit, field, pass_index = seed >> 29, (seed >> 28) & 1, (seed >> 16) & 0xFFF, seed & 0x7FFF
     out = {"base_seed": base, "kind": "reference" if kind_bit else "noisy", "pass_index": pass_index}
     if kind_bit:
         out["chunk"] = field
     else:
-        code, out["half"] = field >> 1, field & 1
+        code, out["half"], out["bin"] = field >> 1, field & 1, (seed >> 15) & 1
         out["spp"] = 2 * (code + 1) if code < 1024 else SPP_STEP * (code - 1023)
     return out
 
@@ -131,11 +136,12 @@ def decode_seed(seed: int) -> dict:
 # --------------------------------------------------------------------------- training renders
 
 def training_render_seed(scene_seed: int, kind: str, spp: int | None = None,
-                         half: int | None = None, pass_index: int = 0) -> int:
+                         half: int | None = None, pass_index: int = 0, bin: int = 0) -> int:
     """32-bit Mitsuba seed of one training render pass (layout in the module docstring).
 
-    ``kind`` is ``"noisy"`` (needs ``spp``, a power of two 2..32768, and ``half`` 0/1) or
-    ``"target"``. Raises :class:`BenchError` for fields out of range.
+    ``kind`` is ``"noisy"`` (needs ``spp``, a power of two 2..32768, ``half`` 0/1 and ``bin``
+    0/1, the sample bin within the half) or ``"target"``. Raises :class:`BenchError` for fields
+    out of range.
     """
     scene_seed, pass_index = int(scene_seed), int(pass_index)
     if not 0 <= scene_seed <= MAX_TRAINING_SEED:
@@ -146,10 +152,12 @@ def training_render_seed(scene_seed: int, kind: str, spp: int | None = None,
             raise BenchError(f"training spp levels must be powers of two 2..32768, got {spp}")
         if half not in (0, 1):
             raise ValueError(f"half must be 0 (A) or 1 (B), got {half!r}")
-        if not 0 <= pass_index < 1 << 7:
-            raise BenchError(f"noisy pass index {pass_index} out of range 0..127 (lower the spp "
+        if bin not in (0, 1):
+            raise ValueError(f"bin must be 0 or 1, got {bin!r}")
+        if not 0 <= pass_index < 1 << 6:
+            raise BenchError(f"noisy pass index {pass_index} out of range 0..63 (lower the spp "
                              f"or the resolution)")
-        low = ((spp.bit_length() - 1) << 8) | (half << 7) | pass_index
+        low = ((spp.bit_length() - 1) << 8) | (half << 7) | (int(bin) << 6) | pass_index
     elif kind == "target":
         if not 0 <= pass_index < 1 << 12:
             raise BenchError(f"target pass index {pass_index} out of range 0..4095 (lower the "
@@ -169,7 +177,7 @@ def decode_training_seed(seed: int) -> dict:
         out.update(kind="target", pass_index=seed & 0xFFF)
     else:
         out.update(kind="noisy", spp=1 << ((seed >> 8) & 0xF), half=(seed >> 7) & 1,
-                   pass_index=seed & 0x7F)
+                   bin=(seed >> 6) & 1, pass_index=seed & 0x3F)
     return out
 
 
@@ -208,12 +216,12 @@ def scalar_seed_stride(width: int, height: int, block_size: int = SCALAR_BLOCK_S
 
 def mitsuba_seed(seed: int, variant: str, width: int, height: int) -> int:
     """The seed handed to ``mi.render``: ``seed`` itself in vectorised variants; in scalar
-    variants ``(seed >> 16) * m`` (see module docstring), refusing a wrap-around of 2**32."""
+    variants ``(seed >> 15) * m`` (see module docstring), refusing a wrap-around of 2**32."""
     if not variant.startswith("scalar"):
         return seed
-    if seed & 0xFFFF:
-        raise ValueError("scalar variants render each buffer in one pass (pass index 0)")
-    index, stride = seed >> 16, scalar_seed_stride(width, height)
+    if seed & 0x7FFF:
+        raise ValueError("scalar variants render each bin/buffer in one pass (pass index 0)")
+    index, stride = seed >> 15, scalar_seed_stride(width, height)
     if (index + 1) * stride * width * height > 1 << 32:
         raise BenchError(f"config key 'variant': scalar_rgb cannot give disjoint seeds at "
                          f"{width}x{height} with this seed/spp/chunk (pixel seeds would wrap "

@@ -39,7 +39,7 @@ def run_method(method: str, render_path: str, output_path: str, timing_path: str
 
     module = load_method(module_name, config_key=f"method '{method}'")
     buffers = RenderBuffers.load(render_path)
-    inputs = [Denoised.load(p) for p in input_paths]
+    inputs = [Denoised.load(p, extras=True) for p in input_paths]
     for path, denoised in zip(input_paths, inputs):
         if denoised.full.shape != buffers.color.shape:
             raise BenchError(f"{path}: shape {denoised.full.shape} does not match render "

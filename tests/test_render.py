@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from mcbench import BenchError
-from mcbench.buffers import ALL_LAYERS
+from mcbench.buffers import ALL_LAYERS, BIN_LAYERS, RenderBuffers
 from mcbench.render import (MAX_WAVEFRONT, film_size, forget_scene, load_scene_dict,
                             merge_reference_chunks, passes_for, render_buffers, render_dict_buffers,
                             render_reference_chunk, render_scene_sums)
@@ -48,7 +48,7 @@ def test_unknown_scene_names_the_config_key():
 @pytest.mark.parametrize("scene", SCENES)
 def test_every_scene_renders_finite_buffers(scene, variant):
     layers, meta = render_buffers(load_scene(scene), 4, resolution=(24, 16))
-    assert set(layers) == set(ALL_LAYERS)
+    assert set(layers) == set(ALL_LAYERS) | set(BIN_LAYERS)
     for name, array in layers.items():
         assert array.dtype == np.float32
         assert array.shape == ((16, 24) if name.startswith("depth") and "variance" not in name
@@ -92,6 +92,44 @@ def test_same_seed_same_image_other_seed_other_image(cornell_8spp):
     assert not np.array_equal(layers["color"], other["color"])
 
 
+def test_sample_bins_make_the_half_buffers(cornell_8spp):
+    """Four quarter-sample bins: A = mean of bins 0-1 and B = mean of bins 2-3 exactly, bins
+    differ, their seeds are disjoint, and a bin's variance of the mean (2 samples) is about twice
+    its half buffer's (4 samples)."""
+    layers, meta = cornell_8spp
+    np.testing.assert_array_equal(layers["color_a"], (layers["color_bin0"] + layers["color_bin1"]) / np.float32(2))
+    np.testing.assert_array_equal(layers["color_b"], (layers["color_bin2"] + layers["color_bin3"]) / np.float32(2))
+    assert not np.array_equal(layers["color_bin0"], layers["color_bin1"])
+    ratio = (layers["variance_bin0"] + layers["variance_bin1"]).mean() / (2 * layers["variance_a"].mean())
+    assert 1.2 < ratio < 3.2
+    seeds = meta["seeds_a"].split(",") + meta["seeds_b"].split(",")
+    assert len(seeds) == len(set(seeds)) == 4
+    buffers = RenderBuffers(layers=layers, spp=8)
+    (c0, v0), (c1, v1) = buffers.sub_images("a")
+    assert c0 is layers["color_bin0"] and v1 is layers["variance_bin1"]
+    (c0, _), (c1, _) = buffers.sub_images("full")
+    assert c0 is layers["color_a"] and c1 is layers["color_b"]
+
+
+def test_one_sample_bins_take_the_pair_variance(variant):
+    """At 4 spp each bin holds one sample: its variance is (b0 - b1)^2 / 2 within its half."""
+    layers, _ = render_buffers(CORNELL, 4, resolution=TINY, seed=2)
+    for first, second in ((0, 1), (2, 3)):
+        expected = 0.5 * (layers[f"color_bin{first}"].astype(np.float64) - layers[f"color_bin{second}"]) ** 2
+        for j in (first, second):
+            np.testing.assert_allclose(layers[f"variance_bin{j}"], expected, rtol=1e-5, atol=1e-7)
+
+
+def test_spp_not_a_multiple_of_four_has_no_bins(variant):
+    layers, _ = render_buffers(CORNELL, 6, resolution=TINY)
+    assert set(layers) == set(ALL_LAYERS)
+    buffers = RenderBuffers(layers=layers, spp=6, source="x.exr")
+    assert not buffers.has_sub_buffers()
+    with pytest.raises(BenchError, match=r"x\.exr.*bins"):
+        buffers.sub_images("a")
+    assert buffers.sub_images("full")[0][0] is layers["color_a"]
+
+
 def test_bad_spp_is_refused():
     for spp in (0, 1, 3):
         with pytest.raises(BenchError, match="spp"):
@@ -126,7 +164,8 @@ def test_multi_pass_render_matches_its_pass_seeds(variant, monkeypatch):
     import mcbench.render as render
     monkeypatch.setattr(render, "MAX_WAVEFRONT", 16 * 16 * 3)   # 3 spp per pass
     layers, meta = render_buffers(CORNELL, 16, resolution=TINY, seed=2)
-    assert meta["passes"] == "3" and len(meta["seeds_a"].split(",")) == 3
+    # each half: two bins of 4 spp, each in passes of 3 + 1 spp
+    assert meta["passes"] == "4" and len(meta["seeds_a"].split(",")) == 4
     assert np.all(np.isfinite(layers["color"])) and layers["variance"].min() >= 0
 
 
@@ -138,12 +177,12 @@ def test_dict_render_equals_module_render_bit_for_bit(variant):
     desc = CORNELL.build(8, 8)
     try:
         again, seeds = render_dict_buffers(
-            desc, 4, lambda half, p: render_seed("noisy", spp=4, half=half, pass_index=p, base_seed=3),
+            desc, 4, lambda half, j, p: render_seed("noisy", spp=4, half=half, bin=j, pass_index=p, base_seed=3),
             key="test-dict-cornell")
     finally:
         forget_scene("test-dict-cornell")
     assert seeds == [int(s) for s in meta["seeds_a"].split(",") + meta["seeds_b"].split(",")]
-    for name in ALL_LAYERS:
+    for name in ALL_LAYERS + BIN_LAYERS:
         assert again[name].dtype == layers[name].dtype
         np.testing.assert_array_equal(again[name], layers[name], err_msg=name)
 
@@ -192,8 +231,9 @@ def test_a_film_of_the_wrong_size_names_the_scene(variant):
 # ----------------------------------------------------------------------------- seeds
 
 def test_seed_fields_round_trip():
-    seed = render_seed("noisy", spp=4096, half=1, pass_index=7, base_seed=5)
-    assert decode_seed(seed) == {"base_seed": 5, "kind": "noisy", "pass_index": 7, "spp": 4096, "half": 1}
+    seed = render_seed("noisy", spp=4096, half=1, bin=1, pass_index=7, base_seed=5)
+    assert decode_seed(seed) == {"base_seed": 5, "kind": "noisy", "pass_index": 7, "spp": 4096, "half": 1,
+                                 "bin": 1}
     seed = render_seed("reference", chunk=255, pass_index=3, base_seed=6)
     assert decode_seed(seed) == {"base_seed": 6, "kind": "reference", "pass_index": 3, "chunk": 255}
     assert 0 <= seed < 2 ** 32
@@ -205,9 +245,10 @@ def _all_seeds(base_seed, width=128, height=128):
     levels = list(range(2, 2049, 2)) + list(range(4096, 65537, 2048))
     seeds = []
     for spp in levels:
-        n_passes = len(passes_for(spp // 2, width, height, "llvm_ad_rgb"))
-        seeds += [render_seed("noisy", spp=spp, half=h, pass_index=p, base_seed=base_seed)
-                  for h in (0, 1) for p in range(n_passes)]
+        bins = (0, 1) if spp % 4 == 0 else (0,)
+        n_passes = len(passes_for(spp // 2 // len(bins), width, height, "llvm_ad_rgb"))
+        seeds += [render_seed("noisy", spp=spp, half=h, bin=j, pass_index=p, base_seed=base_seed)
+                  for h in (0, 1) for j in bins for p in range(n_passes)]
     n_passes = len(passes_for(4096, width, height, "llvm_ad_rgb"))
     seeds += [render_seed("reference", chunk=c, pass_index=p, base_seed=base_seed)
               for c in range(256) for p in range(n_passes)]
@@ -231,10 +272,12 @@ def _random_render_seeds(rng, n):
     codes = rng.integers(0, 2047, n)                    # spp codes 0..1023 and 1025..2047
     spps = np.where(codes < 1024, 2 * (codes + 1), 2048 * np.maximum(codes - 1023, 1))
     out = []
-    for base, kind, spp, half, chunk, p in zip(rng.integers(0, MAX_BASE_SEED + 1, n),
-                                              rng.integers(0, 2, n), spps, rng.integers(0, 2, n),
-                                              rng.integers(0, 4096, n), rng.integers(0, 1 << 16, n)):
-        out.append(render_seed("noisy", spp=int(spp), half=int(half), pass_index=int(p), base_seed=int(base))
+    for base, kind, spp, half, chunk, p, j in zip(rng.integers(0, MAX_BASE_SEED + 1, n),
+                                                 rng.integers(0, 2, n), spps, rng.integers(0, 2, n),
+                                                 rng.integers(0, 4096, n), rng.integers(0, 1 << 15, n),
+                                                 rng.integers(0, 2, n)):
+        out.append(render_seed("noisy", spp=int(spp), half=int(half), bin=int(j), pass_index=int(p),
+                               base_seed=int(base))
                    if kind == 0 else
                    render_seed("reference", chunk=int(chunk), pass_index=int(p), base_seed=int(base)))
     return out
@@ -243,10 +286,11 @@ def _random_render_seeds(rng, n):
 def _random_training_seeds(rng, n):
     """``n`` seeds of training_render_seed drawn uniformly over every field it accepts."""
     out = []
-    for scene, kind, log_spp, half, p in zip(rng.integers(0, MAX_TRAINING_SEED + 1, n),
-                                            rng.integers(0, 2, n), rng.integers(1, 16, n),
-                                            rng.integers(0, 2, n), rng.integers(0, 4096, n)):
-        out.append(training_render_seed(int(scene), "noisy", 1 << int(log_spp), int(half), int(p) % 128)
+    for scene, kind, log_spp, half, p, j in zip(rng.integers(0, MAX_TRAINING_SEED + 1, n),
+                                               rng.integers(0, 2, n), rng.integers(1, 16, n),
+                                               rng.integers(0, 2, n), rng.integers(0, 4096, n),
+                                               rng.integers(0, 2, n)):
+        out.append(training_render_seed(int(scene), "noisy", 1 << int(log_spp), int(half), int(p) % 64, bin=int(j))
                    if kind == 0 else training_render_seed(int(scene), "target", pass_index=int(p)))
     return out
 
@@ -261,8 +305,8 @@ def test_both_seed_layouts_decode_back():
         fields = decode_training_seed(seed)
         assert 0 <= seed < 2 ** 32 and training_render_seed(fields.pop("scene_seed"), fields.pop("kind"),
                                                            **fields) == seed
-    assert decode_training_seed(training_render_seed(FIBRE_SEED_BASE + 5, "noisy", 32768, 1, 127)) == {
-        "scene_seed": FIBRE_SEED_BASE + 5, "kind": "noisy", "spp": 32768, "half": 1, "pass_index": 127}
+    assert decode_training_seed(training_render_seed(FIBRE_SEED_BASE + 5, "noisy", 32768, 1, 63, bin=1)) == {
+        "scene_seed": FIBRE_SEED_BASE + 5, "kind": "noisy", "spp": 32768, "half": 1, "bin": 1, "pass_index": 63}
 
 
 def test_no_training_seed_is_a_render_seed():
@@ -276,11 +320,11 @@ def test_no_training_seed_is_a_render_seed():
     assert not render & training
     assert {s >> 29 for s in render} == set(range(MAX_BASE_SEED + 1))
     assert {s >> 29 for s in training} == {TRAINING_BASE_SEED}
-    extremes = [render_seed("noisy", spp=spp, half=h, pass_index=p, base_seed=b)
-                for spp in (2, 2048, 4096, 2048 * 1024) for h in (0, 1) for p in (0, 65535)
+    extremes = [render_seed("noisy", spp=spp, half=h, bin=j, pass_index=p, base_seed=b)
+                for spp in (2, 2048, 4096, 2048 * 1024) for h in (0, 1) for j in (0, 1) for p in (0, 32767)
                 for b in (0, MAX_BASE_SEED)]
     extremes += [render_seed("reference", chunk=c, pass_index=p, base_seed=b)
-                 for c in (0, 4095) for p in (0, 65535) for b in (0, MAX_BASE_SEED)]
+                 for c in (0, 4095) for p in (0, 32767) for b in (0, MAX_BASE_SEED)]
     assert max(extremes) < TRAINING_BASE_SEED << 29
     assert min(training_render_seed(0, "noisy", 2, 0, 0), training_render_seed(0, "target")) \
         >= TRAINING_BASE_SEED << 29
@@ -298,8 +342,9 @@ def test_scalar_pixel_seed_ranges_are_disjoint():
     for base_seed in range(MAX_BASE_SEED + 1):
         for spp in (2, 4, 64, 2048, 65536):
             for half in (0, 1):
-                s = render_seed("noisy", spp=spp, half=half, base_seed=base_seed)
-                intervals.append(mitsuba_seed(s, "scalar_rgb", width, height) * width * height)
+                for j in ((0, 1) if spp % 4 == 0 else (0,)):
+                    s = render_seed("noisy", spp=spp, half=half, bin=j, base_seed=base_seed)
+                    intervals.append(mitsuba_seed(s, "scalar_rgb", width, height) * width * height)
         for chunk in (0, 1, 255):
             s = render_seed("reference", chunk=chunk, base_seed=base_seed)
             intervals.append(mitsuba_seed(s, "scalar_rgb", width, height) * width * height)
@@ -318,7 +363,11 @@ def test_bad_seed_arguments_are_refused():
     with pytest.raises(BenchError, match="spp"):
         render_seed("noisy", spp=3000, half=0)
     with pytest.raises(BenchError):
-        render_seed("noisy", spp=4, half=0, pass_index=1 << 16)
+        render_seed("noisy", spp=4, half=0, pass_index=1 << 15)
+    with pytest.raises(ValueError, match="bin"):
+        render_seed("reference", chunk=0, bin=1)
+    with pytest.raises(BenchError):
+        training_render_seed(0, "noisy", 4, 0, pass_index=64)
 
 
 # ----------------------------------------------------------------------------- references

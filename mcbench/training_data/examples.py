@@ -140,7 +140,7 @@ def training_example(seed: int, spp_levels, target_spp: int, resolution, crop_si
     try:
         for spp in levels:
             layers, _ = render_dict_buffers(
-                desc, spp, lambda half, p, spp=spp: training_render_seed(seed, "noisy", spp, half, p),
+                desc, spp, lambda half, j, p, spp=spp: training_render_seed(seed, "noisy", spp, half, p, bin=j),
                 key=key, variant=variant)
             for name, layer in layers.items():
                 full[f"{name}_spp{spp}"] = layer
