@@ -277,20 +277,90 @@ def write_training_example(seed: int, output_paths: list[str], *, spp_levels, ta
         write_layers(path, layers, metadata=metadata)
 
 
+def write_correlated_training_inputs(base: str, crop_paths: list[str], output_paths: list[str], *,
+                                     threads: int | None = None) -> None:
+    """Run base denoiser ``base`` (``methods/<base>.py``; a learned one with its committed weights)
+    on every noisy level of each training crop and write its results, the correlated inputs of
+    the deep combiner's training (Back et al. 2020 Sec. 5): per level ``N`` the layers
+    ``correlated_spp<N>``, ``correlated_a_spp<N>``, ``correlated_b_spp<N>`` and, for a base that
+    writes sub-buffer results (:data:`mcbench.buffers.SUB_OUTPUTS`, e.g. kpcn),
+    ``correlated<half>_sub<j>_spp<N>``."""
+    from mcbench.buffers import SUB_OUTPUTS
+    from mcbench.nn.data import HALF_OF, crop_render_layers
+    from mcbench.variants import set_threads
+    from methods import load_method
+
+    if threads:
+        set_threads(threads)
+        try:
+            import torch
+            torch.set_num_threads(int(threads))
+        except ImportError:
+            pass
+    module = load_method(base, kind="denoiser", config_key=f"base '{base}'")
+    if len(crop_paths) != len(output_paths):
+        raise BenchError(f"{len(crop_paths)} crops for {len(output_paths)} outputs of base '{base}'")
+    for crop_path, output_path in zip(crop_paths, output_paths):
+        meta = read_metadata(crop_path)
+        if "spp_levels" not in meta:
+            raise BenchError(f"{crop_path}: not a training crop (no spp_levels metadata)")
+        levels = [int(v) for v in meta["spp_levels"].split(",")]
+        layers = read_layers(crop_path)
+        check_finite(crop_path, layers)
+        out, start = {}, time.perf_counter()
+        for level in levels:
+            buffers = RenderBuffers(layers=crop_render_layers(layers, level), spp=level,
+                                    source=f"{crop_path} at {level} spp")
+            result = module.denoise(buffers)
+            for half, which in HALF_OF.items():
+                out[f"correlated{half}_spp{level}"] = result.image(which)
+                extras = result.extras or {}
+                for j, name in enumerate(SUB_OUTPUTS[which]):
+                    if name in extras:
+                        out[f"correlated{half}_sub{j}_spp{level}"] = extras[name]
+        check_finite(f"{output_path} (results of '{base}' on {crop_path})", out)
+        write_layers(output_path, out, metadata={"base": base, "seed": meta.get("seed", ""),
+                                                 "crop": meta.get("crop", ""), "spp_levels": meta["spp_levels"],
+                                                 "seconds": f"{time.perf_counter() - start:.3f}"})
+
+
 def learned_method(name: str):
-    """``methods/<name>.py`` checked to be a learned method (NETWORK, TRAINING, build_network)."""
+    """``methods/<name>.py`` checked to be a learned method (NETWORK, TRAINING, build_network):
+    a denoiser, or a combiner trained on base results (``CORRELATED_BASES``, ``TRAINING_KEYS``)."""
     from mcbench.weights import check_learned_method
     from methods import load_method
 
-    return check_learned_method(load_method(name, kind="denoiser", config_key=f"network '{name}'"))
+    module = check_learned_method(load_method(name, config_key=f"network '{name}'"))
+    if module.KIND == "combiner":
+        missing = [a for a in ("CORRELATED_BASES", "TRAINING_KEYS") if not hasattr(module, a)]
+        if missing:
+            raise BenchError(f"methods/{name}.py: a learned combiner needs {', '.join(missing)}")
+    return module
 
 
-def train_learned_method(name: str, *args, **kwargs):
-    """Train ``methods/<name>.py`` (:func:`mcbench.nn.train.train_network`; the step resolves
-    the name, core never imports methods)."""
+def training_data(name: str, crop_files: list[str], correlated_files: dict[str, list[str]] | None = None):
+    """The training data of learned method ``name``: its crops (a denoiser: the crop paths
+    themselves) or, for a combiner, :func:`mcbench.nn.data.load_combiner_crops` over the results
+    of its ``CORRELATED_BASES`` (``correlated_files``: {base: files, one per crop})."""
+    module = learned_method(name)
+    if module.KIND != "combiner":
+        return list(crop_files)
+    from mcbench.nn.data import load_combiner_crops
+
+    correlated_files = correlated_files or {}
+    missing = [b for b in module.CORRELATED_BASES if b not in correlated_files]
+    if missing:
+        raise BenchError(f"{name}: no results of base(s) {missing} for its training")
+    return load_combiner_crops(crop_files, {b: correlated_files[b] for b in module.CORRELATED_BASES},
+                               module.TRAINING_KEYS)
+
+
+def train_learned_method(name: str, crop_files: list[str], *args, correlated_files=None, **kwargs):
+    """Train ``methods/<name>.py`` (:func:`mcbench.nn.train.train_network`) on
+    :func:`training_data` (the step resolves the name, core never imports methods)."""
     from mcbench.nn.train import train_network
 
-    return train_network(learned_method(name), *args, **kwargs)
+    return train_network(learned_method(name), training_data(name, crop_files, correlated_files), *args, **kwargs)
 
 
 def write_error_curves(metrics_csv: str, metric: str, png_path: str, *, labels: dict[str, str]) -> None:
@@ -388,4 +458,4 @@ if __name__ == "__main__":
 
     from mcbench.nn.train import main
 
-    sys.exit(main(load_method=learned_method))
+    sys.exit(main(load_method=learned_method, load_data=training_data))

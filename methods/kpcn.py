@@ -7,6 +7,12 @@ of a k×k kernel; the softmax of the logits filters the noisy (demodulated) colo
 (:func:`mcbench.nn.kernels.apply_pixel_kernels`, Eq. 5-6 of Bako et al.), then the albedo is
 multiplied back.
 
+Sub-buffer results (for the multi-buffer deep combiner, Back et al. 2020 Sec. 5): KPCN exposes
+its kernel, so for renders with sample bins the kernel predicted from all of an image's samples
+is also applied to each of that image's two sub-buffers (:data:`mcbench.buffers.SUB_BUFFERS`:
+full -> A, B; A -> bins 0, 1; B -> bins 2, 3), written as the extras of
+:data:`mcbench.buffers.SUB_OUTPUTS`. A's sub-buffer results use A's kernel, never B's samples.
+
 Inputs (31 channels): log(1 + irradiance) (3), its x/y gradients (6), the delta-method noise
 level of log irradiance (1), albedo (3), normal (3), normalised depth (1) and the x/y gradients of
 albedo, normal and depth (14) -- Bako et al.'s diffuse-branch inputs with relative variance
@@ -61,7 +67,7 @@ def network_classes() -> SimpleNamespace:
     import torch (the DAG imports it to read NETWORK and check params)."""
     from torch import nn
 
-    from mcbench.nn.features import remodulate
+    from mcbench.nn.features import demodulate, remodulate
     from mcbench.nn.kernels import apply_pixel_kernels
 
     class KernelPredictingNetwork(nn.Module):
@@ -75,10 +81,17 @@ def network_classes() -> SimpleNamespace:
             convs.append(nn.Conv2d(width, kernel_size * kernel_size, 1))
             self.body = nn.Sequential(*convs)
 
-        def forward(self, buffers):
+        def forward(self, buffers, sub_colors=()):
+            """The denoised colour (N, 3, H, W); with ``sub_colors`` (each (N, 3, H, W), disjoint
+            sample subsets of the same image), also the same kernels applied to each of them."""
             irradiance, inputs = network_inputs(buffers)
             logits = self.body(inputs)
-            return remodulate(apply_pixel_kernels(irradiance, logits, self.kernel_size), buffers["albedo"])
+            albedo = buffers["albedo"]
+            output = remodulate(apply_pixel_kernels(irradiance, logits, self.kernel_size), albedo)
+            if not sub_colors:
+                return output
+            return output, [remodulate(apply_pixel_kernels(demodulate(color, albedo), logits, self.kernel_size), albedo)
+                            for color in sub_colors]
 
     return SimpleNamespace(KernelPredictingNetwork=KernelPredictingNetwork)
 
@@ -89,7 +102,41 @@ def build_network(**arch):
 
 
 def denoise(buffers):
-    """KPCN on the full buffer and on each half buffer (three inferences, as Zheng et al. ran it)."""
-    from mcbench.nn.inference import denoise_with_network
+    """KPCN on the full buffer and on each half buffer (three inferences, as Zheng et al. ran it);
+    for renders with sample bins also each image's kernel applied to its two sub-buffers."""
+    import torch
 
-    return denoise_with_network(sys.modules[__name__], buffers)
+    from mcbench.buffers import SUB_OUTPUTS, Denoised
+    from mcbench.nn.inference import denoise_with_network, image_tensors, load_network
+
+    if not buffers.has_sub_buffers():
+        return denoise_with_network(sys.modules[__name__], buffers)
+    network = load_network(sys.modules[__name__])
+    images, extras = {}, {}
+    previous = torch.are_deterministic_algorithms_enabled()
+    torch.use_deterministic_algorithms(True)
+    try:
+        with torch.inference_mode():
+            for which in ("full", "a", "b"):
+                subs = [image_tensors_color(color) for color, _ in buffers.sub_images(which)]
+                output, sub_outputs = network(image_tensors(buffers.image(which)), subs)
+                images[which] = _to_image(output)
+                for name, sub_output in zip(SUB_OUTPUTS[which], sub_outputs):
+                    extras[name] = _to_image(sub_output)
+    finally:
+        torch.use_deterministic_algorithms(previous)
+    return Denoised(full=images["full"], a=images["a"], b=images["b"], extras=extras)
+
+
+def image_tensors_color(color):
+    """An (H, W, 3) colour as a (1, 3, H, W) float32 tensor."""
+    import numpy as np
+    import torch
+
+    return torch.from_numpy(np.ascontiguousarray(np.moveaxis(np.asarray(color, np.float32), 2, 0)))[None]
+
+
+def _to_image(tensor):
+    import numpy as np
+
+    return np.ascontiguousarray(tensor[0].permute(1, 2, 0).numpy(), dtype=np.float32)

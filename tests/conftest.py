@@ -60,7 +60,7 @@ def synthetic_truth(albedo: np.ndarray, normal: np.ndarray) -> np.ndarray:
 
 def build_render_buffers(truth=None, *, height: int = 16, width: int = 16, spp: int = 8,
                          half_std=0.1, seed=0, albedo=None, normal=None, depth=None,
-                         variance=None) -> RenderBuffers:
+                         variance=None, bins: bool = False) -> RenderBuffers:
     """Synthetic render buffers with independent Gaussian noise in each half buffer.
 
     ``truth``: noise-free radiance (H, W, 3); when given, its shape overrides ``height`` and
@@ -74,6 +74,10 @@ def build_render_buffers(truth=None, *, height: int = 16, width: int = 16, spp: 
     ``variance`` is half of it, as for the mean of two independent halves.
     ``albedo``/``normal`` (H, W, 3), ``depth`` (H, W): features, identical (separate copies)
     in the full, A and B buffers; defaults from :func:`synthetic_features`.
+
+    ``bins``: also the four quarter-sample bins of :data:`mcbench.buffers.BIN_LAYERS` (noise
+    ``sqrt(2) * half_std`` each, drawn bin 0..3 after A and B are *replaced* by the means of bins
+    0-1 and 2-3, so the layers keep the render identities; variance_bin = 2 × the half's).
 
     Layers: ``color = (color_a + color_b) / 2``; every layer float32; all of
     :data:`mcbench.buffers.REQUIRED_LAYERS` present plus ``albedo_a/_b``, ``normal_a/_b``,
@@ -100,6 +104,12 @@ def build_render_buffers(truth=None, *, height: int = 16, width: int = 16, spp: 
     for suffix in HALF_SUFFIXES:
         layers["color" + suffix] = (truth + half_std * rng.standard_normal(shape)).astype(np.float32)
         layers["variance" + suffix] = half_variance.astype(np.float32)
+    if bins:
+        for j in range(4):
+            layers[f"color_bin{j}"] = (truth + np.sqrt(2) * half_std * rng.standard_normal(shape)).astype(np.float32)
+            layers[f"variance_bin{j}"] = (2 * half_variance).astype(np.float32)
+        layers["color_a"] = (layers["color_bin0"] + layers["color_bin1"]) / np.float32(2)
+        layers["color_b"] = (layers["color_bin2"] + layers["color_bin3"]) / np.float32(2)
     mean = (layers["color_a"].astype(np.float64) + layers["color_b"]) / 2
     layers["color"] = mean.astype(np.float32)
     layers["variance"] = (half_variance / 2).astype(np.float32)

@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mcbench.buffers import Denoised
+from mcbench.buffers import SUB_OUTPUTS, Denoised
 from methods import available_methods, load_method
 
 HEIGHT, WIDTH = 12, 10
@@ -54,11 +54,23 @@ def blurred(image: np.ndarray) -> np.ndarray:
     return (total / 9).astype(np.float32)
 
 
+def sub_outputs(buffers, filtered) -> dict:
+    """``filtered`` applied to each image's two sub-buffers, as :data:`SUB_OUTPUTS` extras (what
+    a kernel-exposing base such as KPCN writes)."""
+    return {name: filtered(color) for which in ("full", "a", "b")
+            for name, (color, _) in zip(SUB_OUTPUTS[which], buffers.sub_images(which))}
+
+
 def synthetic_inputs(buffers) -> list[Denoised]:
-    """Two base outputs for combiners: a blurred copy of each image and a biased one."""
+    """Two base outputs for combiners: a blurred copy of each image and a biased one, each with
+    its results on the sub-buffers."""
     images = (buffers.color, buffers.color_a, buffers.color_b)
-    smooth = Denoised(*(blurred(x) for x in images))
-    biased = Denoised(*(blurred(x) * np.float32(0.9) + np.float32(0.02) for x in images))
+
+    def biased_blur(x):
+        return blurred(x) * np.float32(0.9) + np.float32(0.02)
+
+    smooth = Denoised(*(blurred(x) for x in images), extras=sub_outputs(buffers, blurred))
+    biased = Denoised(*(biased_blur(x) for x in images), extras=sub_outputs(buffers, biased_blur))
     return [smooth, biased]
 
 
@@ -72,20 +84,24 @@ def with_layers(buffers, **changes):
 def hard_case(case: str, build):
     """(buffers, combiner inputs) of the named hard case; ``build`` is make_render_buffers."""
     if case == "one_pixel":
-        buffers = build(height=1, width=1, seed=3)
+        buffers = build(height=1, width=1, seed=3, bins=True)
         return buffers, synthetic_inputs(buffers)
-    buffers = build(height=HEIGHT, width=WIDTH, seed=4)
+    buffers = build(height=HEIGHT, width=WIDTH, seed=4, bins=True)
     if case == "fireflies":
         layers = {name: buffers.layers[name].copy() for name in
-                  ("color_a", "color_b", "variance_a", "variance_b")}
-        for (y, x), half in (((2, 3), "a"), ((7, 8), "b"), ((10, 1), "a")):
-            layers["color_" + half][y, x] *= 1e4
+                  ("color_a", "color_b", "variance_a", "variance_b", "color_bin0", "color_bin2",
+                   "variance_bin0", "variance_bin2")}
+        for (y, x), half, in_bin in (((2, 3), "a", 0), ((7, 8), "b", 2), ((10, 1), "a", 0)):
+            layers[f"color_bin{in_bin}"][y, x] *= 1e4             # one sample subset holds the spike
+            layers[f"variance_bin{in_bin}"][y, x] = layers[f"color_bin{in_bin}"][y, x] ** 2
+            layers["color_" + half][y, x] = (layers[f"color_bin{in_bin}"][y, x]
+                                             + buffers.layers[f"color_bin{in_bin + 1}"][y, x]) / 2
             layers["variance_" + half][y, x] = layers["color_" + half][y, x] ** 2
         layers["color"] = (layers["color_a"].astype(np.float64) + layers["color_b"]) / 2
         layers["variance"] = (layers["variance_a"].astype(np.float64) + layers["variance_b"]) / 4
         buffers = with_layers(buffers, **layers)
         inputs = synthetic_inputs(buffers)
-        inputs[1] = Denoised(inputs[1].full, inputs[1].a.copy(), inputs[1].b)
+        inputs[1] = Denoised(inputs[1].full, inputs[1].a.copy(), inputs[1].b, extras=inputs[1].extras)
         inputs[1].a[5, 5] *= 1e4                        # a firefly left in one base output
         return buffers, inputs
     if case == "black_region":
@@ -97,16 +113,20 @@ def hard_case(case: str, build):
         return buffers, synthetic_inputs(buffers)
     if case == "identical_inputs":
         smooth = synthetic_inputs(buffers)[0]
-        return buffers, [smooth, Denoised(smooth.full.copy(), smooth.a.copy(), smooth.b.copy())]
+        return buffers, [smooth, Denoised(smooth.full.copy(), smooth.a.copy(), smooth.b.copy(),
+                                          extras=dict(smooth.extras))]
     if case == "input_is_noisy_image":
-        noisy = Denoised(buffers.color.copy(), buffers.color_a.copy(), buffers.color_b.copy())
+        noisy = Denoised(buffers.color.copy(), buffers.color_a.copy(), buffers.color_b.copy(),
+                         extras=sub_outputs(buffers, lambda x: x.copy()))
         return buffers, [noisy, synthetic_inputs(buffers)[0]]
     raise ValueError(f"unknown hard case {case!r}")
 
 
 def run(module, buffers, inputs) -> Denoised:
+    """A denoiser on ``buffers``; a combiner on ``buffers`` and ``inputs`` (its first ``INPUTS``
+    when it declares how many it takes, e.g. the deep combiner's one)."""
     if module.KIND == "combiner":
-        return module.combine(buffers, inputs)
+        return module.combine(buffers, inputs[:getattr(module, "INPUTS", len(inputs))])
     return module.denoise(buffers)
 
 
@@ -123,7 +143,7 @@ def assert_valid_output(result, shape):
 def test_loads_and_keeps_the_contract(name, make_render_buffers):
     module = load_method(name)
     assert isinstance(getattr(module, "LABEL", None), str) and module.LABEL
-    buffers = make_render_buffers(height=HEIGHT, width=WIDTH, seed=1)
+    buffers = make_render_buffers(height=HEIGHT, width=WIDTH, seed=1, bins=True)
     inputs = synthetic_inputs(buffers)
     first = run(module, buffers, inputs)
     assert_valid_output(first, (HEIGHT, WIDTH))
@@ -132,7 +152,7 @@ def test_loads_and_keeps_the_contract(name, make_render_buffers):
         assert np.array_equal(getattr(first, which), getattr(second, which)), \
             f"{name}: {which} differs between two runs on the same input"
     # the output depends on the input (a method returning a constant would pass the above)
-    other = make_render_buffers(height=HEIGHT, width=WIDTH, seed=2)
+    other = make_render_buffers(height=HEIGHT, width=WIDTH, seed=2, bins=True)
     assert not np.array_equal(run(module, other, synthetic_inputs(other)).full, first.full)
 
 

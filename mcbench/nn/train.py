@@ -152,16 +152,18 @@ def _gradient_penalty(critic, real, fake, buffers, generator: torch.Generator) -
     return ((gradient.flatten(1).norm(dim=1) - 1.0) ** 2).mean()
 
 
-def train_network(module: ModuleType, crop_files: list[str | Path], weights_out: str | Path,
+def train_network(module: ModuleType, data: list[str | Path] | CropSet, weights_out: str | Path,
                   record_out: str | Path, checkpoint: str | Path, overrides: dict | None = None,
                   log=print) -> dict:
-    """Train the network of learned method ``module`` (resuming from ``checkpoint`` if present);
-    returns the record."""
+    """Train the network of learned method ``module`` (resuming from ``checkpoint`` if present)
+    on ``data``: training crop files, or a :class:`CropSet` already loaded (a combiner's, from
+    :func:`mcbench.nn.data.load_combiner_crops`); returns the record."""
     name = method_name(check_learned_method(module))
     settings = training_settings(module, overrides)
     torch.set_num_threads(int(settings["threads"]))
     checkpoint = Path(checkpoint)
-    crops = load_crops(list(crop_files))
+    crops = data if isinstance(data, CropSet) else load_crops(list(data))
+    folder = crops.info.get("folder") or (str(Path(list(data)[0]).parent) if not isinstance(data, CropSet) else "")
     train_set, validation_set = crops.split()
     if not len(train_set) or not len(validation_set):
         raise BenchError(f"training data has {len(train_set)} training and {len(validation_set)} validation "
@@ -282,7 +284,7 @@ def train_network(module: ModuleType, crop_files: list[str | Path], weights_out:
             "crops": len(crops), "training_crops": len(train_set), "validation_crops": len(validation_set),
             "training_scenes": sorted(int(s) for s in set(train_set.seeds.tolist())),
             "validation_scenes": sorted(int(s) for s in set(validation_set.seeds.tolist())),
-            "folder": str(Path(crop_files[0]).parent),
+            "folder": folder,
             "source": "procedural training scenes of mcbench.training (no test scene)",
         },
         "loss": settings["loss"],
@@ -315,9 +317,20 @@ def evaluate_committed(module: ModuleType, crops: CropSet) -> dict:
     return evaluate(network, validation_set if len(validation_set) else crops, record["loss"])
 
 
-def main(argv: list[str] | None = None, *, load_method: Callable[[str], ModuleType]) -> int:
+def correlated_paths(folder: str | Path, bases, crop_files: list[Path]) -> tuple[list[Path], dict[str, list[Path]]]:
+    """The crops of ``crop_files`` that have results of every base in ``folder/correlated/<base>/``
+    (same file name), and those results: ``(crops, {base: files})``."""
+    folder = Path(folder)
+    kept = [c for c in crop_files if all((folder / "correlated" / b / c.name).exists() for b in bases)]
+    return kept, {b: [folder / "correlated" / b / c.name for c in kept] for b in bases}
+
+
+def main(argv: list[str] | None = None, *, load_method: Callable[[str], ModuleType],
+         load_data: Callable | None = None) -> int:
     """Command line: ``train <name>`` or ``evaluate <name>``; ``load_method`` resolves a method
-    name to its module (the caller's, e.g. ``methods.load_method``: core never imports ``methods``)."""
+    name to its module (the caller's, e.g. ``methods.load_method``: core never imports ``methods``);
+    ``load_data(name, crop_files, correlated_files)`` builds a learned combiner's training data
+    (the crops with results of its ``CORRELATED_BASES`` under ``<data>/correlated/<base>/``)."""
     parser = argparse.ArgumentParser(prog="python -m mcbench.steps",
                                      description="Train a learned denoiser, or evaluate its committed weights.")
     parser.add_argument("command", choices=["train", "evaluate"])
@@ -329,13 +342,19 @@ def main(argv: list[str] | None = None, *, load_method: Callable[[str], ModuleTy
     try:
         module = check_learned_method(load_method(args.name))
         files = crop_paths(args.data)
+        data = files
+        if getattr(module, "KIND", "denoiser") == "combiner":
+            if load_data is None:
+                raise BenchError(f"{args.name} is a combiner: no loader for its base results")
+            files, correlated = correlated_paths(args.data, module.CORRELATED_BASES, files)
+            data = load_data(args.name, files, correlated)
         if args.command == "train":
             overrides = {"steps": args.steps} if args.steps else {}
             checkpoint = args.checkpoint or f"results/training/checkpoints/{args.name}.ckpt"
-            train_network(module, files, weights_path(args.name), record_path(args.name), checkpoint,
+            train_network(module, data, weights_path(args.name), record_path(args.name), checkpoint,
                           overrides, log=lambda m: print(m, file=sys.stderr, flush=True))
         else:
-            result = evaluate_committed(module, load_crops(files))
+            result = evaluate_committed(module, data if isinstance(data, CropSet) else load_crops(data))
             recorded = read_json(record_path(args.name))["validation"]["loss"]
             print(f"{args.name}: validation loss {result['loss']:.6f} (recorded {recorded:.6f}, "
                   f"ratio {result['loss'] / recorded:.4f}), relMSE {result['relmse']:.6f}")

@@ -26,7 +26,8 @@ Crops
 ``crops_per_image`` crops of ``crop_size`` x ``crop_size`` pixels at seeded random positions,
 pairwise disjoint (:func:`crop_boxes`: rejection sampling, falling back to random cells of a
 tiling). Each crop holds ``<layer>_spp<N>`` for every layer of :data:`mcbench.buffers.ALL_LAYERS`
-and noisy level ``N``, plus ``target`` (H, W, 3) and ``target_variance`` (H, W, 3).
+(and of :data:`mcbench.buffers.BIN_LAYERS`, the four sample bins, for levels that are multiples
+of 4) and noisy level ``N``, plus ``target`` (H, W, 3) and ``target_variance`` (H, W, 3).
 ``snakemake training_data`` writes them as ``results/training/example_<seed>_<k>.exr``
 (:func:`mcbench.steps.write_training_example`).
 """

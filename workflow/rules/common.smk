@@ -15,7 +15,7 @@ from mcbench.config import config_digest, resolve_config  # noqa: E402
 from mcbench.metrics import METRICS  # noqa: E402
 from mcbench.seeds import training_seeds  # noqa: E402
 from mcbench.weights import COMMITTED_WEIGHTS, is_learned_method  # noqa: E402
-from methods import NOISY, NOISY_LABEL, method_table  # noqa: E402
+from methods import NOISY, NOISY_LABEL, load_method, method_table  # noqa: E402
 from scenes import available_scenes, load_scene  # noqa: E402
 
 
@@ -104,10 +104,13 @@ def weights_digest(wildcards):
     """SHA-256 of a learned method's weights ("" otherwise): a params entry, so the provenance
     trigger reruns the method when its weights change."""
     spec = METHODS[wildcards.method]
-    path = Path(weights_file(spec["module"]))
-    if not spec["learned"] or not path.exists():
-        return ""
-    return _file_digest(str(path), path.stat().st_mtime_ns)
+    return weights_digest_of(spec["module"]) if spec["learned"] else ""
+
+
+def weights_digest_of(module):
+    """SHA-256 of the weights of method module ``module`` ("" when it has none)."""
+    path = Path(weights_file(module))
+    return _file_digest(str(path), path.stat().st_mtime_ns) if path.exists() else ""
 
 
 @functools.lru_cache(maxsize=None)
@@ -126,9 +129,31 @@ def missing_weights(network):
 
 
 def train_network_inputs(wildcards):
-    """Training crops of a network whose weights are missing; none once the weights exist, so
-    an explicit `train_<name>` with committed weights has nothing to do."""
-    return ancient(training_crop_files()) if missing_weights(wildcards.network) else []
+    """Training crops of a network whose weights are missing (a learned combiner: the crops of
+    training.combiners and its bases' results on them); none once the weights exist, so an
+    explicit `train_<name>` with committed weights has nothing to do."""
+    if not missing_weights(wildcards.network):
+        return {}
+    bases = combiner_bases(wildcards.network)
+    if not bases:
+        return {"crops": ancient(training_crop_files())}
+    return {"crops": ancient(combiner_crop_files()),
+            **{f"correlated_{base}": ancient(correlated_files(base)) for base in bases}}
+
+
+def combiner_bases(network):
+    """The base denoisers a learned combiner is trained on (its CORRELATED_BASES); () for a denoiser."""
+    return tuple(getattr(load_method(network), "CORRELATED_BASES", ())) if network in NETWORKS else ()
+
+
+def combiner_crop_files():
+    return [rules.training_example.output[k].format(seed=seed)
+            for seed in COMBINER_SEEDS for k in range(COMBINER_TRAINING["crops"])]
+
+
+def correlated_files(base):
+    return [rules.training_correlated.output[k].format(seed=seed, base=base)
+            for seed in COMBINER_SEEDS for k in range(COMBINER_TRAINING["crops"])]
 
 
 def case_outputs(wildcards):
@@ -158,9 +183,16 @@ def render_cost_records(wildcards=None):
 
 # Training data and learned methods (rules in training.smk). Defaults: the schema's.
 
-TRAINING = {key: value for key, value in config["training"].items() if key != "networks"}
+TRAINING = {key: value for key, value in config["training"].items() if key not in ("networks", "combiners")}
 TRAINING_OVERRIDES = config["training"]["networks"]
 TRAINING_SEEDS = training_seeds(TRAINING)
+COMBINER_TRAINING = config["training"]["combiners"]
+for _key in ("count", "fibre_count", "crops"):
+    if COMBINER_TRAINING[_key] > TRAINING[_key]:
+        raise BenchError(f"training.combiners.{_key}: {COMBINER_TRAINING[_key]} is more than "
+                         f"training.{_key} ({TRAINING[_key]})")
+COMBINER_SEEDS = training_seeds({**TRAINING, "count": COMBINER_TRAINING["count"],
+                                 "fibre_count": COMBINER_TRAINING["fibre_count"]})
 # train_<name> rules for the learned methods the config names (no other method module is imported)
 NETWORKS = sorted({spec["module"] for spec in METHODS.values() if spec["learned"]})
 for _name in TRAINING_OVERRIDES:

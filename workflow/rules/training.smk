@@ -2,6 +2,7 @@
 # the test scenes, and the learned denoisers trained on them (mcbench.nn). Not part of `all`:
 #   snakemake --cores 2 training_data     # render the crops
 #   snakemake --cores 2 train_kpcn        # train one network when its weights are missing
+#   snakemake --cores 2 train_deep_combiner  # a learned combiner: also runs its bases on crops
 # The weights in methods/weights are committed, so the main job never trains (nor renders
 # crops); to retrain one, delete its .pt (a killed training resumes from its checkpoint).
 
@@ -21,6 +22,25 @@ rule training_example:
         f"{RESULTS}/benchmarks/training/example_{{seed}}.tsv"
     script:
         "../scripts/training_example.py"
+
+
+rule training_correlated:
+    input:
+        lambda wildcards: [rules.training_example.output[k].format(seed=wildcards.seed)
+                           for k in range(COMBINER_TRAINING["crops"])],
+    output:
+        [f"{RESULTS}/training/correlated/{{base}}/example_{{seed}}_{k}.exr" for k in range(COMBINER_TRAINING["crops"])],
+    params:
+        weights=lambda wildcards: weights_digest_of(wildcards.base),
+    threads: 1
+    conda:
+        "../envs/mcbench.yaml"
+    log:
+        f"{RESULTS}/logs/training/correlated_{{base}}_{{seed}}.log",
+    benchmark:
+        f"{RESULTS}/benchmarks/training/correlated_{{base}}_{{seed}}.tsv"
+    script:
+        "../scripts/training_correlated.py"
 
 
 rule training_data:

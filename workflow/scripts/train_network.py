@@ -5,7 +5,9 @@ os.environ["MCBENCH_WEIGHTS_DIR"] = os.path.abspath(snakemake.params.weights_dir
 from mcbench.logs import run_logged  # noqa: E402
 from mcbench.steps import train_learned_method  # noqa: E402
 
-run_logged(snakemake.log[0], train_learned_method, snakemake.wildcards.network, list(snakemake.input),
+correlated = {name[len("correlated_"):]: list(files) for name, files in snakemake.input.items()
+              if name.startswith("correlated_")}
+run_logged(snakemake.log[0], train_learned_method, snakemake.wildcards.network, list(snakemake.input.crops),
            snakemake.output.weights, snakemake.output.record, snakemake.params.checkpoint,
            {**snakemake.params.overrides, "threads": snakemake.threads},
-           log=lambda message: print(message, flush=True))
+           log=lambda message: print(message, flush=True), correlated_files=correlated or None)

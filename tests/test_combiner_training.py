@@ -1,0 +1,111 @@
+"""Training data of learned combiners: base results on training crops (the deep combiner's
+correlated inputs), KPCN's results on sub-buffers, and the combiner crop loader."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from mcbench import BenchError
+from mcbench.buffers import ALL_LAYERS, BIN_LAYERS, SUB_OUTPUTS, Denoised, RenderBuffers
+from mcbench.exr import read_layers, write_layers
+from mcbench.nn.data import BUFFER_KEYS, crop_render_layers, load_combiner_crops
+from mcbench.steps import write_correlated_training_inputs
+from methods import load_method
+
+LEVELS = (4, 8)
+MULTI_KEYS = {"correlated": 3, "albedo_variance": 3, "color_sub": 6, "variance_sub": 6, "correlated_sub": 6}
+
+
+def write_crop(path, build, *, seed: int, size: int = 16):
+    """A training crop file like mcbench.training_data writes: every render layer (with bins)
+    per level as ``<layer>_spp<N>``, and a target."""
+    layers = {}
+    for level in LEVELS:
+        buffers = build(height=size, width=size, spp=level, seed=seed * 10 + level, bins=True,
+                        half_std=0.2 / np.sqrt(level))
+        for name, array in buffers.layers.items():
+            layers[f"{name}_spp{level}"] = array
+        for name in ALL_LAYERS:          # feature variances: zero in the synthetic buffers
+            layers.setdefault(f"{name}_spp{level}", np.zeros_like(buffers.layers["depth" if "depth" in name else "color"]))
+    layers["target"] = build(height=size, width=size, half_std=0.0, seed=0).color
+    write_layers(path, layers, metadata={"seed": seed, "crop": 0, "spp_levels": ",".join(map(str, LEVELS)),
+                                         "target_spp": 4096, "resolution": f"{size}x{size}"})
+    return layers
+
+
+def test_kpcn_applies_each_image_kernel_to_its_sub_buffers(make_render_buffers):
+    """KPCN's kernel is linear in the colour it filters and color = (sub0 + sub1) / 2, so its
+    results on the two sub-buffers average to its result on the image (A from bins 0-1 with A's
+    kernel, never B's samples); renders without bins get no sub-buffer results."""
+    kpcn = load_method("kpcn")
+    buffers = make_render_buffers(height=16, width=12, seed=5, bins=True, half_std=0.01)
+    assert all(buffers.layers[n].min() >= 0 for n in BIN_LAYERS)   # radiance: KPCN clamps at 0
+    result = kpcn.denoise(buffers)
+    for which in ("full", "a", "b"):
+        sub0, sub1 = result.sub_outputs(which)
+        np.testing.assert_allclose((sub0.astype(np.float64) + sub1) / 2, result.image(which), rtol=2e-4, atol=1e-5)
+        assert not np.allclose(sub0, sub1)
+    plain = make_render_buffers(height=16, width=12, seed=5)
+    plain_result = kpcn.denoise(plain)
+    assert not plain_result.extras
+    with pytest.raises(BenchError, match="sub-buffer"):
+        plain_result.sub_outputs("a")
+    # the same network and input: the image results do not depend on the sub-buffers
+    again = kpcn.denoise(RenderBuffers(layers={k: v for k, v in buffers.layers.items() if k not in BIN_LAYERS},
+                                       spp=buffers.spp))
+    np.testing.assert_array_equal(again.full, result.full)
+
+
+def test_correlated_inputs_and_combiner_crops(tmp_path, make_render_buffers):
+    crop_paths, outputs = [], {"jbf": [], "kpcn": []}
+    for seed in (0, 7):
+        crop_paths.append(tmp_path / f"example_{seed}_0.exr")
+        write_crop(crop_paths[-1], make_render_buffers, seed=seed)
+    for base in outputs:
+        outputs[base] = [tmp_path / "correlated" / base / p.name for p in crop_paths]
+        write_correlated_training_inputs(base, [str(p) for p in crop_paths], [str(p) for p in outputs[base]])
+    # each level's results are the base's own output on that level's buffers
+    crop = read_layers(crop_paths[1])
+    jbf = load_method("jbf").denoise(RenderBuffers(layers=crop_render_layers(crop, 8), spp=8))
+    written = read_layers(outputs["jbf"][1])
+    np.testing.assert_array_equal(written["correlated_a_spp8"], jbf.a)
+    assert "correlated_sub0_spp8" not in written                # jbf exposes no kernel
+    kpcn_written = read_layers(outputs["kpcn"][0])
+    assert {f"correlated_b_sub{j}_spp4" for j in (0, 1)} <= set(kpcn_written)
+
+    crops = load_combiner_crops(crop_paths, {"kpcn": outputs["kpcn"]}, MULTI_KEYS)
+    channels = sum(BUFFER_KEYS.values()) + sum(MULTI_KEYS.values())
+    assert crops.inputs.shape == (2, len(LEVELS), 3, channels, 16, 16)
+    assert list(crops.keys) == list(BUFFER_KEYS) + list(MULTI_KEYS)
+    offsets = np.cumsum([0] + list(crops.keys.values()))
+    start = dict(zip(crops.keys, offsets))
+    item = crops.inputs[0, 1]                                   # crop of seed 0, level 8
+    crop0 = read_layers(crop_paths[0])
+    # A's sub-buffers are bins 0 and 1; the full image's are A and B
+    np.testing.assert_array_equal(item[1, start["color_sub"]:start["color_sub"] + 3],
+                                  np.moveaxis(crop0["color_bin0_spp8"], 2, 0))
+    np.testing.assert_array_equal(item[0, start["color_sub"] + 3:start["color_sub"] + 6],
+                                  np.moveaxis(crop0["color_b_spp8"], 2, 0))
+    np.testing.assert_array_equal(item[2, start["correlated_sub"]:start["correlated_sub"] + 3],
+                                  np.moveaxis(kpcn_written["correlated_b_sub0_spp8"], 2, 0))
+    both = load_combiner_crops(crop_paths, outputs, {"correlated": 3})
+    assert len(both) == 4 and both.info["bases"] == ["jbf", "kpcn"]
+    train, validation = both.split()
+    assert sorted(set(validation.seeds)) == [7] and len(validation) == 2   # both bases of scene 7
+    with pytest.raises(BenchError, match="correlated_sub"):
+        load_combiner_crops(crop_paths, {"jbf": outputs["jbf"]}, MULTI_KEYS)
+    with pytest.raises(BenchError, match="result files"):
+        load_combiner_crops(crop_paths, {"jbf": outputs["jbf"][:1]}, {"correlated": 3})
+
+
+def test_denoised_load_reads_extras_only_when_asked(tmp_path):
+    image = np.random.default_rng(0).random((4, 5, 3)).astype(np.float32)
+    extras = {name: image * (i + 2) for i, name in enumerate(SUB_OUTPUTS["a"])}
+    path = tmp_path / "out.exr"
+    write_layers(path, Denoised(image, image * 0.5, image * 0.25, extras=extras).layers())
+    assert Denoised.load(path).extras is None
+    loaded = Denoised.load(path, extras=True)
+    np.testing.assert_array_equal(loaded.sub_outputs("a")[1], extras[SUB_OUTPUTS["a"][1]])
+    with pytest.raises(BenchError, match=r"out\.exr.*sub-buffer"):
+        loaded.sub_outputs("full")
