@@ -51,7 +51,7 @@ rule training_data:
 
 rule train_network:
     input:
-        train_network_inputs,
+        unpack(train_network_inputs),
     output:
         weights=f"{WEIGHTS_DIR}/{{network}}.pt",
         record=f"{WEIGHTS_DIR}/{{network}}.json",
