@@ -22,11 +22,13 @@ sub-buffer results (only ``kpcn`` exposes its kernel) are refused with an error 
 Network inputs (38 channels): the single-buffer combiner's 24 image-level channels
 (:func:`mcbench.nn.combination.image_inputs`) plus, per sub-buffer, log(1+y_b), log(1+z_b) and
 y_b's log-space noise level (:func:`mcbench.nn.combination.sub_buffer_inputs`). Network: the same
-five 3×3 layers of 48 channels (two dilated) and a 1×1 layer giving 2×225 logits; 121,674
+five 3×3 layers of 48 channels (two dilated) and a 1×1 layer giving 2×225 logits; 121,650
 parameters.
 
-Training: 2000 steps of batch 8, 48² patches, relMSE (measured 0.45 s/step, forward + backward
-with 2 threads: about 15 minutes on 2 cores).
+Training: 1100 steps of batch 8, 48² patches, relMSE. Measured here (forward, backward, clip and
+Adam step with 2 threads on a shared 2-core machine): 0.80 s/step at best, 1.1 s median while
+other jobs ran (CPU time 0.99 s/step: twice the combination work of the single-buffer kernel), so
+1100 steps take about 15-20 minutes.
 """
 
 from __future__ import annotations
@@ -43,7 +45,7 @@ INPUTS = 1
 SUB_BUFFERS = 2
 
 NETWORK = {"channels": 48, "layers": 6, "dilated_layers": 2, "window": 15}
-TRAINING = {"steps": 2000, "batch_size": 8, "patch": 48, "learning_rate": 5e-4, "loss": "relmse"}
+TRAINING = {"steps": 1100, "batch_size": 8, "patch": 48, "learning_rate": 5e-4, "loss": "relmse"}
 # Tensors forward() needs beyond color, variance, albedo, normal, depth: name -> channels.
 TRAINING_KEYS = {"correlated": 3, "albedo_variance": 3, "normal_variance": 3, "depth_variance": 1,
                  "color_sub": 3 * SUB_BUFFERS, "variance_sub": 3 * SUB_BUFFERS, "correlated_sub": 3 * SUB_BUFFERS}

@@ -156,7 +156,7 @@ def split_sub_buffers(stacked: torch.Tensor, bins: int) -> torch.Tensor:
     n, channels, h, w = stacked.shape
     if channels % bins:
         raise ValueError(f"{channels} channels do not split into {bins} sub-buffers")
-    return stacked.view(n, bins, channels // bins, h, w)
+    return stacked.reshape(n, bins, channels // bins, h, w)
 
 
 def feature_noise_levels(batch: dict[str, torch.Tensor]) -> torch.Tensor:
