@@ -121,6 +121,8 @@ def build_render_buffers(truth=None, *, height: int = 16, width: int = 16, spp: 
             raise ValueError(f"{name} must have shape {expected[name]}, got {value.shape}")
         for suffix in ALL_SUFFIXES:
             layers[name + suffix] = value.copy()
+            # noise-free features: zero variance (the layers every render holds)
+            layers[f"{name}_variance{suffix}"] = np.zeros_like(value)
     assert all(name in layers for name in REQUIRED_LAYERS)
     return RenderBuffers(layers=layers, spp=spp)
 
