@@ -104,39 +104,18 @@ def build_network(**arch):
 def denoise(buffers):
     """KPCN on the full buffer and on each half buffer (three inferences, as Zheng et al. ran it);
     for renders with sample bins also each image's kernel applied to its two sub-buffers."""
-    import torch
-
     from mcbench.buffers import SUB_OUTPUTS, Denoised
-    from mcbench.nn.inference import denoise_with_network, image_tensors, load_network
+    from mcbench.nn.inference import (array_tensor, denoise_with_network, deterministic_inference, image_tensors,
+                                      load_network, tensor_image)
 
     if not buffers.has_sub_buffers():
         return denoise_with_network(sys.modules[__name__], buffers)
     network = load_network(sys.modules[__name__])
     images, extras = {}, {}
-    previous = torch.are_deterministic_algorithms_enabled()
-    torch.use_deterministic_algorithms(True)
-    try:
-        with torch.inference_mode():
-            for which in ("full", "a", "b"):
-                subs = [image_tensors_color(color) for color, _ in buffers.sub_images(which)]
-                output, sub_outputs = network(image_tensors(buffers.image(which)), subs)
-                images[which] = _to_image(output)
-                for name, sub_output in zip(SUB_OUTPUTS[which], sub_outputs):
-                    extras[name] = _to_image(sub_output)
-    finally:
-        torch.use_deterministic_algorithms(previous)
+    with deterministic_inference():
+        for which in ("full", "a", "b"):
+            subs = [array_tensor(color) for color, _ in buffers.sub_images(which)]
+            output, sub_outputs = network(image_tensors(buffers.image(which)), subs)
+            images[which] = tensor_image(output)
+            extras.update({name: tensor_image(sub) for name, sub in zip(SUB_OUTPUTS[which], sub_outputs)})
     return Denoised(full=images["full"], a=images["a"], b=images["b"], extras=extras)
-
-
-def image_tensors_color(color):
-    """An (H, W, 3) colour as a (1, 3, H, W) float32 tensor."""
-    import numpy as np
-    import torch
-
-    return torch.from_numpy(np.ascontiguousarray(np.moveaxis(np.asarray(color, np.float32), 2, 0)))[None]
-
-
-def _to_image(tensor):
-    import numpy as np
-
-    return np.ascontiguousarray(tensor[0].permute(1, 2, 0).numpy(), dtype=np.float32)

@@ -19,7 +19,7 @@ from mcbench.nn.train import evaluate
 from mcbench.weights import COMMITTED_WEIGHTS, is_learned_method, load_weights, record_path, weights_path
 from methods import available_methods, load_method
 
-LEARNED = ["kpcn", "mcgan", "optix_ae", "wskpn"]
+LEARNED = ["kpcn", "mcgan", "optix_ae", "wskpn"]   # learned denoisers (the learned combiners: test_deep_combiner.py)
 # Kernel predictors output convex combinations of input pixels, so black in gives exactly black
 # out; direct predictors (residual in log space) only approximately: a small bias is allowed.
 BLACK_TOLERANCE = {"kpcn": 1e-7, "wskpn": 1e-7, "mcgan": 0.05, "optix_ae": 0.05}
@@ -37,7 +37,8 @@ def noisy_buffers(make_render_buffers):
 
 
 def test_registry_lists_the_learned_methods_and_labels_stand_ins():
-    learned = sorted(n for n in available_methods() if is_learned_method(load_method(n)))
+    learned = sorted(n for n in available_methods() if is_learned_method(load_method(n))
+                     and load_method(n).KIND == "denoiser")
     assert learned == LEARNED
     assert load_method("optix_ae").LABEL == "OptiX† (our autoencoder)"
     for name in LEARNED:

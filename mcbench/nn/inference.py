@@ -12,6 +12,7 @@ Every function takes the learned method's *module* (``NETWORK``, ``TRAINING``,
 
 from __future__ import annotations
 
+from contextlib import contextmanager
 from functools import lru_cache
 from pathlib import Path
 from types import ModuleType
@@ -53,25 +54,31 @@ def _cached_network(module: ModuleType, path: str, mtime_ns: int) -> torch.nn.Mo
 
 def image_tensors(image: ImageBuffers) -> dict[str, torch.Tensor]:
     """One image's buffers as (1, C, H, W) float32 tensors keyed like :data:`mcbench.nn.data.BUFFER_KEYS`."""
-    def tensor(array):
-        array = np.asarray(array, dtype=np.float32)
-        array = array[None] if array.ndim == 2 else np.moveaxis(array, 2, 0)
-        return torch.from_numpy(np.ascontiguousarray(array))[None]
-
-    return {"color": tensor(image.color), "variance": tensor(image.variance), "albedo": tensor(image.albedo),
-            "normal": tensor(image.normal), "depth": tensor(image.depth)}
+    return {"color": array_tensor(image.color), "variance": array_tensor(image.variance),
+            "albedo": array_tensor(image.albedo), "normal": array_tensor(image.normal),
+            "depth": array_tensor(image.depth)}
 
 
-def run_network(network: torch.nn.Module, image: ImageBuffers) -> np.ndarray:
-    """Denoise one image: (H, W, 3) float32 linear radiance."""
+@contextmanager
+def deterministic_inference():
+    """``torch.inference_mode`` with deterministic algorithms (the previous setting restored)."""
     previous = torch.are_deterministic_algorithms_enabled()
     torch.use_deterministic_algorithms(True)
     try:
         with torch.inference_mode():
-            output = network(image_tensors(image))
+            yield
     finally:
         torch.use_deterministic_algorithms(previous)
-    return np.ascontiguousarray(output[0].permute(1, 2, 0).numpy(), dtype=np.float32)
+
+
+def tensor_image(tensor: torch.Tensor) -> np.ndarray:
+    """The first image of an (N, C, H, W) tensor as an (H, W, C) float32 array."""
+    return np.ascontiguousarray(tensor[0].permute(1, 2, 0).numpy(), dtype=np.float32)
+
+
+def run_network(network: torch.nn.Module, image: ImageBuffers) -> np.ndarray:
+    """Denoise one image: (H, W, 3) float32 linear radiance."""
+    return run_network_on(network, image_tensors(image))
 
 
 def denoise_with_network(module: ModuleType, buffers: RenderBuffers) -> Denoised:
@@ -150,14 +157,8 @@ def _combiner_arrays(buffers: RenderBuffers, inputs: list[Denoised], which: str,
 def run_network_on(network: torch.nn.Module, tensors: dict[str, torch.Tensor]) -> np.ndarray:
     """``network(tensors)`` of one image (batch of 1), deterministic like :func:`run_network`:
     (H, W, 3) float32 linear radiance."""
-    previous = torch.are_deterministic_algorithms_enabled()
-    torch.use_deterministic_algorithms(True)
-    try:
-        with torch.inference_mode():
-            output = network(tensors)
-    finally:
-        torch.use_deterministic_algorithms(previous)
-    return np.ascontiguousarray(output[0].permute(1, 2, 0).numpy(), dtype=np.float32)
+    with deterministic_inference():
+        return tensor_image(network(tensors))
 
 
 def combine_with_network(module: ModuleType, buffers: RenderBuffers, inputs: list[Denoised], *,
