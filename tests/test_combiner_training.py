@@ -109,3 +109,73 @@ def test_denoised_load_reads_extras_only_when_asked(tmp_path):
     np.testing.assert_array_equal(loaded.sub_outputs("a")[1], extras[SUB_OUTPUTS["a"][1]])
     with pytest.raises(BenchError, match=r"out\.exr.*sub-buffer"):
         loaded.sub_outputs("full")
+
+
+# --------------------------------------------------------------------------- committed weights
+
+COMBINERS = ["deep_combiner", "deep_combiner_mb"]
+
+
+@pytest.mark.parametrize("name", COMBINERS)
+def test_committed_combiner_weights_load_safely_and_match_their_record(name):
+    from mcbench.io import read_json
+    from mcbench.weights import COMMITTED_WEIGHTS, load_weights, record_path, weights_path
+
+    path = weights_path(name)
+    assert path.parent == COMMITTED_WEIGHTS and path.exists(), f"{path} missing"
+    blob = load_weights(path)                       # torch.load(weights_only=True) underneath
+    module = load_method(name)
+    record = read_json(record_path(name))
+    assert blob["arch"] == module.NETWORK == record["arch"] and record["network"] == name
+    network = module.build_network(**blob["arch"])
+    network.load_state_dict(blob["state_dict"])
+    assert record["parameters"] == sum(p.numel() for p in network.parameters())
+    assert record["data"]["bases"] == list(module.CORRELATED_BASES)
+    assert record["settings"]["steps"] == record["history"][-1]["step"]
+    per_spp = record["validation"]["per_spp"]
+    assert all(np.isfinite(v["loss"]) and v["loss"] < v["noisy_loss"] for v in per_spp.values())
+
+
+@pytest.fixture(scope="module")
+def combiner_validation_scene(tmp_path_factory):
+    """The first validation scene of the deep combiner's record, rendered afresh with the
+    training-data settings, and every base's results on its crops."""
+    from mcbench.io import read_json
+    from mcbench.training_data import training_example
+    from mcbench.variants import pick_variant
+    from mcbench.weights import record_path
+
+    if pick_variant("auto") == "scalar_rgb":
+        pytest.skip("training renders need an LLVM or CUDA variant (libLLVM 19 missing)")
+    data = read_json(record_path("deep_combiner"))["data"]
+    rendered = read_json(record_path("kpcn"))["data"]["crops_per_scene"]   # crops rendered per scene
+    seed = data["validation_scenes"][0]
+    width, height = (int(v) for v in data["resolution"].split("x"))
+    crops = training_example(seed, data["spp_levels"], int(data["target_spp"]), (width, height),
+                             data["crop_size"], rendered)[:data["crops_per_scene"]]
+    folder = tmp_path_factory.mktemp("validation")
+    paths = []
+    for layers, meta in crops:
+        paths.append(str(folder / f"example_{seed}_{meta['crop']}.exr"))
+        write_layers(paths[-1], layers, metadata=meta)
+    bases = sorted({b for name in COMBINERS for b in load_method(name).CORRELATED_BASES})
+    correlated = {}
+    for base in bases:
+        correlated[base] = [str(folder / "correlated" / base / f"example_{seed}_{k}.exr") for k in range(len(paths))]
+        write_correlated_training_inputs(base, paths, correlated[base])
+    return seed, paths, correlated
+
+
+@pytest.mark.parametrize("name", COMBINERS)
+def test_committed_combiner_weights_reproduce_their_validation_loss(name, combiner_validation_scene):
+    from mcbench.io import read_json
+    from mcbench.nn.inference import load_network
+    from mcbench.nn.train import evaluate
+    from mcbench.steps import training_data
+    from mcbench.weights import record_path
+
+    seed, paths, correlated = combiner_validation_scene
+    record = read_json(record_path(name))
+    crops = training_data(name, paths, correlated)
+    result = evaluate(load_network(load_method(name)), crops, record["loss"])
+    assert result["loss"] == pytest.approx(record["validation"]["per_scene"][str(seed)], rel=0.05)

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from mcbench import BenchError
-from mcbench.buffers import ALL_LAYERS
+from mcbench.buffers import ALL_LAYERS, BIN_LAYERS
 from mcbench.config import read_config_file
 from mcbench.seeds import (FIBRE_SEED_BASE, TRAINING_BASE_SEED, decode_seed, decode_training_seed,
                            is_fibre_seed, render_seed, training_render_seed, training_seeds)
@@ -42,8 +42,8 @@ def test_same_seed_same_layers_other_seed_other_layers(example_3):
 
 
 def test_layers_names_shapes_finite_and_variances(example_3):
-    expected = {f"{name}_spp{spp}" for name in ALL_LAYERS for spp in LEVELS} | {"target",
-                                                                                 "target_variance"}
+    expected = {f"{name}_spp{spp}" for name in ALL_LAYERS + BIN_LAYERS for spp in LEVELS} | {
+        "target", "target_variance"}
     for layers, meta in example_3:
         assert set(layers) == expected
         for name, layer in layers.items():
@@ -199,17 +199,18 @@ def test_training_seeds_disjoint_from_test_render_seeds():
     for scene_seed in (0, 1, 77, 65535):
         for spp in (2, 4, 16, 64, 256, 4096):
             for half in (0, 1):
-                for p in (0, 1, 127):
-                    seeds.add(training_render_seed(scene_seed, "noisy", spp, half, p))
+                for j in (0, 1):
+                    for p in (0, 1, 63):
+                        seeds.add(training_render_seed(scene_seed, "noisy", spp, half, p, bin=j))
         for p in (0, 15, 4095):
             seeds.add(training_render_seed(scene_seed, "target", pass_index=p))
-    assert len(seeds) == 4 * (6 * 2 * 3 + 3)                         # injective
+    assert len(seeds) == 4 * (6 * 2 * 2 * 3 + 3)                     # injective
     for s in seeds:
         assert 0 <= s < 2 ** 32
         assert decode_seed(s)["base_seed"] == TRAINING_BASE_SEED      # never a test render's
         decoded = decode_training_seed(s)
         again = (training_render_seed(decoded["scene_seed"], "noisy", decoded["spp"],
-                                      decoded["half"], decoded["pass_index"])
+                                      decoded["half"], decoded["pass_index"], bin=decoded["bin"])
                  if decoded["kind"] == "noisy" else
                  training_render_seed(decoded["scene_seed"], "target",
                                       pass_index=decoded["pass_index"]))
@@ -217,7 +218,8 @@ def test_training_seeds_disjoint_from_test_render_seeds():
     # Test renders with any config seed 0..6 (noisy and reference) never decode as training.
     for base in range(TRAINING_BASE_SEED):
         for s in (render_seed("noisy", spp=4, half=1, pass_index=3, base_seed=base),
-                  render_seed("reference", chunk=4095, pass_index=65535, base_seed=base)):
+                  render_seed("noisy", spp=4, half=1, bin=1, pass_index=32767, base_seed=base),
+                  render_seed("reference", chunk=4095, pass_index=32767, base_seed=base)):
             assert s not in seeds
             with pytest.raises(ValueError):
                 decode_training_seed(s)

@@ -121,8 +121,10 @@ def evaluate(network: torch.nn.Module, crops: CropSet, loss: str, batch_size: in
     """Mean ``loss`` and relMSE of ``network`` over every (crop, level) full buffer of ``crops``.
 
     Returns ``{"loss", "relmse", "items", "per_scene": {seed: loss}, "per_spp": {spp: {"loss",
-    "relmse", "noisy_loss", "noisy_relmse"}}}``; every item (one crop at one level) weighs the
-    same; ``noisy_*`` are the errors of the noisy input itself, for comparison.
+    "relmse", "noisy_loss", "noisy_relmse"[, "correlated_loss", "correlated_relmse"]}}}``; every
+    item (one crop at one level) weighs the same; ``noisy_*`` are the errors of the noisy input
+    itself and ``correlated_*`` (a combiner's data) those of the base result it combines, for
+    comparison.
     """
     loss_fn, relmse_fn = LOSSES[loss], LOSSES["relmse"]
     was_training = network.training
@@ -131,15 +133,19 @@ def evaluate(network: torch.nn.Module, crops: CropSet, loss: str, batch_size: in
     for buffers, targets, batch_seeds, batch_spp in validation_batches(crops, batch_size):
         prediction = network(buffers)
         for i in range(len(targets)):
-            y, t, x = prediction[i:i + 1], targets[i:i + 1], buffers["color"][i:i + 1]
-            rows.append((int(batch_seeds[i]), int(batch_spp[i]), float(loss_fn(y, t)), float(relmse_fn(y, t)),
-                         float(loss_fn(x, t)), float(relmse_fn(x, t))))
+            y, t = prediction[i:i + 1], targets[i:i + 1]
+            row = [int(batch_seeds[i]), int(batch_spp[i]), float(loss_fn(y, t)), float(relmse_fn(y, t))]
+            for key in ("color", "correlated"):
+                if key in buffers:
+                    x = buffers[key][i:i + 1]
+                    row += [float(loss_fn(x, t)), float(relmse_fn(x, t))]
+            rows.append(row)
     network.train(was_training)
     table = np.array(rows, dtype=np.float64)
     seeds, spp = table[:, 0].astype(int), table[:, 1].astype(int)
+    names = ("loss", "relmse", "noisy_loss", "noisy_relmse", "correlated_loss", "correlated_relmse")
     per_scene = {str(s): float(table[seeds == s, 2].mean()) for s in np.unique(seeds)}
-    per_spp = {str(n): dict(zip(("loss", "relmse", "noisy_loss", "noisy_relmse"),
-                                (float(v) for v in table[spp == n, 2:].mean(axis=0)))) for n in np.unique(spp)}
+    per_spp = {str(n): dict(zip(names, (float(v) for v in table[spp == n, 2:].mean(axis=0)))) for n in np.unique(spp)}
     return {"loss": float(table[:, 2].mean()), "relmse": float(table[:, 3].mean()), "items": int(len(table)),
             "per_scene": per_scene, "per_spp": per_spp}
 
