@@ -209,6 +209,11 @@ def flip_map(image, reference) -> np.ndarray:
     return _flip_evaluate(image, reference)[0]
 
 
+def flip_with_map(image, reference) -> tuple[np.ndarray, float]:
+    """``(flip_map(image, reference), flip(image, reference))`` from one FLIP evaluation."""
+    return _flip_evaluate(image, reference)
+
+
 def flip(image, reference) -> float:
     """Mean HDR-FLIP error over pixels (the package's own mean of :func:`flip_map`), in [0, 1].
 

@@ -63,27 +63,37 @@ def run_method(method: str, render_path: str, output_path: str, timing_path: str
 
 
 def compute_case_metrics(scene: str, spp: int, reference_path: str, render_path: str,
-                         candidate_paths: dict[str, str], metrics: list[str], output_path: str) -> pd.DataFrame:
+                         candidate_paths: dict[str, str], metrics: list[str], output_path: str, *,
+                         flip_maps_path: str | None = None) -> pd.DataFrame:
     """Errors of the noisy input and every candidate against the reference for one test case.
 
-    Writes a tidy CSV with columns scene, spp, candidate, metric, value.
+    Writes a tidy CSV with columns scene, spp, candidate, metric, value; with ``flip_maps_path``
+    also every entry's per-pixel HDR-FLIP map (one (H, W) layer per entry, named like it), from
+    the same evaluation as the ``flip`` metric, so the viewer does not evaluate FLIP again.
     """
+    from mcbench.metrics import flip_with_map
+
     reference = read_layers(reference_path, ["color"])
     check_finite(reference_path, reference)
     reference = reference["color"]
     images = {NOISY: RenderBuffers.load(render_path).color}
     for candidate, path in candidate_paths.items():
         images[candidate] = Denoised.load(path).full
-    rows = []
+    rows, flip_maps = [], {}
     for candidate, image in images.items():
         if image.shape != reference.shape:
             source = render_path if candidate == NOISY else candidate_paths[candidate]
             raise BenchError(f"{source}: shape {image.shape} does not match reference "
                              f"{reference_path} of shape {reference.shape}")
+        flip_value = None
+        if flip_maps_path is not None:
+            flip_maps[candidate], flip_value = flip_with_map(image, reference)
         for metric in metrics:
-            rows.append({"scene": scene, "spp": spp, "candidate": candidate, "metric": metric,
-                         "value": METRICS[metric](image, reference)})
+            value = flip_value if metric == "flip" and flip_value is not None else METRICS[metric](image, reference)
+            rows.append({"scene": scene, "spp": spp, "candidate": candidate, "metric": metric, "value": value})
     frame = pd.DataFrame(rows)
+    if flip_maps_path is not None:
+        write_layers(flip_maps_path, flip_maps, metadata={"scene": scene, "spp": spp, "what": "HDR-FLIP maps"})
     write_csv(output_path, frame)
     return frame
 
@@ -386,12 +396,13 @@ def write_speed_error(metrics_csv: str, timings_csv: str, png_path: str, *, metr
 
 def write_viewer_case(scene: str, spp: int, reference_path: str, render_path: str,
                       candidate_paths: dict[str, str], case_dir: str, *,
-                      weight_inputs: dict[str, list[str]]) -> dict:
+                      weight_inputs: dict[str, list[str]], flip_maps_path: str | None = None) -> dict:
     """One case's images of the static viewer (mcbench.viewer.write_case_images) in
     ``case_dir``, with its manifest fragment as ``case.json``: the reference, the noisy input
     and every candidate tone-mapped at each exposure, their relMSE and FLIP error maps, and
     the filtered weight maps of each candidate that ``weight_inputs`` gives inputs
-    ({candidate: input names}) and whose EXR holds ``weights_filtered_{i}`` for each input."""
+    ({candidate: input names}) and whose EXR holds ``weights_filtered_{i}`` for each input.
+    ``flip_maps_path``: the case's FLIP maps from :func:`compute_case_metrics` (else evaluated here)."""
     from mcbench.viewer import CASE_RECORD, write_case_images
 
     reference = read_layers(reference_path, ["color"])
@@ -410,7 +421,11 @@ def write_viewer_case(scene: str, spp: int, reference_path: str, render_path: st
         inputs = weight_inputs.get(name, [])
         if inputs and all(f"weights_filtered_{i}" in layers for i in range(len(inputs))):
             weights[name] = [(input_name, layers[f"weights_filtered_{i}"]) for i, input_name in enumerate(inputs)]
-    fragment = write_case_images(case_dir, reference=reference, images=images, weights=weights)
+    flip_maps = None
+    if flip_maps_path is not None:
+        flip_maps = read_layers(flip_maps_path, list(sources))
+        check_finite(flip_maps_path, flip_maps)
+    fragment = write_case_images(case_dir, reference=reference, images=images, weights=weights, flip_maps=flip_maps)
     write_json(Path(case_dir) / CASE_RECORD, {"scene": scene, "spp": int(spp), **fragment})
     return fragment
 

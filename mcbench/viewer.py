@@ -214,12 +214,14 @@ def _check_image(name: str, image, shape) -> np.ndarray:
 
 
 def write_case_images(case_dir, *, reference, images: dict, weights: dict | None = None,
-                      exposures=EXPOSURES_EV) -> dict:
+                      exposures=EXPOSURES_EV, flip_maps: dict | None = None) -> dict:
     """Write one case's viewer images into ``case_dir`` and return their manifest fragment.
 
     ``reference`` (H, W, 3) and ``images`` {entry name: (H, W, 3)} (the noisy input and the
     candidates): linear radiance. ``weights`` {entry name: [(input name, weights_filtered layer
-    (H, W, 3)), ...]} for ensembles. Returns (file names relative to ``case_dir``)::
+    (H, W, 3)), ...]} for ensembles. ``flip_maps`` {entry name: (H, W)}: per-pixel HDR-FLIP
+    computed already (:func:`mcbench.metrics.flip_with_map`); missing entries are evaluated here.
+    Returns (file names relative to ``case_dir``)::
 
         {"width": W, "height": H,
          "images": {entry: {"<ev>": "<entry>_<tag>.jpg"}},       # reference first
@@ -244,7 +246,9 @@ def write_case_images(case_dir, *, reference, images: dict, weights: dict | None
         if name == REFERENCE:
             continue
         fragment["errors"][name] = {}
-        for metric, values in error_maps(image, reference).items():
+        maps = ({"relmse": error_metrics.relmse_map(image, reference), "flip": flip_maps[name]}
+                if flip_maps and name in flip_maps else error_maps(image, reference))
+        for metric, values in maps.items():
             file_name = f"{name}_{metric}.png"
             write_indexed_png(case_dir / file_name, scale_indices(values, ERROR_SCALES[metric]), ERROR_SCALES[metric])
             fragment["errors"][name][metric] = file_name

@@ -99,6 +99,30 @@ def test_compute_case_metrics_equals_the_metrics_recomputed(case_files, tmp_path
     pd.testing.assert_frame_equal(pd.read_csv(csv), frame)
 
 
+def test_case_metrics_write_the_flip_maps_the_viewer_uses(case_files, tmp_path):
+    """One FLIP evaluation per entry: the maps file holds each entry's per-pixel FLIP, whose
+    package mean is the table's flip value, and the viewer's FLIP images from it equal those it
+    evaluates itself."""
+    from mcbench.metrics import flip_map
+
+    render, reference = case_files
+    output, _ = run("jbf", render, tmp_path, module_name="jbf")
+    maps_path = tmp_path / "maps.exr"
+    frame = steps.compute_case_metrics(SCENE, SPP, str(reference), str(render), {"jbf": str(output)},
+                                       ["relmse", "flip"], str(tmp_path / "m.csv"), flip_maps_path=str(maps_path))
+    maps = read_layers(maps_path)
+    truth = read_layers(reference, ["color"])["color"]
+    assert set(maps) == {steps.NOISY, "jbf"}
+    np.testing.assert_allclose(maps["jbf"], flip_map(Denoised.load(output).full, truth), rtol=1e-6, atol=1e-7)
+    flip_values = frame[frame.metric == "flip"].set_index("candidate")["value"]
+    assert flip_values["jbf"] == METRICS["flip"](Denoised.load(output).full, truth)
+    with_maps, without = tmp_path / "with", tmp_path / "without"
+    for folder, path in ((with_maps, str(maps_path)), (without, None)):
+        steps.write_viewer_case(SCENE, SPP, str(reference), str(render), {"jbf": str(output)}, str(folder),
+                                weight_inputs={}, flip_maps_path=path)
+    assert (with_maps / "jbf_flip.png").read_bytes() == (without / "jbf_flip.png").read_bytes()
+
+
 def test_gather_tables_concatenates_the_cases(case_files, tmp_path):
     render, reference = case_files
     first, csv_a, _ = case_metrics(render, reference, tmp_path, scene="box", spp=8)

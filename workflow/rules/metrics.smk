@@ -8,6 +8,8 @@ rule case_metrics:
         render=rules.render_noisy.output[0],
     output:
         f"{RESULTS}/metrics/{{scene}}/spp{{spp}}.csv",
+        # every entry's HDR-FLIP map (from the same evaluation as the flip metric; the viewer's)
+        flip_maps=f"{RESULTS}/metrics/{{scene}}/spp{{spp}}_flip.exr",
     params:
         candidates=CANDIDATES,
         metrics=METRIC_NAMES,

@@ -13,6 +13,7 @@ rule viewer_case:
         unpack(case_outputs),
         reference=rules.merge_reference.output[0],
         render=rules.render_noisy.output[0],
+        flip_maps=rules.case_metrics.output.flip_maps,
     output:
         directory(f"{RESULTS}/viewer_cases/{{scene}}/spp{{spp}}"),
     params:
