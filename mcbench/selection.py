@@ -125,10 +125,12 @@ def estimate_mse_maps(color_a, color_b, variance_a, variance_b, denoised_a, deno
 
 def _as_channels(maps: list[np.ndarray]) -> tuple[np.ndarray, tuple]:
     """Stack a list of (N, H, W, C) maps into (H, W, K) channels, K = sum of N*C."""
-    shapes = [np.shape(m) for m in maps]
-    channels = [np.moveaxis(np.asarray(m, np.float64), 0, 2).reshape(m.shape[1], m.shape[2], -1)
-                for m in maps]
-    return np.concatenate(channels, axis=2), shapes
+    arrays = [_candidates(f"maps[{j}]", m) for j, m in enumerate(maps)]
+    if not arrays or any(a.shape[1:3] != arrays[0].shape[1:3] for a in arrays):
+        raise ValueError(f"maps must be one or more (N, H, W, C) arrays of one image size, got "
+                         f"shapes {[a.shape for a in arrays]}")
+    channels = [np.moveaxis(a, 0, 2).reshape(a.shape[1], a.shape[2], -1) for a in arrays]
+    return np.concatenate(channels, axis=2), [a.shape for a in arrays]
 
 
 def _from_channels(stacked: np.ndarray, shapes: list[tuple]) -> list[np.ndarray]:

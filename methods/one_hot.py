@@ -65,6 +65,9 @@ def combine(buffers: RenderBuffers, inputs: list[Denoised], *,
     layers = {name: np.asarray(buffers.layers[name], np.float64) for name in
               ("color", "variance", "color_a", "color_b", "variance_a", "variance_b", "albedo", "normal")}
     results = {which: np.stack([np.asarray(d.image(which), np.float64) for d in inputs]) for which in IMAGES}
+    if results["full"].shape[1:] != layers["color"].shape:
+        raise ValueError(f"one_hot: input images {results['full'].shape[1:]} differ from the render's "
+                         f"{layers['color'].shape} ({buffers.source})")
     sel.check_finite_arrays({**{f"{buffers.source}: {name}": layers[name] for name in layers},
                              **{f"inputs' {which} images": results[which] for which in IMAGES}},
                             what="one_hot")

@@ -300,3 +300,11 @@ def test_prefilter_is_a_checked_config_choice():
     with pytest.raises(ValueError, match="unknown prefilter"):
         module.combine(None, [Denoised(np.zeros((1, 1, 3)), np.zeros((1, 1, 3)), np.zeros((1, 1, 3)))],
                        prefilter="median")
+
+
+@pytest.mark.parametrize("name", ["naive_average", "one_hot"])
+def test_inputs_of_another_size_are_refused(name, make_render_buffers):
+    buffers = make_render_buffers(height=6, width=5, seed=21)
+    small = random_inputs(make_render_buffers(height=5, width=5, seed=21), 2, seed=22)
+    with pytest.raises(ValueError, match="differ from the render's"):
+        load_method(name).combine(buffers, small)
