@@ -59,6 +59,32 @@ enumerated, which is exponential in the number of candidates (2^N - 1 supports, 
 allowed) -- but only on those non-unique pixels. Tolerances are relative to the pixel's
 scale max(|y|, |x|) (floor 1e-30): coordinates are divided by it before the geometry.
 
+``"qp"`` (Sec. 5.2.2, the slow baseline of Fig. 6): the same simplex problems, one call per
+problem to the general QP solver ``qpsolvers.solve_qp`` (backend ``QP_BACKEND``, quadprog:
+dense, active-set), on data divided by the problem's scale with a ridge of 1e-12 (quadprog
+needs a definite matrix; A^T A has rank <= 2 per pixel-channel).
+
+Ablations (Sec. 5.2.1-5.2.4)
+----------------------------
+``weights="unconstrained"`` (Sec. 5.2.1): sum w = 1 without w >= 0. The paper's closed form
+w = M^-1 1 / (1^T M^-1 1) (Eq. 19) needs a non-singular <M>, but on sum w = 1 the objective is
+1/2 |A w - b|^2 + const with A of rank <= 2, so for N > 2 <M> is singular on that plane and
+the minimisers form an affine set. We return its minimum-norm point, w = 1/N + D^+ (b - a_bar)
+(D the centred points, the KKT conditions of the equality-constrained least squares; for N = 2
+and non-singular <M> this is Eq. 19). The pseudo-inverse drops directions with singular values
+below max(1e-6 sigma_max, 1e-11 sqrt(N)) in units of the scale, so |w| < 5e11: finite, never
+NaN/Inf (``unconstrained_least_squares``; per pixel-channel the same formula through the exact
+solver's 2 x 2 scatter). The weight filter then averages without clipping.
+``channels="single"`` (Sec. 5.2.3): one weight vector per pixel shared by the C channels,
+minimising the channel-summed objective sum_c L_c(w) = 1/2 |A w - b|^2 + const with A now
+2C x N (the points a_i = (y_i^A, y_i^B) in R^2C, b = (x^B, x^A)). ``"iterative"`` sums Eq. 29's
+c1 and c2 over the channels (each step is still the exact line minimiser); ``"exact"`` projects
+b onto the hull of the points by Wolfe's minimum-norm-point algorithm (finite, exact up to a
+Frank-Wolfe gap of 1e-13 scale^2; the weights are unique when the points are affinely
+independent, otherwise Wolfe's deterministic answer, not the minimum-norm one); ``"qp"``
+solves the 2C-D problem with the QP solver. ``filter=False`` (Sec. 5.2.4) keeps the raw
+weights.
+
 Weight filter (Sec. 4.2): raw combined images z, z^A, z^B, Var[z] ~ (z^A - z^B)^2 / 2, and a
 cross-bilateral filter (Eq. 32-34) of all N x C weight maps with one kernel per pixel
 guided by z/Var[z], albedo and normal (``mcbench.bilateral``). A convex combination of
@@ -79,7 +105,7 @@ from mcbench.buffers import Denoised, RenderBuffers
 KIND = "combiner"
 LABEL = "Ensemble"
 
-SOLVERS = ("iterative", "exact")
+SOLVERS = ("iterative", "exact", "qp")
 MAX_EXACT_N = 20
 _CHUNK = 256  # pixel-channels per parallel work item (scratch arrays are per item)
 
@@ -154,7 +180,11 @@ def _clip_normalise(w):
 
 @cached_njit()
 def _iterative_one(ya, yb, xa, xb, w, order, state, max_iterations, tolerance):
+    """One problem: ya, yb (N, D) with D channels sharing the weights (D = 1 per
+    pixel-channel; D = C for one weight vector per pixel, whose Eq. 29 sums c1 and c2 over
+    the channels); xa, xb (D,). Writes w (N,); returns the iteration count."""
     n = ya.shape[0]
+    d = ya.shape[1]
     # random start in [0, 1]^N, normalised (Sec. 4.1.2)
     for j in range(n):
         state, bits = _next(state)
@@ -178,16 +208,20 @@ def _iterative_one(ya, yb, xa, xb, w, order, state, max_iterations, tolerance):
             if it >= max_iterations:
                 break
             i = order[jj]
-            za = 0.0
-            zb = 0.0
-            for j in range(n):
-                za += w[j] * ya[j]
-                zb += w[j] * yb[j]
-            # Eq. 29 with y_1 = current ensemble z, y_2 = base denoiser i
-            da = za - ya[i]
-            db = zb - yb[i]
-            c1 = da * da + db * db
-            c2 = (za - xb) * da + (zb - xa) * db
+            # Eq. 29 with y_1 = current ensemble z, y_2 = base denoiser i (summed over the
+            # D channels that share the weights; for D = 1 exactly the scalar form)
+            c1 = 0.0
+            c2 = 0.0
+            for k in range(d):
+                za = 0.0
+                zb = 0.0
+                for j in range(n):
+                    za += w[j] * ya[j, k]
+                    zb += w[j] * yb[j, k]
+                da = za - ya[i, k]
+                db = zb - yb[i, k]
+                c1 += da * da + db * db
+                c2 += (za - xb[k]) * da + (zb - xa[k]) * db
             # feasible step range on the line w -> e_i: alpha <= 1 keeps the others >= 0, and
             # alpha >= -w_i / (1 - w_i) keeps w_i >= 0 (an "away" step that moves weight off
             # denoiser i; the paper's Eq. 29 clips at 0, see the module docstring)
@@ -223,8 +257,8 @@ def _iterative_one(ya, yb, xa, xb, w, order, state, max_iterations, tolerance):
 
 @cached_njit(parallel=True)
 def _iterative_kernel(ya, yb, xa, xb, seed_state, max_iterations, tolerance):
-    """ya, yb: (P, N); xa, xb: (P,). Returns weights (P, N) and iteration counts (P,)."""
-    P, n = ya.shape
+    """ya, yb: (P, N, D); xa, xb: (P, D). Returns weights (P, N) and iteration counts (P,)."""
+    P, n = ya.shape[0], ya.shape[1]
     seed_state = _mix64(seed_state)
     out = np.empty((P, n))
     iters = np.empty(P, np.int64)
@@ -527,6 +561,306 @@ def _exact_kernel(ya, yb, xa, xb):
 
 
 # ---------------------------------------------------------------------------------------
+# exact solver for weights shared by the channels (Wolfe's minimum-norm-point algorithm)
+# ---------------------------------------------------------------------------------------
+_WOLFE_GAP_TOL = 1e-13   # Frank-Wolfe gap x.(x - q_j), in units of the scale^2
+_WOLFE_PIVOT_TOL = 1e-14  # singular affine system (relative to its largest entry)
+
+
+@cached_njit()
+def _affine_min_norm(q, support, k, kkt, alpha):
+    """alpha minimising |sum_t alpha_t q[support[t]]|^2 subject to sum_t alpha_t = 1, from
+    the (k + 1) x (k + 1) KKT system [G 1; 1^T 0] by Gaussian elimination with partial
+    pivoting (G the Gram matrix of the support). Returns False if the system is singular
+    (affinely dependent support)."""
+    dim = q.shape[1]
+    m = k + 1
+    for r in range(k):
+        for c in range(k):
+            g = 0.0
+            for e in range(dim):
+                g += q[support[r], e] * q[support[c], e]
+            kkt[r, c] = g
+        kkt[r, k] = 1.0
+        kkt[k, r] = 1.0
+        kkt[r, m] = 0.0
+    kkt[k, k] = 0.0
+    kkt[k, m] = 1.0
+    big = 1e-300
+    for r in range(m):
+        for c in range(m):
+            big = max(big, abs(kkt[r, c]))
+    for col in range(m):
+        piv = col
+        for r in range(col + 1, m):
+            if abs(kkt[r, col]) > abs(kkt[piv, col]):
+                piv = r
+        if abs(kkt[piv, col]) <= _WOLFE_PIVOT_TOL * big:
+            return False
+        if piv != col:
+            for c in range(m + 1):
+                t = kkt[col, c]
+                kkt[col, c] = kkt[piv, c]
+                kkt[piv, c] = t
+        for r in range(col + 1, m):
+            f = kkt[r, col] / kkt[col, col]
+            for c in range(col, m + 1):
+                kkt[r, c] -= f * kkt[col, c]
+    for r in range(m - 1, -1, -1):
+        acc = kkt[r, m]
+        for c in range(r + 1, m):
+            acc -= kkt[r, c] * kkt[c, m]
+        kkt[r, m] = acc / kkt[r, r]
+    for t in range(k):
+        alpha[t] = kkt[t, m]
+    return True
+
+
+@cached_njit()
+def _wolfe_one(q, w, x, support, lam, alpha, kkt):
+    """Minimum-norm point of the convex hull of the rows of q (N, D): Wolfe (1976). Writes
+    its simplex weights w (N,); returns the number of major and minor steps."""
+    n, dim = q.shape
+    q2max = 1e-300
+    j0 = 0
+    best = np.inf
+    for j in range(n):
+        nj = 0.0
+        for e in range(dim):
+            nj += q[j, e] * q[j, e]
+        q2max = max(q2max, nj)
+        if nj < best:
+            best = nj
+            j0 = j
+    support[0] = j0
+    lam[0] = 1.0
+    k = 1
+    steps = 0
+    max_steps = 50 * n + 50
+    while steps < max_steps:
+        for e in range(dim):
+            x[e] = 0.0
+            for t in range(k):
+                x[e] += lam[t] * q[support[t], e]
+        xx = 0.0
+        for e in range(dim):
+            xx += x[e] * x[e]
+        # major cycle: the point most in the direction of -x (Frank-Wolfe vertex)
+        jbest = 0
+        low = np.inf
+        for j in range(n):
+            xq = 0.0
+            for e in range(dim):
+                xq += x[e] * q[j, e]
+            if xq < low:
+                low = xq
+                jbest = j
+        if xx - low <= _WOLFE_GAP_TOL * q2max:
+            break  # optimal: no point improves on x
+        present = False
+        for t in range(k):
+            if support[t] == jbest:
+                present = True
+        if present:
+            break  # rounding: x is as good as this support allows
+        support[k] = jbest
+        lam[k] = 0.0
+        k += 1
+        # minor cycles: affine minimiser of the support, stepping back into the simplex
+        while steps < max_steps:
+            steps += 1
+            if not _affine_min_norm(q, support, k, kkt, alpha):
+                steps = max_steps  # dependent support (rounding): keep the last feasible lam
+                break
+            positive = True
+            for t in range(k):
+                if alpha[t] <= 0.0:
+                    positive = False
+            if positive:
+                for t in range(k):
+                    lam[t] = alpha[t]
+                break
+            theta = 1.0
+            for t in range(k):
+                if alpha[t] <= 0.0 and lam[t] - alpha[t] > 0.0:
+                    theta = min(theta, lam[t] / (lam[t] - alpha[t]))
+            kept = 0
+            total = 0.0
+            for t in range(k):
+                val = (1.0 - theta) * lam[t] + theta * alpha[t]
+                if val > 1e-15:
+                    support[kept] = support[t]
+                    lam[kept] = val
+                    total += val
+                    kept += 1
+            if kept == 0:  # cannot happen in exact arithmetic; restart from the best vertex
+                support[0] = jbest
+                lam[0] = 1.0
+                kept = 1
+                total = 1.0
+            k = kept
+            for t in range(k):
+                lam[t] /= total
+    for j in range(n):
+        w[j] = 0.0
+    for t in range(k):
+        w[support[t]] += lam[t]
+    _clip_normalise(w)
+    return steps
+
+
+@cached_njit(parallel=True)
+def _shared_exact_kernel(ya, yb, xa, xb):
+    """Weights shared by D channels: ya, yb (P, N, D); xa, xb (P, D). Minimises
+    sum_d 1/2 |A_d w - b_d|^2 on the simplex: the projection of b = (x^B, x^A) in R^2D onto
+    the hull of the points a_i = (y_i^A, y_i^B), divided by the problem's scale. Returns
+    weights (P, N) and step counts (P,)."""
+    P, n, dim = ya.shape
+    out = np.empty((P, n))
+    steps = np.empty(P, np.int64)
+    nchunks = (P + _CHUNK - 1) // _CHUNK
+    for c in prange(nchunks):
+        q = np.empty((n, 2 * dim))
+        w = np.empty(n)
+        x = np.empty(2 * dim)
+        support = np.empty(n + 1, np.int64)
+        lam = np.empty(n + 1)
+        alpha = np.empty(n + 1)
+        kkt = np.empty((n + 2, n + 3))
+        for p in range(c * _CHUNK, min(P, (c + 1) * _CHUNK)):
+            s = 1e-30
+            for e in range(dim):
+                s = max(s, abs(xa[p, e]), abs(xb[p, e]))
+                for j in range(n):
+                    s = max(s, abs(ya[p, j, e]), abs(yb[p, j, e]))
+            for j in range(n):
+                for e in range(dim):
+                    q[j, e] = (ya[p, j, e] - xb[p, e]) / s
+                    q[j, dim + e] = (yb[p, j, e] - xa[p, e]) / s
+            if n == 1:
+                w[0] = 1.0
+                steps[p] = 0
+            else:
+                steps[p] = _wolfe_one(q, w, x, support, lam, alpha, kkt)
+            for j in range(n):
+                out[p, j] = w[j]
+    return out, steps
+
+
+# ---------------------------------------------------------------------------------------
+# unconstrained weights (Sec. 5.2.1 ablation): sum to one, any sign
+# ---------------------------------------------------------------------------------------
+_SV_REL_TOL = 1e-6    # singular values of the centred points, relative to the largest
+_SV_ABS_TOL = 1e-11   # ... and absolute, in units of the scale (per sqrt(N))
+
+
+@cached_njit(parallel=True)
+def _unconstrained_kernel(ya, yb, xa, xb):
+    """Per pixel-channel: ya, yb (P, N); xa, xb (P,). The minimum-norm minimiser of
+    1/2 |A w - b|^2 subject to sum w = 1 (no sign constraint): w = 1/N + D^+ (b - a_bar)
+    with D the centred 2 x N points, via the 2 x 2 scatter's pseudo-inverse of the exact
+    solver (its thresholds bound |w|). Returns weights (P, N)."""
+    P, n = ya.shape
+    out = np.empty((P, n))
+    nchunks = (P + _CHUNK - 1) // _CHUNK
+    for c in prange(nchunks):
+        u = np.empty(n)
+        v = np.empty(n)
+        idx = np.arange(n)
+        wtmp = np.empty(n)
+        for p in range(c * _CHUNK, min(P, (c + 1) * _CHUNK)):
+            s = max(1e-30, abs(xa[p]), abs(xb[p]))
+            for j in range(n):
+                s = max(s, abs(ya[p, j]), abs(yb[p, j]))
+            for j in range(n):
+                u[j] = ya[p, j] / s
+                v[j] = yb[p, j] / s
+            # feasibility flag ignored: b need not lie in the points' affine hull
+            _min_norm_on_support(u, v, idx, n, xb[p] / s, xa[p] / s, wtmp)
+            total = 0.0
+            for j in range(n):
+                total += wtmp[j]
+            for j in range(n):  # the sum against rounding amplified by large weights
+                out[p, j] = wtmp[j] + (1.0 - total) / n
+    return out
+
+
+def unconstrained_least_squares(points, targets) -> np.ndarray:
+    """Minimum-norm minimiser of 1/2 |A w - b|^2 subject to sum_i w_i = 1, w of any sign.
+
+    points : (P, N, D) float64, row i of problem p is the point a_i (a column of A);
+    targets : (P, D) float64, b. Each problem is divided by its scale
+    s = max(|a|, |b|) (floor 1e-30). With D the centred points a_i - a_bar (D x N) the
+    solutions are w = 1/N + D^+ (b - a_bar) + null(D) (the KKT conditions of the
+    equality-constrained least squares; D's rows are orthogonal to 1), the minimum-norm one
+    has no null-space part. D^+ keeps singular values above max(1e-6 sigma_max,
+    1e-11 sqrt(N)) (units of s), so |w - 1/N| <= |b - a_bar| / (1e-11 sqrt(N)) < 5e11 /
+    sqrt(N): finite, never NaN/Inf. Returns (P, N) float64 weights (sum 1, restored
+    against rounding by adding (1 - sum) / N).
+    """
+    a = np.asarray(points, np.float64)
+    b = np.asarray(targets, np.float64)
+    n = a.shape[1]
+    scale = np.maximum(np.maximum(np.abs(a).max(axis=(1, 2)), np.abs(b).max(axis=1)), 1e-30)
+    a = a / scale[:, None, None]
+    b = b / scale[:, None]
+    a_bar = a.mean(axis=1)
+    centred = np.swapaxes(a - a_bar[:, None, :], 1, 2)              # (P, D, N)
+    u, sv, vt = np.linalg.svd(centred, full_matrices=False)        # (P,D,K) (P,K) (P,K,N)
+    keep = sv > np.maximum(_SV_REL_TOL * sv[:, :1], _SV_ABS_TOL * np.sqrt(n))
+    inverse = np.divide(1.0, sv, out=np.zeros_like(sv), where=keep)
+    coef = np.einsum("pdk,pd->pk", u, b - a_bar) * inverse
+    w = 1.0 / n + np.einsum("pkn,pk->pn", vt, coef)
+    return w + (1.0 - w.sum(axis=1, keepdims=True)) / n   # the sum against rounding
+
+
+# ---------------------------------------------------------------------------------------
+# general-purpose QP (the slow baseline of Fig. 6)
+# ---------------------------------------------------------------------------------------
+QP_BACKEND = "quadprog"
+_QP_RIDGE = 1e-12    # added to A^T A (units of the scale^2): quadprog needs it definite
+
+
+def qp_simplex_weights(points, targets) -> np.ndarray:
+    """Minimiser of 1/2 |A w - b|^2 on the simplex for each problem, by the general QP solver
+    ``qpsolvers.solve_qp`` (backend ``QP_BACKEND``), one call per problem.
+
+    points : (P, N, D) float64 (point a_i = column i of A); targets : (P, D) float64 (b).
+    Each problem is divided by its scale s = max(|a|, |b|) (floor 1e-30) and regularised
+    with 1e-12 I (the objective moves by at most 5e-13 s^2); the answer is clipped to
+    w >= 0 and renormalised. Returns (P, N) float64. Raises ValueError if the backend
+    fails on a problem even with a ridge of 1e-8.
+    """
+    import qpsolvers  # only this slow path needs it
+
+    a = np.asarray(points, np.float64)
+    b = np.asarray(targets, np.float64)
+    count, n, _ = a.shape
+    out = np.ones((count, n))
+    if n == 1:
+        return out
+    G, h = -np.eye(n), np.zeros(n)
+    A_eq, b_eq = np.ones((1, n)), np.ones(1)
+    for p in range(count):
+        s = max(float(np.abs(a[p]).max()), float(np.abs(b[p]).max()), 1e-30)
+        at = a[p] / s                                  # (N, D) = A^T
+        gram = at @ at.T
+        linear = -(at @ (b[p] / s))
+        w = None
+        for ridge in (_QP_RIDGE, 1e-8):
+            w = qpsolvers.solve_qp(gram + ridge * np.eye(n), linear, G=G, h=h, A=A_eq,
+                                   b=b_eq, solver=QP_BACKEND)
+            if w is not None and np.all(np.isfinite(w)):
+                break
+            w = None
+        if w is None:
+            raise ValueError(f"QP solver {QP_BACKEND} failed on ensemble problem {p}")
+        w = np.maximum(w, 0.0)
+        out[p] = w / w.sum()
+    return out
+
+
+# ---------------------------------------------------------------------------------------
 # public API
 # ---------------------------------------------------------------------------------------
 def _check_finite(named: dict) -> None:
@@ -567,50 +901,105 @@ def _seed_state(seed) -> np.uint64:
     return np.uint64(int(seed) % (1 << 64))
 
 
+WEIGHTS = ("simplex", "unconstrained")
+CHANNELS = ("rgb", "single")
+
+
+def _problems(xa, xb, ya_p, yb_p, shape, channels):
+    """Solver inputs ya, yb (P, N, D) and xa, xb (P, D): one problem per pixel-channel with
+    D = 1 (``"rgb"``) or one per pixel with its D = C channels sharing the weights
+    (``"single"``)."""
+    n, h, w, c = shape
+    if channels == "rgb":
+        return ya_p.reshape(-1, n, 1), yb_p.reshape(-1, n, 1), xa.reshape(-1, 1), xb.reshape(-1, 1)
+
+    def per_pixel(y):
+        return np.ascontiguousarray(y.reshape(h * w, c, n).transpose(0, 2, 1))
+
+    return per_pixel(ya_p), per_pixel(yb_p), xa.reshape(h * w, c), xb.reshape(h * w, c)
+
+
+def _stacked_points(ya, yb, xa, xb):
+    """Eq. 25 summed over D channels: points (P, N, 2D) a_i = (y_i^A, y_i^B) and targets
+    (P, 2D) b = (x^B, x^A)."""
+    return np.concatenate([ya, yb], axis=2), np.concatenate([xb, xa], axis=1)
+
+
 def solve_weights(color_a, color_b, denoised_a, denoised_b, solver="iterative", seed=0,
-                  max_iterations=1024, tolerance=1e-9, return_info=False):
+                  max_iterations=1024, tolerance=1e-9, return_info=False, *,
+                  weights="simplex", channels="rgb"):
     """Per-pixel, per-channel ensemble weights minimising Eq. 13 (with <M> from Eq. 11-12).
 
     Parameters
     ----------
     color_a, color_b : (H, W, C) noisy half buffers x^A, x^B (linear radiance).
     denoised_a, denoised_b : (N, H, W, C) base denoisers' half-buffer outputs y_i^A, y_i^B.
-    solver : ``"iterative"`` (Sec. 4.1, Eq. 29-31) or ``"exact"`` (projection onto the convex
-        hull, minimum-norm tie-break; see the module docstring).
-    seed : int, seeds the iterative solver's counter-based generator (ignored by "exact").
+    solver : ``"iterative"`` (Sec. 4.1, Eq. 29-31), ``"exact"`` (projection onto the convex
+        hull, minimum-norm tie-break; with ``channels="single"`` Wolfe's minimum-norm-point
+        algorithm in 2C dimensions; see the module docstring) or ``"qp"`` (the general QP
+        solver ``qpsolvers`` with ``QP_BACKEND``, one call per problem: the slow baseline of
+        Fig. 6). Ignored with ``weights="unconstrained"`` (a closed form).
+    seed : int, seeds the iterative solver's counter-based generator (ignored otherwise).
     max_iterations : int, iteration limit of the iterative solver (paper: 1024).
     tolerance : float, the iterative solver stops once no weight changed by more than this
         over a whole cycle of N iterations.
     return_info : if True also return per pixel-channel (H, W, C) diagnostics: iteration
-        counts (iterative) or path codes (exact: 0 unique, 1 min-norm over candidates,
-        2 support enumeration, 3 geometric fallback).
+        counts (iterative), path codes (exact, ``"rgb"``: 0 unique, 1 min-norm over
+        candidates, 2 support enumeration, 3 geometric fallback), Wolfe steps (exact,
+        ``"single"``), 0 (qp and unconstrained).
+    weights : ``"simplex"`` (Eq. 13: w >= 0, sum 1) or ``"unconstrained"`` (sum 1 only,
+        Sec. 5.2.1 ablation): the minimum-norm minimiser (:func:`unconstrained_least_squares`;
+        for ``"rgb"`` the same formula through the exact solver's 2 x 2 pseudo-inverse).
+    channels : ``"rgb"`` (one weight vector per pixel-channel, the paper's choice) or
+        ``"single"`` (one per pixel shared by the C channels, minimising the sum over the
+        channels of Eq. 13, Sec. 5.2.3; the weights are repeated along C).
 
     Returns
     -------
-    (N, H, W, C) float64 weights, each pixel-channel on the simplex (w >= 0, sum 1).
+    (N, H, W, C) float64 weights, each pixel-channel summing to 1 (and >= 0 for
+    ``"simplex"``).
 
     Raises
     ------
-    ValueError on shape mismatch, unknown solver, or NaN/Inf in any input (the message
-    gives the number of bad pixels).
+    ValueError on shape mismatch, unknown solver/weights/channels, or NaN/Inf in any input
+    (the message gives the number of bad pixels).
     """
-    if solver not in SOLVERS:
-        raise ValueError(f"unknown ensemble solver '{solver}'; choose one of {SOLVERS}")
+    for name, value, choices in (("solver", solver, SOLVERS), ("weights", weights, WEIGHTS),
+                                 ("channels", channels, CHANNELS)):
+        if value not in choices:
+            raise ValueError(f"unknown ensemble {name} '{value}'; choose one of {choices}")
     xa, xb, ya_p, yb_p, shape = _prepare(color_a, color_b, denoised_a, denoised_b)
-    n = shape[0]
-    if solver == "iterative":
+    n, h, wd, c = shape
+    ya_k, yb_k, xa_k, xb_k = _problems(xa, xb, ya_p, yb_p, shape, channels)
+    if weights == "unconstrained":
+        if channels == "rgb":
+            w = _unconstrained_kernel(ya_p, yb_p, xa, xb)
+        else:
+            w = unconstrained_least_squares(*_stacked_points(ya_k, yb_k, xa_k, xb_k))
+        info = np.zeros(w.shape[0], np.int64)
+    elif solver == "iterative":
         if int(max_iterations) < 1:
             raise ValueError(f"max_iterations must be >= 1, got {max_iterations}")
-        w, info = _iterative_kernel(ya_p, yb_p, xa, xb, _seed_state(seed),
+        w, info = _iterative_kernel(ya_k, yb_k, xa_k, xb_k, _seed_state(seed),
                                     int(max_iterations), float(tolerance))
-    else:
+    elif solver == "exact" and channels == "single":
+        w, info = _shared_exact_kernel(ya_k, yb_k, xa_k, xb_k)
+    elif solver == "exact":
         if n > MAX_EXACT_N:
             raise ValueError(f"exact solver supports N <= {MAX_EXACT_N} denoisers, got {n}")
         w, info = _exact_kernel(ya_p, yb_p, xa, xb)
-    weights = np.ascontiguousarray(w.T).reshape(shape)
+    else:
+        w = qp_simplex_weights(*_stacked_points(ya_k, yb_k, xa_k, xb_k))
+        info = np.zeros(w.shape[0], np.int64)
+    if channels == "rgb":
+        result = np.ascontiguousarray(w.T).reshape(shape)
+        info = info.reshape(shape[1:])
+    else:
+        result = np.ascontiguousarray(np.broadcast_to(w.T.reshape(n, h, wd, 1), shape))
+        info = np.ascontiguousarray(np.broadcast_to(info.reshape(h, wd, 1), shape[1:]))
     if return_info:
-        return weights, info.reshape(shape[1:])
-    return weights
+        return result, info
+    return result
 
 
 def combine_with(weights, denoised) -> np.ndarray:
@@ -620,14 +1009,17 @@ def combine_with(weights, denoised) -> np.ndarray:
 
 
 def filter_weights(weights, denoised_full, denoised_a, denoised_b, albedo, normal, radius=7,
-                   sigma_spatial=3.0, sigma_color=2.0, sigma_albedo=0.25, sigma_normal=0.15):
+                   sigma_spatial=3.0, sigma_color=2.0, sigma_albedo=0.25, sigma_normal=0.15,
+                   *, nonnegative=True):
     """Cross-bilateral filter of the raw weight maps (Sec. 4.2, Eq. 32-34).
 
     weights, denoised_full, denoised_a, denoised_b : (N, H, W, C); albedo, normal (H, W, 3).
     The guide is the raw combined image z = sum w y_i with Var[z] ~ (z^A - z^B)^2 / 2; all
     N x C maps share one kernel per pixel. Defaults are the paper's (radius 7 px,
     sigma_s 3, sigma_z 2, sigma_albedo 0.25, sigma_normal 0.15).
-    Returns (N, H, W, C) float64 weights on the simplex.
+    Returns (N, H, W, C) float64 weights on the simplex; with ``nonnegative=False``
+    (unconstrained weights, Sec. 5.2.1) weights summing to one, of any sign: no clipping,
+    and the sum is restored against rounding by adding (1 - sum) / N to each weight.
     """
     w = np.asarray(weights, np.float64)
     n, h, wd, c = w.shape
@@ -641,22 +1033,35 @@ def filter_weights(weights, denoised_full, denoised_a, denoised_b, albedo, norma
                                  radius)
     out = np.moveaxis(out.reshape(n, c, h, wd), 1, 3)
     total = out.sum(axis=0)
+    if not nonnegative:
+        return np.ascontiguousarray(out + (1.0 - total) / n)
     assert np.all(np.abs(total - 1.0) < 1e-6), "filtered weights left the simplex"
     out = np.maximum(out, 0.0)
     return np.ascontiguousarray(out / out.sum(axis=0, keepdims=True))
 
 
 def combine(buffers: RenderBuffers, inputs: list[Denoised], *,
-            solver: Literal["iterative", "exact"] = "iterative", seed: int = 0,
+            solver: Literal["iterative", "exact", "qp"] = "iterative", seed: int = 0,
             max_iterations: int = 1024, tolerance: float = 1e-9, filter: bool = True,
+            weights: Literal["simplex", "unconstrained"] = "simplex",
+            channels: Literal["rgb", "single"] = "rgb",
             radius: int = 7, sigma_spatial: float = 3.0, sigma_color: float = 2.0,
             sigma_albedo: float = 0.25, sigma_normal: float = 0.15) -> Denoised:
     """Ensemble of the ``inputs`` (Sec. 4): solve raw weights from the half buffers, filter
     them (unless ``filter=False``, an ablation), and combine (Eq. 35).
 
+    Ablations (Sec. 5.2.1-5.2.4; the defaults are the paper's method): ``weights=
+    "unconstrained"`` drops w >= 0 (sum one only; the weight filter then does not clip);
+    ``channels="single"`` shares one weight vector per pixel by the RGB channels;
+    ``solver="qp"`` solves the same problems with a general QP solver (slow; Fig. 6);
+    ``filter=False`` keeps the raw weights. See :func:`solve_weights`.
+
     Returns Denoised(full, a, b, extras) with float32 images; ``extras`` holds
     ``weights_raw_{i}`` and ``weights_filtered_{i}`` (H, W, 3) per input i (with
     ``filter=False`` the filtered maps equal the raw ones).
+
+    Raises ValueError if an input holds NaN/Inf, or if a combined image is not finite in
+    float32 (only unconstrained weights, bounded by 5e11, on radiance above ~1e26 could).
     """
     if not inputs:
         raise ValueError("the ensemble needs at least one input")
@@ -665,12 +1070,13 @@ def combine(buffers: RenderBuffers, inputs: list[Denoised], *,
     y_b = np.stack([np.asarray(d.b, np.float64) for d in inputs])
     _check_finite({"denoised_full": y_full})
     raw = solve_weights(buffers.color_a, buffers.color_b, y_a, y_b, solver=solver, seed=seed,
-                        max_iterations=max_iterations, tolerance=tolerance)
+                        max_iterations=max_iterations, tolerance=tolerance, weights=weights,
+                        channels=channels)
     if filter:
         filt = filter_weights(raw, y_full, y_a, y_b, buffers.albedo, buffers.normal,
                               radius=radius, sigma_spatial=sigma_spatial,
                               sigma_color=sigma_color, sigma_albedo=sigma_albedo,
-                              sigma_normal=sigma_normal)
+                              sigma_normal=sigma_normal, nonnegative=weights == "simplex")
     else:
         filt = raw
     extras = {}
@@ -678,7 +1084,10 @@ def combine(buffers: RenderBuffers, inputs: list[Denoised], *,
         extras[f"weights_raw_{i}"] = raw[i].astype(np.float32)
     for i in range(len(inputs)):
         extras[f"weights_filtered_{i}"] = filt[i].astype(np.float32)
-    return Denoised(full=combine_with(filt, y_full).astype(np.float32),
-                    a=combine_with(filt, y_a).astype(np.float32),
-                    b=combine_with(filt, y_b).astype(np.float32),
-                    extras=extras)
+    images = {key: combine_with(filt, y).astype(np.float32)
+              for key, y in (("full", y_full), ("a", y_a), ("b", y_b))}
+    bad = [key for key, image in images.items() if not np.isfinite(image).all()]
+    if bad:
+        raise ValueError(f"ensemble ({weights} weights) combined image(s) {bad} overflow "
+                         f"float32")
+    return Denoised(full=images["full"], a=images["a"], b=images["b"], extras=extras)
