@@ -67,21 +67,26 @@ needs a definite matrix; A^T A has rank <= 2 per pixel-channel).
 Ablations (Sec. 5.2.1-5.2.4)
 ----------------------------
 ``weights="unconstrained"`` (Sec. 5.2.1): sum w = 1 without w >= 0. The paper's closed form
-w = M^-1 1 / (1^T M^-1 1) (Eq. 19) needs a non-singular <M>, but on sum w = 1 the objective is
-1/2 |A w - b|^2 + const with A of rank <= 2, so for N > 2 <M> is singular on that plane and
-the minimisers form an affine set. We return its minimum-norm point, w = 1/N + D^+ (b - a_bar)
-(D the centred points, the KKT conditions of the equality-constrained least squares; for N = 2
-and non-singular <M> this is Eq. 19). The pseudo-inverse drops directions with singular values
-below max(1e-6 sigma_max, 1e-11 sqrt(N)) in units of the scale, so |w| < 5e11: finite, never
-NaN/Inf (``unconstrained_least_squares``; per pixel-channel the same formula through the exact
-solver's 2 x 2 scatter). The weight filter then averages without clipping.
+w = M^-1 1 / (1^T M^-1 1) (Eq. 19) needs a non-singular matrix, but on sum w = 1 the objective
+is 1/2 |A w - b|^2 + const, i.e. <M> may be replaced by 1/2 C^T C (C = A - b 1^T, rank <= 2):
+singular for N > 2, and for N > 3 the minimisers form an affine set (Eq. 19 with a
+pseudo-inverse is then not even a minimiser in general). We return the minimum-norm minimiser,
+w = 1/N + D^+ (b - a_bar) (D the 2 x N centred points: the KKT conditions of the
+equality-constrained least squares; D's rows are orthogonal to 1). For N = 2 with
+non-singular <M> this is Eq. 19, for N = 3 points in general position the unique A w = b.
+The pseudo-inverse drops directions with singular values below max(1e-6 sigma_max,
+1e-11 sqrt(N)) in units of the scale (per pixel-channel: the exact solver's 2 x 2 scatter
+thresholds, the same up to sqrt(trace) for sigma_max), so |w - 1/N| < 5e11 / sqrt(N): finite,
+never NaN/Inf (``unconstrained_least_squares``); the sum is restored to one against rounding.
+The weight filter then averages without clipping.
 ``channels="single"`` (Sec. 5.2.3): one weight vector per pixel shared by the C channels,
 minimising the channel-summed objective sum_c L_c(w) = 1/2 |A w - b|^2 + const with A now
 2C x N (the points a_i = (y_i^A, y_i^B) in R^2C, b = (x^B, x^A)). ``"iterative"`` sums Eq. 29's
 c1 and c2 over the channels (each step is still the exact line minimiser); ``"exact"`` projects
 b onto the hull of the points by Wolfe's minimum-norm-point algorithm (finite, exact up to a
-Frank-Wolfe gap of 1e-13 scale^2; the weights are unique when the points are affinely
-independent, otherwise Wolfe's deterministic answer, not the minimum-norm one); ``"qp"``
+Frank-Wolfe gap of 1e-13 scale^2; coincident points -- identical outputs -- share their
+weight equally; the weights are unique when the distinct points are affinely independent,
+otherwise Wolfe's deterministic answer, not necessarily the minimum-norm one); ``"qp"``
 solves the 2C-D problem with the QP solver. ``filter=False`` (Sec. 5.2.4) keeps the raw
 weights.
 
@@ -721,6 +726,8 @@ def _shared_exact_kernel(ya, yb, xa, xb):
     nchunks = (P + _CHUNK - 1) // _CHUNK
     for c in prange(nchunks):
         q = np.empty((n, 2 * dim))
+        group = np.empty(n, np.int64)
+        size = np.empty(n, np.int64)
         w = np.empty(n)
         x = np.empty(2 * dim)
         support = np.empty(n + 1, np.int64)
@@ -733,17 +740,35 @@ def _shared_exact_kernel(ya, yb, xa, xb):
                 s = max(s, abs(xa[p, e]), abs(xb[p, e]))
                 for j in range(n):
                     s = max(s, abs(ya[p, j, e]), abs(yb[p, j, e]))
+            # coincident points (identical outputs) are one point of the hull: solve on the
+            # distinct ones, then split each one's weight equally (the minimum-norm split)
+            m = 0
             for j in range(n):
-                for e in range(dim):
-                    q[j, e] = (ya[p, j, e] - xb[p, e]) / s
-                    q[j, dim + e] = (yb[p, j, e] - xa[p, e]) / s
-            if n == 1:
+                group[j] = -1
+                for g in range(m):
+                    same = True
+                    for e in range(dim):
+                        if (abs((ya[p, j, e] - xb[p, e]) / s - q[g, e]) > _GEOM_TOL
+                                or abs((yb[p, j, e] - xa[p, e]) / s - q[g, dim + e]) > _GEOM_TOL):
+                            same = False
+                    if same:
+                        group[j] = g
+                        size[g] += 1
+                        break
+                if group[j] < 0:
+                    for e in range(dim):
+                        q[m, e] = (ya[p, j, e] - xb[p, e]) / s
+                        q[m, dim + e] = (yb[p, j, e] - xa[p, e]) / s
+                    group[j] = m
+                    size[m] = 1
+                    m += 1
+            if m == 1:
                 w[0] = 1.0
                 steps[p] = 0
             else:
-                steps[p] = _wolfe_one(q, w, x, support, lam, alpha, kkt)
+                steps[p] = _wolfe_one(q[:m], w[:m], x, support, lam, alpha, kkt)
             for j in range(n):
-                out[p, j] = w[j]
+                out[p, j] = w[group[j]] / size[group[j]]
     return out, steps
 
 

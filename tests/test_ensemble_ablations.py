@@ -272,6 +272,30 @@ def test_single_channel_exact_matches_quadprog_on_summed_mse(kind):
             assert got @ M @ got >= ref @ M @ ref - 1e-8 * s2, (n, k)
 
 
+def test_single_channel_exact_identical_outputs_share_equally():
+    """Identical base outputs are one point of the hull: the exact shared weights split its
+    weight equally (all identical: 1/N, like the per-channel exact solver) and stay optimal
+    (quadprog on Eq. 14)."""
+    rng = np.random.default_rng(13)
+    xa, xb, ya, yb = pixel_problems(rng, 5, 40, "realistic")
+    ya[3], yb[3] = ya[1], yb[1]
+    ya[4], yb[4] = ya[1], yb[1]
+    w = E.solve_weights(xa, xb, ya, yb, solver="exact", channels="single")
+    np.testing.assert_array_equal(w[3], w[1])
+    np.testing.assert_array_equal(w[4], w[1])
+    assert (w[1] > 0.05).any()
+    f = summed_objective(w, xa, xb, ya, yb)[0]
+    s2 = pixel_scale2(xa, xb, ya, yb, axis=-1)[0]
+    for k in range(40):
+        ref = summed_qp_optimum(xa[0, k], xb[0, k], ya[:, 0, k], yb[:, 0, k])
+        f_ref = summed_objective(ref[:, None, None], xa[:, k:k + 1], xb[:, k:k + 1],
+                                 ya[:, :, k:k + 1], yb[:, :, k:k + 1])[0, 0]
+        assert f[k] <= f_ref + 1e-8 * s2[k]
+    same = E.solve_weights(xa, xb, np.repeat(ya[:1], 4, 0), np.repeat(yb[:1], 4, 0),
+                           solver="exact", channels="single")
+    np.testing.assert_allclose(same, 0.25, atol=1e-15)
+
+
 def test_single_channel_costs_objective_against_channel_wise():
     """Shared weights are a restriction of channel-wise ones: the summed optimum can only
     rise, and it does where the denoisers' colour biases differ per channel."""
