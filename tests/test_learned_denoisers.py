@@ -187,7 +187,7 @@ def test_no_test_scene_is_a_training_scene():
     from scenes import available_scenes, load_scene
 
     seeds = set()
-    for name in LEARNED:
+    for name in LEARNED + ["deep_combiner", "deep_combiner_mb"]:      # the learned combiners too
         data = read_json(record_path(name))["data"]
         used = data["training_scenes"] + data["validation_scenes"]
         assert len(used) == len(set(used)) and not any(is_validation_seed(s) for s in data["training_scenes"])
