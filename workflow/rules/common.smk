@@ -186,15 +186,18 @@ def render_cost_records(wildcards=None):
 TRAINING = {key: value for key, value in config["training"].items() if key not in ("networks", "combiners")}
 TRAINING_OVERRIDES = config["training"]["networks"]
 TRAINING_SEEDS = training_seeds(TRAINING)
-COMBINER_TRAINING = config["training"]["combiners"]
-for _key in ("count", "fibre_count", "crops"):
-    if COMBINER_TRAINING[_key] > TRAINING[_key]:
-        raise BenchError(f"training.combiners.{_key}: {COMBINER_TRAINING[_key]} is more than "
-                         f"training.{_key} ({TRAINING[_key]})")
-COMBINER_SEEDS = training_seeds({**TRAINING, "count": COMBINER_TRAINING["count"],
-                                 "fibre_count": COMBINER_TRAINING["fibre_count"]})
 # train_<name> rules for the learned methods the config names (no other method module is imported)
 NETWORKS = sorted({spec["module"] for spec in METHODS.values() if spec["learned"]})
+# The crops of the learned combiners: a subset of the training scenes, checked when the config
+# has a learned combiner (a smaller training set for the denoisers alone stays valid).
+COMBINER_TRAINING = config["training"]["combiners"]
+if any(spec["learned"] and spec["kind"] == "combiner" for spec in METHODS.values()):
+    for _key in ("count", "fibre_count", "crops"):
+        if COMBINER_TRAINING[_key] > TRAINING[_key]:
+            raise BenchError(f"training.combiners.{_key}: {COMBINER_TRAINING[_key]} is more than "
+                             f"training.{_key} ({TRAINING[_key]}), and this config has a learned combiner")
+COMBINER_SEEDS = training_seeds({**TRAINING, "count": min(COMBINER_TRAINING["count"], TRAINING["count"]),
+                                 "fibre_count": min(COMBINER_TRAINING["fibre_count"], TRAINING["fibre_count"])})
 for _name in TRAINING_OVERRIDES:
     if _name not in NETWORKS:
         raise BenchError(f"training.networks.{_name}: not a learned method of this config; "
