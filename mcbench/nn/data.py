@@ -39,7 +39,6 @@ from mcbench.exr import check_finite, read_layers, read_metadata
 
 # Raw buffers a network receives: name -> channels (layout of the (13, H, W) input arrays).
 BUFFER_KEYS = {"color": 3, "variance": 3, "albedo": 3, "normal": 3, "depth": 1}
-BUFFER_CHANNELS = sum(BUFFER_KEYS.values())
 HALVES = ("", "_a", "_b")   # full, A, B
 VALIDATION_MODULUS = 8
 VALIDATION_REMAINDER = 7
