@@ -24,13 +24,31 @@ Training renders of the procedural scenes (:func:`training_render_seed`)::
                         (0 = A, 1 = B), bit 6 bin within the half, bit 5..0 pass (0..63)
                 target: pass (0..4095)
 
+Oracle renders of the ground-truth statistics study (:func:`oracle_render_seed`, Zheng et
+al. 2021 Sec. 5.2.7: one scene rendered many times at one spp)::
+
+    bit 31..29  base_seed   global seed from the config (key ``seed``), 0..6
+    bit 28      1           (shared with reference chunks)
+    bit 27..16  field       (repetition << 2) | (half << 1) | bin; repetition 0..1023
+    bit 15      1           oracle marker: every reference chunk seed has 0 here
+    bit 14..0   pass        pass index within one bin / buffer (0..32767)
+
+The repetition, half and bin sit above bit 15, so scalar variants (one pass per bin, seed
+``>> 15`` an odd index, a reference chunk's is even) keep disjoint pixel-seed ranges too.
+:func:`decode_seed` does not know this slot (it reads an oracle seed as a reference chunk);
+:func:`decode_oracle_seed` decodes it and :func:`is_oracle_seed` tells it apart. The seed holds
+neither scene nor spp (like a test render's, which holds no scene): two oracle studies of
+different spp reuse the same streams, never a test, reference or training render's.
+
 Why no two renders share a seed
 -------------------------------
 Within each layout every field has its own bits and every field value decodes back
 (:func:`decode_seed`, :func:`decode_training_seed`), so each layout is injective. Across the
 layouts, the base seed of a test render is 0..6 (:func:`render_seed` refuses 7, and the config
 schema caps ``seed`` at 6) while every training seed has base 7: the two images are disjoint
-intervals ``[b * 2**29, (b + 1) * 2**29)`` of the 32-bit range. Training scene seeds are split
+intervals ``[b * 2**29, (b + 1) * 2**29)`` of the 32-bit range. Oracle seeds have base 0..6 and
+bits 28 and 15 both set, which no test render has (a noisy render has bit 28 = 0, a reference
+chunk bit 15 = 0: :func:`render_seed` refuses ``bin`` for references). Training scene seeds are split
 into two families: object scenes below :data:`FIBRE_SEED_BASE` (32768) and fibre scenes from it
 on (:func:`training_seeds`).
 
@@ -62,13 +80,17 @@ from mcbench import BenchError
 __all__ = ["MAX_BASE_SEED", "TRAINING_BASE_SEED", "MAX_TRAINING_SEED", "FIBRE_SEED_BASE",
            "SCALAR_BLOCK_SIZE", "spp_code", "render_seed", "decode_seed", "training_render_seed",
            "decode_training_seed", "is_fibre_seed", "training_seeds", "scalar_seed_stride",
-           "mitsuba_seed"]
+           "mitsuba_seed", "MAX_ORACLE_REPETITIONS", "oracle_render_seed", "decode_oracle_seed",
+           "is_oracle_seed"]
 
 TRAINING_BASE_SEED = 7          # bits 31..29 of every training render seed, reserved
 MAX_BASE_SEED = TRAINING_BASE_SEED - 1   # largest config ``seed`` (test renders: 0..6)
 MAX_TRAINING_SEED = (1 << 16) - 1
 FIBRE_SEED_BASE = 1 << 15       # training scene seeds >= this are fibre scenes
 SCALAR_BLOCK_SIZE = 16          # explicit block size in scalar variants (seed ranges depend on it)
+
+MAX_ORACLE_REPETITIONS = 1 << 10   # repetitions of one oracle study (10 bits of the field)
+_ORACLE_MARK = (1 << 28) | (1 << 15)
 
 SPP_SMALL = 2048                # every even spp up to this has its own code
 SPP_STEP = 2048                 # above it, multiples of this up to SPP_STEP * 1024
@@ -203,6 +225,53 @@ def training_seeds(settings: dict) -> list[int]:
         raise BenchError(f"training.fibre_count must be 0..{MAX_TRAINING_SEED + 1 - FIBRE_SEED_BASE}, "
                          f"got {fibres}")
     return list(range(first, first + count)) + list(range(FIBRE_SEED_BASE, FIBRE_SEED_BASE + fibres))
+
+
+# --------------------------------------------------------------------------- oracle renders
+
+def oracle_render_seed(repetition: int, half: int, *, bin: int = 0, pass_index: int = 0,
+                       base_seed: int = 0) -> int:
+    """32-bit Mitsuba seed of one pass of an oracle render (layout in the module docstring).
+
+    ``repetition``: 0..:data:`MAX_ORACLE_REPETITIONS` - 1 (config key ``oracle.repetitions``
+    plus the held-out one); ``half`` 0 = A, 1 = B; ``bin`` 0/1, the sample bin within the
+    half; ``pass_index`` 0..32767; ``base_seed`` the config's ``seed`` (0..6). Distinct
+    arguments give distinct seeds, none equal to a :func:`render_seed` or
+    :func:`training_render_seed` value.
+    """
+    repetition, base_seed, pass_index = int(repetition), int(base_seed), int(pass_index)
+    if not 0 <= base_seed <= MAX_BASE_SEED:
+        raise BenchError(f"config key 'seed': must be in 0..{MAX_BASE_SEED} "
+                         f"({TRAINING_BASE_SEED} is reserved for training renders), got {base_seed}")
+    if not 0 <= repetition < MAX_ORACLE_REPETITIONS:
+        raise BenchError(f"config key 'oracle.repetitions': repetition {repetition} out of range "
+                         f"0..{MAX_ORACLE_REPETITIONS - 1} (the held-out one included)")
+    if half not in (0, 1):
+        raise ValueError(f"half must be 0 (A) or 1 (B), got {half!r}")
+    if bin not in (0, 1):
+        raise ValueError(f"bin must be 0 or 1, got {bin!r}")
+    if not 0 <= pass_index < 1 << 15:
+        raise BenchError(f"oracle pass index {pass_index} out of range 0..32767 (lower "
+                         f"oracle.spp or the resolution)")
+    field = (repetition << 2) | (half << 1) | int(bin)
+    return (base_seed << 29) | _ORACLE_MARK | (field << 16) | pass_index
+
+
+def is_oracle_seed(seed: int) -> bool:
+    """Whether ``seed`` lies in the oracle slot (bits 28 and 15 set, base seed 0..6)."""
+    seed = int(seed)
+    return seed >> 29 <= MAX_BASE_SEED and seed & _ORACLE_MARK == _ORACLE_MARK
+
+
+def decode_oracle_seed(seed: int) -> dict:
+    """Inverse of :func:`oracle_render_seed`: ``base_seed``, ``repetition``, ``half``, ``bin``,
+    ``pass_index``. Raises ValueError for a seed outside the oracle slot."""
+    seed = int(seed)
+    if not is_oracle_seed(seed):
+        raise ValueError(f"seed {seed} is not an oracle render seed")
+    field = (seed >> 16) & 0xFFF
+    return {"base_seed": seed >> 29, "repetition": field >> 2, "half": (field >> 1) & 1,
+            "bin": field & 1, "pass_index": seed & 0x7FFF}
 
 
 # --------------------------------------------------------------------------- scalar variants
