@@ -1,0 +1,84 @@
+# The comparisons of Zheng et al. 2021 Sec. 5.2 (mcbench.comparisons): Tables 1-2 (ensemble
+# against one-hot selection), the ablation table and the comparison methods' own ranking.
+# Which method compares with which is read from the method table (module docstring).
+
+COMPARISON_METHODS = {name: {key: spec[key] for key in ("module", "kind", "inputs", "params", "label")}
+                      for name, spec in METHODS.items()}
+
+
+rule comparison_onehot:
+    input:
+        metrics=rules.gather_metrics.output[0],
+    output:
+        table1_csv=report(
+            f"{RESULTS}/tables/comparisons/table1_{{metric}}.csv",
+            caption="../report/comparisons_onehot.rst",
+            category="Comparisons",
+            subcategory="Tables 1-2: one-hot selection",
+            labels={"metric": "{metric}", "table": "Table 1 (pre-filtering SBF, NFOR)"},
+        ),
+        table1_md=f"{RESULTS}/tables/comparisons/table1_{{metric}}.md",
+        table2_csv=report(
+            f"{RESULTS}/tables/comparisons/table2_{{metric}}.csv",
+            caption="../report/comparisons_onehot.rst",
+            category="Comparisons",
+            subcategory="Tables 1-2: one-hot selection",
+            labels={"metric": "{metric}", "table": "Table 2 (post-filtering)"},
+        ),
+        table2_md=f"{RESULTS}/tables/comparisons/table2_{{metric}}.md",
+    params:
+        methods=COMPARISON_METHODS,
+        labels=LABELS,
+    conda:
+        "../envs/mcbench.yaml"
+    log:
+        f"{RESULTS}/logs/comparison_onehot_{{metric}}.log",
+    script:
+        "../scripts/comparison_tables.py"
+
+
+rule comparison_ablations:
+    input:
+        metrics=rules.gather_metrics.output[0],
+        timings=rules.gather_timings.output[0],
+    output:
+        csv=report(
+            f"{RESULTS}/tables/comparisons/ablations.csv",
+            caption="../report/comparisons_ablations.rst",
+            category="Comparisons",
+            subcategory="Ablations",
+            labels={"table": "ablations", "metric": "relmse, dssim"},
+        ),
+        md=f"{RESULTS}/tables/comparisons/ablations.md",
+    params:
+        methods=COMPARISON_METHODS,
+        labels=LABELS,
+    conda:
+        "../envs/mcbench.yaml"
+    log:
+        f"{RESULTS}/logs/comparison_ablations.log",
+    script:
+        "../scripts/comparison_tables.py"
+
+
+rule comparison_ranking:
+    input:
+        metrics=rules.gather_metrics.output[0],
+    output:
+        csv=report(
+            f"{RESULTS}/tables/comparisons/ranking_{{metric}}.csv",
+            caption="../report/comparisons_ranking.rst",
+            category="Comparisons",
+            subcategory="Comparison rankings",
+            labels={"metric": "{metric}", "table": "comparison methods beside their ensembles"},
+        ),
+        md=f"{RESULTS}/tables/comparisons/ranking_{{metric}}.md",
+    params:
+        methods=COMPARISON_METHODS,
+        labels=LABELS,
+    conda:
+        "../envs/mcbench.yaml"
+    log:
+        f"{RESULTS}/logs/comparison_ranking_{{metric}}.log",
+    script:
+        "../scripts/comparison_tables.py"
