@@ -35,31 +35,59 @@ def run_method(method: str, render_path: str, output_path: str, timing_path: str
     The timing counts the method's compute only (EXR reading and writing excluded), measured
     with ``time.perf_counter``; base denoisers include their three runs (full, A, B).
     """
+    run_methods([{"name": method, "module": module_name, "params": params or {},
+                  "input_paths": list(input_paths), "exr": output_path, "timing": timing_path}],
+                render_path, scene=scene, spp=spp, threads=threads)
+
+
+def run_methods(entries: list[dict], render_path: str, *, scene: str = "", spp: int = 0,
+                threads: int = 1) -> None:
+    """Run several methods of one test case in one process, in the given order (one DAG job).
+
+    ``entries``: dicts with ``name``, ``module``, ``params``, ``input_paths`` (the output EXRs
+    of the method's inputs) and ``exr``, ``timing`` (where its output and timing record go),
+    in dependency order: an entry may take an earlier entry's output as an input. The render and
+    every input EXR are read once; an input made earlier in the same call is read back from the
+    file just written, so each method sees exactly what a job of its own would see (results
+    do not depend on the batching). Every method gets its own output, timing record (compute
+    only, as :func:`run_method`) and output check; the first failure stops the call, naming the
+    method. Methods are imported once per process (a learned method's torch import is paid once
+    per batch, not once per method).
+    """
     from methods import load_method
 
-    module = load_method(module_name, config_key=f"method '{method}'")
     buffers = RenderBuffers.load(render_path)
-    inputs = [Denoised.load(p, extras=True) for p in input_paths]
-    for path, denoised in zip(input_paths, inputs):
-        if denoised.full.shape != buffers.color.shape:
-            raise BenchError(f"{path}: shape {denoised.full.shape} does not match render "
-                             f"{render_path} of shape {buffers.color.shape}")
-    start = time.perf_counter()
-    if module.KIND == "denoiser":
-        result = module.denoise(buffers, **(params or {}))
-    else:
-        result = module.combine(buffers, inputs, **(params or {}))
-    seconds = time.perf_counter() - start
-    layers = result.layers()
-    bad = {name: layer for name, layer in layers.items() if not np.all(np.isfinite(layer))}
-    if bad:
-        check_finite(f"{output_path} (output of method '{method}')", bad)
-    write_layers(output_path, layers, metadata={"method": method, "scene": scene, "spp": spp,
-                                                "seconds": f"{seconds:.6f}"})
+    loaded: dict[str, Denoised] = {}
+
+    def input_of(path: str) -> Denoised:
+        if path not in loaded:
+            denoised = Denoised.load(path, extras=True)
+            if denoised.full.shape != buffers.color.shape:
+                raise BenchError(f"{path}: shape {denoised.full.shape} does not match render "
+                                 f"{render_path} of shape {buffers.color.shape}")
+            loaded[path] = denoised
+        return loaded[path]
+
     height, width = buffers.shape
-    write_json(timing_path, {"scene": scene, "spp": spp, "method": method, "module": module_name,
-                             "kind": module.KIND, "seconds": seconds, "width": width,
-                             "height": height, "threads": threads, "machine": _machine()})
+    for entry in entries:
+        method, module_name, params = entry["name"], entry["module"], dict(entry.get("params") or {})
+        module = load_method(module_name, config_key=f"method '{method}'")
+        inputs = [input_of(path) for path in entry.get("input_paths", ())]
+        start = time.perf_counter()
+        if module.KIND == "denoiser":
+            result = module.denoise(buffers, **params)
+        else:
+            result = module.combine(buffers, inputs, **params)
+        seconds = time.perf_counter() - start
+        layers = result.layers()
+        bad = {name: layer for name, layer in layers.items() if not np.all(np.isfinite(layer))}
+        if bad:
+            check_finite(f"{entry['exr']} (output of method '{method}')", bad)
+        write_layers(entry["exr"], layers, metadata={"method": method, "scene": scene, "spp": spp,
+                                                     "seconds": f"{seconds:.6f}"})
+        write_json(entry["timing"], {"scene": scene, "spp": spp, "method": method, "module": module_name,
+                                     "kind": module.KIND, "seconds": seconds, "width": width,
+                                     "height": height, "threads": threads, "machine": _machine()})
 
 
 def compute_case_metrics(scene: str, spp: int, reference_path: str, render_path: str,

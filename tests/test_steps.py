@@ -68,6 +68,40 @@ def test_run_method_combiner_reads_its_inputs(case_files, tmp_path):
     assert json.loads(timing.read_text())["kind"] == "combiner"
 
 
+def test_run_methods_in_one_job_equals_one_job_per_method(case_files, tmp_path):
+    """A batch (base denoisers, a combiner of them, a combiner of that combiner) writes exactly the
+    files that one run_method per method writes, in dependency order within the call."""
+    render, _ = case_files
+    specs = [("jbf", "jbf", {}, []), ("oidn", "oidn", {}, []),
+             ("ens", "ensemble", {"solver": "exact"}, ["jbf", "oidn"]),
+             ("avg", "naive_average", {}, ["ens", "oidn"])]
+    single, batch = tmp_path / "single", tmp_path / "batch"
+    single.mkdir(), batch.mkdir()
+    for name, module, params, inputs in specs:
+        steps.run_method(name, str(render), str(single / f"{name}.exr"), str(single / f"{name}.json"),
+                         module_name=module, params=params,
+                         input_paths=[str(single / f"{i}.exr") for i in inputs], scene=SCENE, spp=SPP)
+    steps.run_methods([{"name": name, "module": module, "params": params,
+                        "input_paths": [str(batch / f"{i}.exr") for i in inputs],
+                        "exr": str(batch / f"{name}.exr"), "timing": str(batch / f"{name}.json")}
+                       for name, module, params, inputs in specs], str(render), scene=SCENE, spp=SPP)
+    for name, *_ in specs:
+        one, other = read_layers(single / f"{name}.exr"), read_layers(batch / f"{name}.exr")
+        assert one.keys() == other.keys()
+        for layer in one:
+            np.testing.assert_array_equal(one[layer], other[layer])
+        assert json.loads((batch / f"{name}.json").read_text())["method"] == name
+
+
+def test_run_methods_names_a_missing_input(case_files, tmp_path):
+    render, _ = case_files
+    with pytest.raises(Exception, match="missing.exr"):
+        steps.run_methods([{"name": "ens", "module": "ensemble", "params": {},
+                            "input_paths": [str(tmp_path / "missing.exr")],
+                            "exr": str(tmp_path / "ens.exr"), "timing": str(tmp_path / "ens.json")}],
+                          str(render))
+
+
 def test_run_method_refuses_an_input_of_another_size(case_files, tmp_path, make_render_buffers):
     render, _ = case_files
     small = make_render_buffers(height=8, width=8)

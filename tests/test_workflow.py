@@ -147,7 +147,8 @@ def test_killed_run_resumes_without_redoing_finished_jobs(tmp_path):
     snakemake(workdir, "--unlock")
     result = snakemake(workdir, "--rerun-incomplete")
     assert not re.search(r"^(local)?rule render_noisy:", result.stdout + result.stderr, re.MULTILINE)
-    assert re.search(r"^(local)?rule run_method:", result.stdout + result.stderr, re.MULTILINE)
+    assert re.search(r"^(local)?rule run_(method|combiners|learned_denoisers):", result.stdout + result.stderr,
+                     re.MULTILINE)
     for render, mtime in mtimes.items():
         assert (workdir / render).stat().st_mtime_ns == mtime, f"{render} was redone"
     assert (workdir / "results/tables/ranking_relmse.csv").exists()
@@ -293,6 +294,35 @@ def test_the_same_command_plans_the_same_study_from_any_folder(tmp_path):
     default_other = _planned(_dry_run(other))
     assert default_root == default_other
     assert default_root[1] == config_digest(resolve_config(yaml.safe_load((REPO / "config.yaml").read_text())))
+
+
+def _job_counts(result: subprocess.CompletedProcess) -> dict[str, int]:
+    """The dry run's job-stats table as {rule: count}."""
+    text = result.stdout + result.stderr
+    assert result.returncode == 0, text[-3000:]
+    table = text.split("Job stats:")[1].split("total")[0]
+    return {m.group(1): int(m.group(2)) for m in re.finditer(r"^(\w+)\s+(\d+)$", table, re.MULTILINE)}
+
+
+@pytest.mark.parametrize("batch", [True, False])
+def test_methods_of_a_case_share_jobs_unless_batching_is_off(tmp_path, batch):
+    """batch_methods: one job per case for the learned denoisers and one for the combiners, one job
+    per non-learned base denoiser; off: one job per method. The outputs planned are the same."""
+    config = write_config(tmp_path, batch_methods=batch)
+    result = _dry_run(tmp_path, "--configfile", str(tmp_path / "config.yaml"))
+    counts, cases = _job_counts(result), len(config["scenes"]) * len(config["spp"])
+    learned = [d for d in config["denoisers"] if d == "kpcn"]
+    plain = [d for d in config["denoisers"] if d != "kpcn"]
+    if batch:
+        assert counts["run_method"] == cases * len(plain)
+        assert counts["run_combiners"] == cases and counts["run_learned_denoisers"] == cases * bool(learned)
+    else:
+        assert counts["run_method"] == cases * (len(config["denoisers"]) + len(config["combiners"]))
+        assert "run_combiners" not in counts and "run_learned_denoisers" not in counts
+    outputs = {line.strip() for line in (result.stdout + result.stderr).splitlines() if line.strip().startswith("output:")}
+    planned = {p for line in outputs for p in line.removeprefix("output:").replace(",", " ").split()}
+    for name in config["denoisers"] + [c["name"] for c in config["combiners"]]:
+        assert f"results/outputs/cornell_box/spp4/{name}.exr" in planned
 
 
 def test_a_config_naming_only_scenes_runs(tmp_path):

@@ -74,6 +74,66 @@ wildcard_constraints:
     metric="|".join(METRICS),
 
 
+# Which methods share a job (config batch_methods): the learned denoisers of a case in one job,
+# the combiners of a case in another (config order is dependency order); every other method,
+# and every method when batch_methods is false, in a job of its own (rule run_method).
+BATCHES = {"learned_denoisers": [], "combiners": []}
+if config["batch_methods"]:
+    BATCHES["learned_denoisers"] = [n for n, s in METHODS.items() if s["kind"] == "denoiser" and s["learned"]]
+    BATCHES["combiners"] = [n for n, s in METHODS.items() if s["kind"] == "combiner"]
+BATCHED = {name for names in BATCHES.values() for name in names}
+SINGLE_JOB_METHODS = [name for name in METHODS if name not in BATCHED]
+
+
+def method_output(name, wildcards, kind="exr"):
+    """Output path (``exr`` or ``timing``) of method ``name`` in the case of ``wildcards``."""
+    return getattr(rules.run_method.output, kind).format(scene=wildcards.scene, spp=wildcards.spp, method=name)
+
+
+def batch_outputs(batch, kind):
+    """The output patterns ({scene}, {spp} left as wildcards) of a batch's methods."""
+    return [getattr(rules.run_method.output, kind).replace("{method}", name) for name in BATCHES[batch]]
+
+
+def batch_inputs(batch):
+    """Input function: outputs of the methods a batch's methods take that the batch does not make."""
+
+    def inputs(wildcards):
+        names = dict.fromkeys(i for name in BATCHES[batch] for i in METHODS[name]["inputs"])
+        return [method_output(name, wildcards) for name in names if name not in BATCHES[batch]]
+
+    return inputs
+
+
+def batch_entries(batch):
+    """Params function: the ``mcbench.steps.run_methods`` entries of a batch's methods in one case."""
+
+    def entries(wildcards):
+        return [{"name": name, "module": METHODS[name]["module"], "params": METHODS[name]["params"],
+                 "input_paths": [method_output(i, wildcards) for i in METHODS[name]["inputs"]],
+                 "exr": method_output(name, wildcards), "timing": method_output(name, wildcards, "timing")}
+                for name in BATCHES[batch]]
+
+    return entries
+
+
+def batch_weights(batch):
+    """Input function: nothing, after checking that every learned method of a batch has weights."""
+
+    def weights(wildcards):
+        for name in BATCHES[batch]:
+            check_weights(name)
+        return []
+
+    return weights
+
+
+def batch_weights_digests(batch):
+    """Params function: the SHA-256 of each learned method's weights in a batch (provenance)."""
+    return lambda wildcards: {name: weights_digest_of(METHODS[name]["module"])
+                              for name in BATCHES[batch] if METHODS[name]["learned"]}
+
+
 def reference_chunk_spp(wildcards):
     return REFERENCE_SPP[wildcards.scene] // REFERENCE_CHUNKS
 
@@ -90,14 +150,19 @@ def weights_file(network):
 
 
 def method_weights(wildcards):
-    """Nothing: a learned method's weights must exist before the main job runs it. Missing
-    weights stop the DAG with the folder named (a mistyped ``weights_dir`` would otherwise plan
-    hours of training renders); `snakemake train_<name>` is the one way to make them."""
-    spec = METHODS[wildcards.method]
+    """Nothing, after checking that a learned method's weights exist (check_weights)."""
+    check_weights(wildcards.method)
+    return []
+
+
+def check_weights(name):
+    """A learned method's weights must exist before the main job runs it. Missing weights stop the
+    DAG with the folder named (a mistyped ``weights_dir`` would otherwise plan hours of training
+    renders); `snakemake train_<name>` is the one way to make them."""
+    spec = METHODS[name]
     if spec["learned"] and not Path(weights_file(spec["module"])).exists():
         raise BenchError(f"no weights for {spec['module']} in {WEIGHTS_DIR} (weights_dir); train them "
                          f"with `snakemake --cores 2 train_{spec['module']}` or fix weights_dir")
-    return []
 
 
 def weights_digest(wildcards):
