@@ -11,16 +11,39 @@ and the weight is w(p, q) = exp(-max(0, d²)). The filtered value is the w-weigh
 the (2·radius + 1)² window, clipped at image borders. ``guide`` may differ from the filtered
 ``values`` (cross filtering, e.g. weights from buffer B applied to buffer A).
 
-Vectorised over the image, one window offset at a time; patch sums use
-``scipy.ndimage.uniform_filter`` (edge mode "nearest"). Accumulation in float64.
+Two implementations with the same result (tested to 1e-10 relative):
+
+* :func:`nl_means_filter` -- compiled (numba): bands of ``BAND_ROWS`` image rows, and per band
+  one window offset at a time the per-pixel distance map of the band plus the patch halo,
+  separable direct patch sums (7 + 7 taps for 7x7 patches, edge rows/columns replicated),
+  exp and the weighted sum of all value channels at once (one weight per pixel pair, shared by
+  the K channels). Working set per band: two (rows + 2 F) x W maps and the band's (rows, W, K)
+  accumulators, so it stays in cache at 512^2. Bands run in parallel (``prange``) with
+  NUMBA_NUM_THREADS > 1; each band's arithmetic is identical either way.
+* :func:`nl_means_filter_reference` -- the NumPy path (vectorised over the image, one offset at
+  a time, patch sums by ``scipy.ndimage.uniform_filter`` in edge mode "nearest"), kept as the
+  tests' truth; :func:`nl_means_weight_maps` yields its per-offset weight maps.
+
+:func:`nl_means_distance_rows` is the compiled per-offset patch distance of a band of rows,
+shared with the regression kernel of ``methods/nfor.py``. All arithmetic is float64 (the
+distances subtract variance terms of similar size, and the weights feed float64 sums).
+
+Speed (``NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/bench_nlmeans.py``, 2-core AMD EPYC,
+R = 5, F = 3, one channel): see that benchmark's docstring for the measured numbers.
 """
 
 from __future__ import annotations
 
 import numpy as np
+from numba import prange
 from scipy.ndimage import uniform_filter
 
-__all__ = ["nl_means_filter", "nl_means_weight_maps"]
+from mcbench.jit import cached_njit
+
+__all__ = ["nl_means_filter", "nl_means_filter_reference", "nl_means_weight_maps",
+           "nl_means_distance_rows", "BAND_ROWS"]
+
+BAND_ROWS = 16   # rows per band of the compiled filter; affects speed only
 
 
 def _shifted(array: np.ndarray, dy: int, dx: int) -> tuple[np.ndarray, np.ndarray]:
@@ -59,13 +82,10 @@ def nl_means_weight_maps(guide: np.ndarray, guide_variance: np.ndarray, radius: 
             yield dy, dx, weight, valid
 
 
-def nl_means_filter(values: np.ndarray, guide: np.ndarray, guide_variance: np.ndarray, radius: int = 5,
-                    patch_radius: int = 3, k: float = 0.5, alpha: float = 1.0, epsilon: float = 1e-10) -> np.ndarray:
-    """NL-means filter ``values`` (H, W, K) or (H, W) with weights computed on ``guide``.
-
-    Returns float64 of the same shape as ``values``. The centre weight is 1, so the
-    normalisation never divides by zero.
-    """
+def nl_means_filter_reference(values: np.ndarray, guide: np.ndarray, guide_variance: np.ndarray,
+                              radius: int = 5, patch_radius: int = 3, k: float = 0.5, alpha: float = 1.0,
+                              epsilon: float = 1e-10) -> np.ndarray:
+    """NumPy reference of :func:`nl_means_filter` (same arguments, same result to rounding)."""
     values = np.asarray(values, dtype=np.float64)
     squeeze = values.ndim == 2
     if squeeze:
@@ -80,3 +100,158 @@ def nl_means_filter(values: np.ndarray, guide: np.ndarray, guide_variance: np.nd
         weight_sum += weight
     out = total / weight_sum[..., None]
     return out[..., 0] if squeeze else out
+
+
+# ---------------------------------------------------------------------------------------------
+# Compiled path
+# ---------------------------------------------------------------------------------------------
+
+@cached_njit()
+def _clamp(i, n):
+    return 0 if i < 0 else (n - 1 if i >= n else i)
+
+
+@cached_njit()
+def nl_means_distance_rows(guide, variance, y0, rows, dy, dx, patch, k, alpha, epsilon, clamp,
+                           dmap, hsum, out):
+    """Patch distance d²(p, p + o) (module docstring, RKZ12 Eq. 5-6) for o = (dy, dx) and the
+    pixels p of rows [y0, y0 + rows), written to ``out[:rows, :]``.
+
+    guide, variance: (C, H, W) float64 planes (variance >= 0). Per-pixel distances, averaged
+    over the C channels, are clipped at ``clamp`` (``np.inf``: no clipping) before the patch
+    mean; patch and shifted pixels replicate the image edges. dmap, hsum: scratch of at least
+    (rows + 2 patch, W). Pixels whose p + o leaves the image get a value too (edge-replicated
+    shift); callers mask them.
+    """
+    c, h, w = guide.shape
+    k2 = k * k
+    ra = y0 - patch
+    nr = rows + 2 * patch
+    inv_c = 1.0 / c
+    x0 = min(max(0, -dx), w)              # x in [x0, x1): x + dx inside the image, no clamping
+    x1 = max(min(w, w - dx), x0)
+    for r in range(nr):
+        yp = _clamp(ra + r, h)
+        yq = _clamp(yp + dy, h)
+        drow = dmap[r]
+        drow[:] = 0.0
+        for ch in range(c):
+            gp, gq = guide[ch, yp], guide[ch, yq]
+            vp_row, vq_row = variance[ch, yp], variance[ch, yq]
+            for x in range(x0, x1):
+                vp = vp_row[x]
+                vq = vq_row[x + dx]
+                diff = gp[x] - gq[x + dx]
+                drow[x] += (diff * diff - alpha * (vp + min(vp, vq))) / (epsilon + k2 * (vp + vq))
+            for x in range(w):
+                if x >= x0 and x < x1:
+                    continue
+                xq = _clamp(x + dx, w)
+                vp = vp_row[x]
+                vq = vq_row[xq]
+                diff = gp[x] - gq[xq]
+                drow[x] += (diff * diff - alpha * (vp + min(vp, vq))) / (epsilon + k2 * (vp + vq))
+        for x in range(w):
+            acc = drow[x] * inv_c
+            drow[x] = acc if acc < clamp else clamp
+    if patch == 0:
+        for r in range(rows):
+            out[r, :w] = dmap[r, :w]
+        return
+    norm = 1.0 / ((2 * patch + 1) * (2 * patch + 1))
+    lo = min(patch, w)                    # x in [lo, hi): the patch row lies inside the image
+    hi = max(w - patch, lo)
+    for r in range(nr):
+        drow = dmap[r]
+        hrow = hsum[r]
+        hrow[:] = 0.0
+        for n in range(-patch, patch + 1):
+            for x in range(lo, hi):
+                hrow[x] += drow[x + n]
+        for x in range(w):
+            if x >= lo and x < hi:
+                continue
+            s = 0.0
+            for n in range(-patch, patch + 1):
+                s += drow[_clamp(x + n, w)]
+            hrow[x] = s
+    for r in range(rows):
+        y = y0 + r
+        orow = out[r]
+        orow[:w] = 0.0
+        for n in range(-patch, patch + 1):
+            hrow = hsum[_clamp(y + n, h) - ra]
+            for x in range(w):
+                orow[x] += hrow[x]
+        for x in range(w):
+            orow[x] *= norm
+
+
+@cached_njit(parallel=True)
+def _nl_means_kernel(values, guide, variance, radius, patch, k, alpha, epsilon, band):
+    """values: (K, H, W); guide, variance: (C, H, W) float64 planes. Returns (K, H, W)."""
+    nv, h, w = values.shape
+    out = np.empty((nv, h, w))
+    nbands = (h + band - 1) // band
+    for bi in prange(nbands):
+        y0 = bi * band
+        rows = min(h, y0 + band) - y0
+        dmap = np.empty((rows + 2 * patch, w))
+        hsum = np.empty((rows + 2 * patch, w))
+        dist = np.empty((rows, w))
+        total = np.zeros((nv, rows, w))
+        wsum = np.zeros((rows, w))
+        for dy in range(-radius, radius + 1):
+            for dx in range(-radius, radius + 1):
+                nl_means_distance_rows(guide, variance, y0, rows, dy, dx, patch, k, alpha, epsilon,
+                                       np.inf, dmap, hsum, dist)
+                x0 = max(0, -dx)
+                x1 = min(w, w - dx)
+                for r in range(rows):
+                    yq = y0 + r + dy
+                    if yq < 0 or yq >= h:
+                        continue
+                    drow = dist[r]
+                    for x in range(x0, x1):
+                        drow[x] = np.exp(-max(drow[x], 0.0))      # the weight w(p, p + o)
+                        wsum[r, x] += drow[x]
+                    for ch in range(nv):
+                        trow, vrow = total[ch, r], values[ch, yq]
+                        for x in range(x0, x1):
+                            trow[x] += drow[x] * vrow[x + dx]
+        for ch in range(nv):
+            for r in range(rows):
+                for x in range(w):
+                    out[ch, y0 + r, x] = total[ch, r, x] / wsum[r, x]
+    return out
+
+
+def _planes(array: np.ndarray) -> np.ndarray:
+    """(H, W, C) -> contiguous (C, H, W) float64."""
+    return np.ascontiguousarray(np.moveaxis(np.asarray(array, dtype=np.float64), 2, 0))
+
+
+def nl_means_filter(values: np.ndarray, guide: np.ndarray, guide_variance: np.ndarray, radius: int = 5,
+                    patch_radius: int = 3, k: float = 0.5, alpha: float = 1.0, epsilon: float = 1e-10) -> np.ndarray:
+    """NL-means filter ``values`` (H, W, K) or (H, W) with weights computed on ``guide``
+    (H, W, C) or (H, W) and its per-pixel, per-channel ``guide_variance`` (same shape).
+
+    Returns float64 of the same shape as ``values``. The centre weight is 1, so the
+    normalisation never divides by zero. Compiled; equals :func:`nl_means_filter_reference`.
+    """
+    values = np.asarray(values, dtype=np.float64)
+    squeeze = values.ndim == 2
+    if squeeze:
+        values = values[..., None]
+    guide = np.asarray(guide, dtype=np.float64)
+    variance = np.maximum(np.asarray(guide_variance, dtype=np.float64), 0.0)
+    if guide.ndim == 2:
+        guide, variance = guide[..., None], variance[..., None]
+    if guide.shape != variance.shape:
+        raise ValueError(f"guide {guide.shape} and guide_variance {variance.shape} differ in shape")
+    if values.shape[:2] != guide.shape[:2]:
+        raise ValueError(f"values {values.shape[:2]} and guide {guide.shape[:2]} differ in size")
+    out = _nl_means_kernel(_planes(values), _planes(guide), _planes(variance), int(radius),
+                           int(patch_radius), float(k), float(alpha), float(epsilon), BAND_ROWS)
+    out = np.moveaxis(out, 0, 2)
+    return np.ascontiguousarray(out[..., 0] if squeeze else out)

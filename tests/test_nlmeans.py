@@ -1,8 +1,11 @@
-"""NL-means (Rousselle et al. 2012) against a brute-force per-pixel loop."""
+"""NL-means (Rousselle et al. 2012) against a brute-force per-pixel loop, and the compiled filter
+against the NumPy reference path."""
 
 import numpy as np
+import pytest
 
-from mcbench.nlmeans import nl_means_filter
+from mcbench import nlmeans
+from mcbench.nlmeans import nl_means_filter, nl_means_filter_reference
 
 
 def brute_force(values, guide, variance, radius, patch_radius, k, alpha, epsilon=1e-10):
@@ -50,3 +53,42 @@ def test_constant_image_is_unchanged_and_noise_is_reduced():
     noisy = truth + rng.normal(0, 0.2, truth.shape)
     out = nl_means_filter(noisy, noisy, np.full_like(noisy, 0.04))
     assert np.mean((out - truth) ** 2) < 0.1 * np.mean((noisy - truth) ** 2)
+
+
+def relmse(got, expected):
+    return float(np.mean((got - expected) ** 2 / (expected ** 2 + 1e-2)))
+
+
+@pytest.mark.parametrize("radius, patch_radius, k, channels", [(2, 1, 0.7, 3), (5, 3, 0.5, 1), (3, 0, 1.0, 2),
+                                                                (4, 2, 1.0, 3)])
+def test_compiled_filter_equals_numpy_reference(radius, patch_radius, k, channels):
+    """The compiled filter against the NumPy path (scipy box filters) on random images whose
+    height is not a multiple of the band, with zero-variance pixels and a flat region."""
+    rng = np.random.default_rng(radius * 10 + patch_radius)
+    h, w = nlmeans.BAND_ROWS + 7, 13
+    guide = rng.random((h, w, channels))
+    variance = rng.random((h, w, channels)) * 0.05
+    variance[:4] = 0.0
+    guide[:3, :5] = 0.25
+    values = rng.random((h, w, 4)) * 10
+    expected = nl_means_filter_reference(values, guide, variance, radius=radius, patch_radius=patch_radius, k=k)
+    got = nl_means_filter(values, guide, variance, radius=radius, patch_radius=patch_radius, k=k)
+    assert relmse(got, expected) < 1e-12
+    # rtol 1e-6, not 1e-12: zero-variance pixels give distances ~ diff^2 / epsilon ~ 1e9, and
+    # scipy's running box sums keep ~1e-16 of those in their neighbours' sums (the compiled
+    # path sums each patch directly, as the brute force does)
+    np.testing.assert_allclose(got, expected, rtol=1e-6, atol=1e-12)
+    # (H, W) inputs keep their shape
+    got_2d = nl_means_filter(values[..., 0], guide[..., 0], variance[..., 0], radius=radius,
+                             patch_radius=patch_radius, k=k)
+    expected_2d = nl_means_filter_reference(values[..., 0], guide[..., 0], variance[..., 0], radius=radius,
+                                            patch_radius=patch_radius, k=k)
+    assert got_2d.shape == (h, w)
+    np.testing.assert_allclose(got_2d, expected_2d, rtol=1e-6, atol=1e-12)
+
+
+def test_shape_errors_name_the_arrays():
+    with pytest.raises(ValueError, match="guide .* and guide_variance"):
+        nl_means_filter(np.zeros((4, 4)), np.zeros((4, 4, 3)), np.zeros((4, 4, 2)))
+    with pytest.raises(ValueError, match="values .* and guide"):
+        nl_means_filter(np.zeros((4, 5)), np.zeros((4, 4)), np.zeros((4, 4)))
