@@ -235,3 +235,15 @@ def test_oracle_step_end_to_end(tmp_path):
     assert "Fig. 11" in open(paths["table_md"]).read()
     with open(paths["weights_png"], "rb") as handle:
         assert handle.read(8) == b"\x89PNG\r\n\x1a\n"
+
+
+def test_oracle_size_divides_the_harness_resolution_and_names_the_key():
+    from mcbench import BenchError
+    from mcbench.steps_oracle import oracle_size
+
+    assert oracle_size(None, (128, 96), 2) == (64, 48)
+    assert oracle_size([32, 32], (128, 128), 1) == (32, 32)
+    with pytest.raises(BenchError, match="oracle.downscale"):
+        oracle_size(None, (128, 128), 3)
+    with pytest.raises(BenchError, match="oracle.downscale.*11 pixels"):
+        oracle_size([32, 32], (128, 128), 4)

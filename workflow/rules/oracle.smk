@@ -3,23 +3,22 @@
 # denoisers' true MSE matrices against the harness's reference, the weights solved from them
 # next to the dual-buffer estimate's.
 
+from mcbench.steps_oracle import oracle_size  # noqa: E402
+
 ORACLE = config["oracle"]
-if ORACLE["scene"] not in SCENES:
-    raise BenchError(f"oracle.scene: '{ORACLE['scene']}' is not one of the config's scenes "
+# the scene: oracle.scene, or the config's first scene when null (the default)
+ORACLE_SCENE = ORACLE["scene"] or SCENES[0]
+if ORACLE_SCENE not in SCENES:
+    raise BenchError(f"oracle.scene: '{ORACLE_SCENE}' is not one of the config's scenes "
                      f"({', '.join(SCENES)}); its reference is rendered only for those")
-
-
-def oracle_reference(wildcards):
-    """The harness's reference of the oracle scene (a configured scene: it has one)."""
-    if wildcards.scene not in SCENES:
-        raise BenchError(f"oracle.scene: '{wildcards.scene}' is not one of the config's scenes "
-                         f"({', '.join(SCENES)})")
-    return rules.merge_reference.output[0].format(scene=wildcards.scene)
+oracle_size(config["resolution"], load_scene(ORACLE_SCENE).RESOLUTION, ORACLE["downscale"])
+for _index, _name in enumerate(ORACLE["denoisers"]):
+    load_method(_name, kind="denoiser", config_key=f"oracle.denoisers[{_index}]")
 
 
 rule oracle_study:
     input:
-        reference=oracle_reference,
+        reference=rules.merge_reference.output[0],
     output:
         table=report(
             f"{RESULTS}/oracle/{{scene}}/table.csv",
