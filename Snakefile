@@ -30,6 +30,7 @@ include: "workflow/rules/report.smk"
 include: "workflow/rules/training.smk"
 include: "workflow/rules/viewer.smk"
 include: "workflow/rules/figures.smk"
+include: "workflow/rules/comparisons.smk"
 
 
 rule all:
@@ -42,4 +43,7 @@ rule all:
         expand(rules.error_curves.output, metric=config["metrics"]),
         rules.speed_error.output,
         rules.viewer.output,
+        expand(rules.comparison_onehot.output, metric=config["metrics"]),
+        rules.comparison_ablations.output,
+        expand(rules.comparison_ranking.output, metric=config["metrics"]),
     default_target: True

@@ -49,8 +49,11 @@ def run_methods(entries: list[dict], render_path: str, *, scene: str = "", spp: 
     in dependency order: an entry may take an earlier entry's output as an input. The render and
     every input EXR are read once; an input made earlier in the same call is read back from the
     file just written, so each method sees exactly what a job of its own would see (results
-    do not depend on the batching). Every method gets its own output, timing record (compute
-    only, as :func:`run_method`) and output check; the first failure stops the call, naming the
+    do not depend on the batching). Every method gets its own output, timing record and output
+    check. The timing is the method's compute on the case (``time.perf_counter``; EXR reading and
+    writing excluded) after an untimed run on the case's top-left 32 x 32 crop, so that
+    just-in-time compilation, numba's cache loading and first-call set-up are not counted (they
+    are paid once per process, whatever the image size); the first failure stops the call, naming the
     method. Methods are imported once per process (a learned method's torch import is paid once
     per batch, not once per method).
     """
@@ -73,11 +76,11 @@ def run_methods(entries: list[dict], render_path: str, *, scene: str = "", spp: 
         method, module_name, params = entry["name"], entry["module"], dict(entry.get("params") or {})
         module = load_method(module_name, config_key=f"method '{method}'")
         inputs = [input_of(path) for path in entry.get("input_paths", ())]
+        # untimed run on a corner crop: compiles / loads the method's JIT kernels (numba's cache
+        # load alone took 0.6 s of a 0.06 s ensemble at 128x128) and first-call set-up
+        _apply(module, *_corner_crop(buffers, inputs), params)
         start = time.perf_counter()
-        if module.KIND == "denoiser":
-            result = module.denoise(buffers, **params)
-        else:
-            result = module.combine(buffers, inputs, **params)
+        result = _apply(module, buffers, inputs, params)
         seconds = time.perf_counter() - start
         layers = result.layers()
         bad = {name: layer for name, layer in layers.items() if not np.all(np.isfinite(layer))}
@@ -88,6 +91,30 @@ def run_methods(entries: list[dict], render_path: str, *, scene: str = "", spp: 
         write_json(entry["timing"], {"scene": scene, "spp": spp, "method": method, "module": module_name,
                                      "kind": module.KIND, "seconds": seconds, "width": width,
                                      "height": height, "threads": threads, "machine": _machine()})
+
+
+WARM_UP_SIZE = 32  # pixels per side of the untimed warm-up crop of run_methods
+
+
+def _apply(module, buffers: RenderBuffers, inputs: list[Denoised], params: dict) -> Denoised:
+    if module.KIND == "denoiser":
+        return module.denoise(buffers, **params)
+    return module.combine(buffers, inputs, **params)
+
+
+def _corner_crop(buffers: RenderBuffers, inputs: list[Denoised]) -> tuple[RenderBuffers, list[Denoised]]:
+    """The top-left WARM_UP_SIZE^2 pixels of a render and of its inputs (every layer)."""
+    h, w = (min(WARM_UP_SIZE, n) for n in buffers.shape)
+
+    def corner(layer: np.ndarray) -> np.ndarray:  # contiguous, like a loaded layer (same kernels)
+        return np.ascontiguousarray(layer[:h, :w])
+
+    crop = RenderBuffers(layers={k: corner(v) for k, v in buffers.layers.items()}, spp=buffers.spp,
+                         source=buffers.source)
+    cropped = [Denoised(full=corner(d.full), a=corner(d.a), b=corner(d.b),
+                        extras={k: corner(v) for k, v in d.extras.items()} if d.extras else None)
+               for d in inputs]
+    return crop, cropped
 
 
 def compute_case_metrics(scene: str, spp: int, reference_path: str, render_path: str,
@@ -167,12 +194,15 @@ def write_rankings(metrics_csv: str, metric: str, csv_path: str, md_path: str, *
     """Score-and-rank table (Zheng et al. Table 3 layout) for one metric, as CSV and Markdown,
     and as a LaTeX booktabs table at ``tex_path`` when given (label ``tab:ranking-<metric>``).
 
-    ``candidates`` (with the noisy input) is the config's list: a metrics table with another
-    set of candidates, or any incomplete case, stops here instead of being ranked."""
+    ``candidates`` (with the noisy input) is the ranking pool: rows of other candidates (the
+    comparison methods, ranked in their own tables) are left out; a metrics table missing a
+    pool candidate, or any incomplete case, stops here instead of being ranked."""
     from mcbench.metrics import METRIC_LABELS
     from mcbench.ranking import check_complete, format_latex, format_markdown, ranking_table
 
     metrics = read_table(metrics_csv)
+    # the ranking pool: the comparison methods' rows are ranked in their own tables
+    metrics = metrics[metrics["candidate"].isin(candidates)]
     check_complete(metrics[metrics["metric"] == metric], candidates=candidates, metric_names=[metric],
                    source=metrics_csv)
     table = ranking_table(metrics, metric)
@@ -401,12 +431,15 @@ def train_learned_method(name: str, crop_files: list[str], *args, correlated_fil
     return train_network(learned_method(name), training_data(name, crop_files, correlated_files), *args, **kwargs)
 
 
-def write_error_curves(metrics_csv: str, metric: str, png_path: str, *, labels: dict[str, str]) -> None:
-    """Error against spp of every candidate, per scene and averaged, for one metric
-    (mcbench.figures, like Fig. 13 of Zheng et al.); ``labels``: candidate -> legend label."""
+def write_error_curves(metrics_csv: str, metric: str, png_path: str, *, labels: dict[str, str],
+                       candidates: list[str] | None = None) -> None:
+    """Error against spp of every candidate (or of ``candidates`` only), per scene and averaged, for
+    one metric (mcbench.figures, like Fig. 13 of Zheng et al.); ``labels``: candidate -> legend label."""
     from mcbench.figures import error_curves, error_curves_figure
 
     metrics = read_table(metrics_csv, columns=["scene", "spp", "candidate", "metric", "value"])
+    if candidates is not None:
+        metrics = metrics[metrics["candidate"].isin(candidates)]
     error_curves_figure(error_curves(metrics, metric=metric), png_path, metric=metric, labels=labels)
 
 

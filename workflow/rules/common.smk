@@ -11,6 +11,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(workflow.basedir)))  # methods/, scenes/, mcbench/ from a checkout
 
 from mcbench import BenchError  # noqa: E402
+from mcbench.comparisons import comparison_role  # noqa: E402
 from mcbench.config import config_digest, resolve_config  # noqa: E402
 from mcbench.metrics import METRICS  # noqa: E402
 from mcbench.seeds import training_seeds  # noqa: E402
@@ -38,6 +39,9 @@ for _index, _scene in enumerate(config["scenes"]):
 SCENES = list(config["scenes"])
 SPPS = sorted(config["spp"])
 CANDIDATES = list(METHODS)
+# The ranking pool: every candidate but the comparison methods of Zheng et al. Sec. 5.2 (one-hot
+# selection, naive averages, ablations), which rank in their own tables (comparisons.smk).
+RANKED = [name for name in CANDIDATES if comparison_role(METHODS[name]) is None]
 LABELS = {NOISY: NOISY_LABEL, **{name: spec["label"] for name, spec in METHODS.items()}}
 METRIC_NAMES = list(config["metrics"])
 REFERENCE_CHUNKS = config["reference"]["chunks"]

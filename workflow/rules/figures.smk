@@ -18,6 +18,7 @@ rule error_curves:
         ),
     params:
         labels=LABELS,
+        candidates=[NOISY] + RANKED,
     conda:
         "../envs/mcbench.yaml"
     log:

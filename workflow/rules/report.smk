@@ -15,7 +15,7 @@ rule ranking_table:
         md=f"{RESULTS}/tables/ranking_{{metric}}.md",
         tex=f"{RESULTS}/tables/ranking_{{metric}}.tex",
     params:
-        candidates=[NOISY] + CANDIDATES,
+        candidates=[NOISY] + RANKED,
         labels=LABELS,
     conda:
         "../envs/mcbench.yaml"
