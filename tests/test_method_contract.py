@@ -162,3 +162,32 @@ def test_hard_case_gives_finite_output(name, case, make_render_buffers):
     buffers, inputs = hard_case(case, make_render_buffers)
     result = run(module, buffers, inputs)
     assert_valid_output(result, buffers.shape)
+
+
+def default_config_variants():
+    """Distinct (module, params) of the default study's non-learned combiners that set params
+    (the ablations and one-hot variants of Sec. 5.2): each keeps the contract on the hard cases."""
+    from mcbench.config import resolve_config
+    from mcbench.weights import is_learned_method
+
+    seen, params = set(), []
+    for entry in resolve_config({})["combiners"]:
+        module_name, options = entry.get("method", entry["name"]), entry.get("params") or {}
+        key = (module_name, tuple(sorted(options.items())))
+        if not options or key in seen or is_learned_method(load_method(module_name)):
+            continue
+        seen.add(key)
+        label = ",".join(f"{k}={v}" for k, v in sorted(options.items()))
+        params += [pytest.param(module_name, dict(options), case, id=f"{module_name}[{label}]-{case}")
+                   for case in COMBINER_CASES]
+    return params
+
+
+@pytest.mark.parametrize(("name", "options", "case"), default_config_variants())
+def test_default_config_variants_give_finite_output(name, options, case, make_render_buffers):
+    module = load_method(name)
+    buffers, inputs = hard_case(case, make_render_buffers)
+    result = module.combine(buffers, inputs, **options)
+    assert_valid_output(result, buffers.shape)
+    again = module.combine(buffers, inputs, **options)
+    assert np.array_equal(result.full, again.full), f"{name} {options}: not deterministic"
