@@ -128,6 +128,7 @@ def compute_case_metrics(scene: str, spp: int, reference_path: str, render_path:
     """
     from mcbench.metrics import flip_with_map
 
+    start = time.perf_counter()
     reference = read_layers(reference_path, ["color"])
     check_finite(reference_path, reference)
     reference = reference["color"]
@@ -148,7 +149,9 @@ def compute_case_metrics(scene: str, spp: int, reference_path: str, render_path:
             rows.append({"scene": scene, "spp": spp, "candidate": candidate, "metric": metric, "value": value})
     frame = pd.DataFrame(rows)
     if flip_maps_path is not None:
-        write_layers(flip_maps_path, flip_maps, metadata={"scene": scene, "spp": spp, "what": "HDR-FLIP maps"})
+        # seconds: this step's reading and computing (benchmarks/dag_overhead.py's metric compute)
+        write_layers(flip_maps_path, flip_maps, metadata={"scene": scene, "spp": spp, "what": "HDR-FLIP maps",
+                                                          "seconds": f"{time.perf_counter() - start:.6f}"})
     write_csv(output_path, frame)
     return frame
 

@@ -17,6 +17,8 @@ rule case_metrics:
         "../envs/mcbench.yaml"
     log:
         f"{RESULTS}/logs/metrics/{{scene}}_spp{{spp}}.log",
+    benchmark:
+        f"{RESULTS}/benchmarks/metrics/{{scene}}_spp{{spp}}.tsv"
     script:
         "../scripts/case_metrics.py"
 
