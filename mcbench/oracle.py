@@ -244,9 +244,12 @@ def table_markdown(table: pd.DataFrame, *, title: str, digits: int = 5) -> str:
 def weight_maps_figure(maps: dict[str, np.ndarray], path, *, denoisers: list[str], title: str) -> None:
     """PNG of weight maps (channels averaged): one row per denoiser, one column per variant.
 
-    ``maps``: {column title: (N, H, W, C) weights}, N = len(``denoisers``). A shared diverging
-    colour scale centred at 0.5 spans [0, 1] and is widened to the maps' own range where
-    unconstrained weights leave it (the colour bar shows it). Written atomically."""
+    ``maps``: {column title: (N, H, W, C) weights}, N = len(``denoisers``). Columns whose weights
+    all lie in [0, 1] (one-hot, simplex) share a [0, 1] colour scale; the others (unconstrained)
+    share a diverging one centred at 0.5, spanning the 99th percentile of |w - 0.5| over them
+    (at least 0.5; values beyond are clipped). Written atomically."""
+    import textwrap
+
     import matplotlib
 
     matplotlib.use("Agg")
@@ -255,23 +258,26 @@ def weight_maps_figure(maps: dict[str, np.ndarray], path, *, denoisers: list[str
     from mcbench.figures import save_figure
 
     averaged = {name: np.asarray(w, np.float64).mean(axis=-1) for name, w in maps.items()}
-    low = min(0.0, *(float(a.min()) for a in averaged.values()))
-    high = max(1.0, *(float(a.max()) for a in averaged.values()))
-    reach = max(0.5 - low, high - 0.5)
-    norm = matplotlib.colors.TwoSlopeNorm(vcenter=0.5, vmin=0.5 - reach, vmax=0.5 + reach)
+    bounded = {name: bool(a.min() >= -1e-9 and a.max() <= 1.0 + 1e-9) for name, a in averaged.items()}
+    free = [np.abs(a - 0.5).ravel() for name, a in averaged.items() if not bounded[name]]
+    reach = max(0.5, float(np.percentile(np.concatenate(free), 99))) if free else 0.5
+    scales = {True: dict(cmap="viridis", vmin=0.0, vmax=1.0),
+              False: dict(cmap="RdBu_r", vmin=0.5 - reach, vmax=0.5 + reach)}
     rows, cols = len(denoisers), len(maps)
-    figure, axes = plt.subplots(rows, cols, figsize=(1.9 * cols + 0.8, 1.9 * rows + 0.6), squeeze=False)
-    image = None
+    figure, axes = plt.subplots(rows, cols, figsize=(1.7 * cols + 1.6, 1.7 * rows + 1.2), squeeze=False)
+    shown = {}
     for j, (name, weights) in enumerate(averaged.items()):
         for i, denoiser in enumerate(denoisers):
             axis = axes[i, j]
-            image = axis.imshow(weights[i], cmap="RdBu_r", norm=norm, interpolation="nearest")
+            shown[bounded[name]] = axis.imshow(weights[i], interpolation="nearest", **scales[bounded[name]])
             axis.set_xticks([])
             axis.set_yticks([])
             if i == 0:
-                axis.set_title(name, fontsize=7)
+                axis.set_title("\n".join(textwrap.wrap(name, 18)), fontsize=7)
             if j == 0:
                 axis.set_ylabel(denoiser, fontsize=8)
-    figure.colorbar(image, ax=axes, shrink=0.8, label="weight (channels averaged)")
-    figure.suptitle(title, fontsize=9)
+    for is_bounded, image in shown.items():
+        figure.colorbar(image, ax=axes, shrink=0.7, pad=0.02,
+                        label="weight in [0, 1]" if is_bounded else "unconstrained weight (clipped)")
+    figure.suptitle("\n".join(textwrap.wrap(title, 120)), fontsize=8)
     save_figure(figure, path)
