@@ -54,6 +54,7 @@ EIGEN_ABS_TOL = 1e-13     # ... and absolute, in units of the problem's scale ma
 FEASIBLE_TOL = 1e-9       # a support's solution counts as on the simplex above -this
 TIE_ABS_TOL = 1e-12       # objectives this close (units of the scale, plus TIE_REL_TOL relative) tie
 TIE_REL_TOL = 1e-10
+UNCONSTRAINED_RANGE = (-1.0, 2.0)   # colour scale of unconstrained weight maps (centred at 0.5)
 
 
 class MseMatrixAccumulator:
@@ -246,8 +247,8 @@ def weight_maps_figure(maps: dict[str, np.ndarray], path, *, denoisers: list[str
 
     ``maps``: {column title: (N, H, W, C) weights}, N = len(``denoisers``). Columns whose weights
     all lie in [0, 1] (one-hot, simplex) share a [0, 1] colour scale; the others (unconstrained)
-    share a diverging one centred at 0.5, spanning the 99th percentile of |w - 0.5| over them
-    (at least 0.5; values beyond are clipped). Written atomically."""
+    share a diverging one centred at 0.5 on [-1, 2] (:data:`UNCONSTRAINED_RANGE`; values beyond
+    are clipped, so broken weights saturate). Written atomically."""
     import textwrap
 
     import matplotlib
@@ -259,10 +260,8 @@ def weight_maps_figure(maps: dict[str, np.ndarray], path, *, denoisers: list[str
 
     averaged = {name: np.asarray(w, np.float64).mean(axis=-1) for name, w in maps.items()}
     bounded = {name: bool(a.min() >= -1e-9 and a.max() <= 1.0 + 1e-9) for name, a in averaged.items()}
-    free = [np.abs(a - 0.5).ravel() for name, a in averaged.items() if not bounded[name]]
-    reach = max(0.5, float(np.percentile(np.concatenate(free), 99))) if free else 0.5
-    scales = {True: dict(cmap="viridis", vmin=0.0, vmax=1.0),
-              False: dict(cmap="RdBu_r", vmin=0.5 - reach, vmax=0.5 + reach)}
+    low, high = UNCONSTRAINED_RANGE
+    scales = {True: dict(cmap="viridis", vmin=0.0, vmax=1.0), False: dict(cmap="RdBu_r", vmin=low, vmax=high)}
     rows, cols = len(denoisers), len(maps)
     figure, axes = plt.subplots(rows, cols, figsize=(1.7 * cols + 1.6, 1.7 * rows + 1.2), squeeze=False)
     shown = {}
@@ -278,6 +277,6 @@ def weight_maps_figure(maps: dict[str, np.ndarray], path, *, denoisers: list[str
                 axis.set_ylabel(denoiser, fontsize=8)
     for is_bounded, image in shown.items():
         figure.colorbar(image, ax=axes, shrink=0.7, pad=0.02,
-                        label="weight in [0, 1]" if is_bounded else "unconstrained weight (clipped)")
+                        label="weight in [0, 1]" if is_bounded else f"unconstrained weight (clipped to [{low:g}, {high:g}])")
     figure.suptitle("\n".join(textwrap.wrap(title, 120)), fontsize=8)
     save_figure(figure, path)
