@@ -1,130 +1,264 @@
-"""Timing and optimality benchmark of the ensemble weight solvers and the weight filter
-(Zheng et al. 2021, Sec. 4.1-4.2) on synthetic inputs. A script, not a timed test:
+"""Speed and memory of the ensemble combiner (Zheng et al. 2021, Sec. 4), issue 14 target 1.
+A script, not a timed test:
 
-    python benchmarks/bench_ensemble.py [--sizes 512 1024] [--n 2 4 8] [--quick]
+    python benchmarks/bench_ensemble.py [--quick] [--keep DIR]
 
-Synthetic data (linear radiance): a smooth truth image mu (H, W, 3); noisy halves
-x^h = mu + sqrt(mu) * 0.3 * eps (heteroscedastic, plus 0.1 % fireflies); base outputs
-y_i^h = mu + bias_i + 0.02 * eps, with bias_i a smooth per-denoiser field, y_i (full) the
-same with less noise. Albedo is mu clipped to [0, 1]; normals are piecewise constant.
+Every figure is one whole process (``benchmarks/ensemble_job.py``: Python start, imports, EXR
+reads of the render and the N inputs, solve + weight filter + blend, EXR write), as the DAG runs
+an ensemble job, with its wall time and peak RSS (``os.wait4`` of the child). Printed:
 
-Every timing is taken after a warm-up call (numba compilation) and reported both in
-seconds and as a ratio to the exact solver and to a NumPy reference op measured in the same
-run (the Eq. 35 combination sum_i w_i y_i with np.einsum). The optimality gap of the
-iterative solver is L(w_iter) - L(w_exact) per pixel-channel (Eq. 13), also divided by
-scale^2 with scale = max(|x^A|, |x^B|, |y_i^A|, |y_i^B|) at that pixel-channel.
+1. 1024^2, N = 2, 4, 8, ``solver=iterative`` and ``exact``: wall, peak RSS and the phases, beside
+   the authors' C++ program on the same kind of inputs (``../shared/study/public-code-facts.md``:
+   9.0 / 13.0 / 20.4 s, 274 / 395 / 635 MiB) as ratios (target: wall <= 0.25x, RSS <= 1.2x);
+2. the fitted exponent b of combine time ~ pixels^b (256^2 ... 2048^2, N = 4) and ~ N^b
+   (N = 2 ... 8 at 1024^2), both solvers (1.0 = linear);
+3. numba against NumPy in the same run: the weight filter (Eq. 32-34) of
+   ``methods.ensemble.filter_weights`` against a vectorised NumPy implementation of the same
+   equations (one shifted-image pass per window offset, float64) at 256^2, N = 4, and the
+   relMSE between their blends;
+4. the machine load (``os.getloadavg``) before and after.
+
+Synthetic inputs (:func:`synthetic_parts`; linear radiance, float32 EXRs written once per size
+and N into a temporary folder): a smooth truth mu (H, W, 3); noisy halves x^h = mu + sqrt(mu) 0.3 eps with 0.1 %
+fireflies; base outputs y_i^h = mu + bias_i + 0.02 eps (bias_i a smooth per-denoiser field), the
+full result with 0.015 eps; albedo mu / max mu, normals piecewise constant.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
+import os
+import subprocess
 import sys
+import tempfile
+import time
 from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE.parent))
 
-from methods import ensemble as E  # noqa: E402
-from timing import timed  # noqa: E402
+from mcbench.exr import write_layers  # noqa: E402
+
+CPP_REFERENCE = {2: (9.0, 274.0), 4: (13.0, 395.0), 8: (20.4, 635.0)}  # N: (wall s, peak MiB)
+WALL_TARGET, RSS_TARGET = 0.25, 1.2
 
 
-def synthetic(size: int, n: int, seed: int = 0):
-    """Returns color_a, color_b (H, W, 3), y_full, y_a, y_b (N, H, W, 3), albedo, normal."""
-    rng = np.random.default_rng(seed)
-    H = W = size
-    yy, xx = np.mgrid[0:H, 0:W] / size
+def truth_and_features(size: int):
+    """mu (H, W, 3) float64, albedo and normal (H, W, 3) of the synthetic case."""
+    yy, xx = np.mgrid[0:size, 0:size] / size
     mu = np.stack([0.6 + 0.5 * np.sin(6 * xx) * np.cos(4 * yy),
                    0.4 + 0.3 * np.cos(5 * (xx + yy)),
                    0.3 + 0.25 * np.sin(9 * xx * yy)], -1) * 2.0
     mu = np.maximum(mu, 0.01)
+    albedo = np.clip(mu / mu.max(), 0, 1)
+    normal = np.zeros((size, size, 3))
+    normal[..., 2] = 1.0
+    normal[:, size // 2:] = [0.0, 1.0, 0.0]
+    return mu, albedo, normal
 
-    def noisy():
+
+def synthetic_parts(size: int, n: int, seed: int = 0):
+    """The synthetic case piece by piece (float64), so that a large one need not be held whole:
+    yields ``(mu, albedo, normal)``, then ``(x^A, x^B)``, then for each base output i the dict
+    ``{"full", "a", "b"}`` of its (H, W, 3) results."""
+    rng = np.random.default_rng(seed)
+    mu, albedo, normal = truth_and_features(size)
+    yield mu, albedo, normal
+    halves = []
+    for _ in range(2):
         x = mu + np.sqrt(mu) * 0.3 * rng.standard_normal(mu.shape)
-        fire = rng.random((H, W)) < 1e-3
+        fire = rng.random(mu.shape[:2]) < 1e-3
         x[fire] += rng.uniform(10, 100, (int(fire.sum()), 1))
-        return x
-
-    xa, xb = noisy(), noisy()
-    ys = {"full": [], "a": [], "b": []}
+        halves.append(x)
+    yield tuple(halves)
+    yy, xx = np.mgrid[0:size, 0:size] / size
     for i in range(n):
         fx, fy, ph = rng.uniform(1, 6), rng.uniform(1, 6), rng.uniform(0, 6.3)
         bias = (0.05 * (i + 1) / n) * np.sin(fx * xx + ph)[..., None] * np.cos(fy * yy)[..., None]
         bias = bias * rng.uniform(0.5, 1.5, 3)
-        for key, sd in (("full", 0.015), ("a", 0.02), ("b", 0.02)):
-            ys[key].append(mu + bias + sd * rng.standard_normal(mu.shape))
-    albedo = np.clip(mu / mu.max(), 0, 1)
-    normal = np.zeros((H, W, 3))
-    normal[..., 2] = 1.0
-    normal[:, W // 2:] = [0.0, 1.0, 0.0]
-    return xa, xb, np.stack(ys["full"]), np.stack(ys["a"]), np.stack(ys["b"]), albedo, normal
+        yield {key: mu + bias + sd * rng.standard_normal(mu.shape)
+               for key, sd in (("full", 0.015), ("a", 0.02), ("b", 0.02))}
 
 
-def run(sizes, ns, repeats):
-    # warm-up: compile every kernel once on a tiny problem
-    xa, xb, yf, ya, yb, alb, nrm = synthetic(16, 2)
-    for solver in E.SOLVERS:
-        w = E.solve_weights(xa, xb, ya, yb, solver=solver)
-    E.filter_weights(w, yf, ya, yb, alb, nrm)
-
-    rows = []
-    for size in sizes:
-        for n in ns:
-            xa, xb, yf, ya, yb, alb, nrm = synthetic(size, n)
-            t_ref, _ = timed(lambda: np.einsum("nhwc,nhwc->hwc", ya, yb), repeats)
-            t_exact, (we, codes) = timed(
-                lambda: E.solve_weights(xa, xb, ya, yb, solver="exact", return_info=True),
-                repeats)
-            t_iter, (wi, iters) = timed(
-                lambda: E.solve_weights(xa, xb, ya, yb, solver="iterative", return_info=True),
-                repeats)
-            t_filt, _ = timed(lambda: E.filter_weights(we, yf, ya, yb, alb, nrm), repeats)
-            gap = E.objective(wi, xa, xb, ya, yb) - E.objective(we, xa, xb, ya, yb)
-            scale = np.maximum.reduce([np.abs(xa), np.abs(xb), np.abs(ya).max(0),
-                                       np.abs(yb).max(0), np.full(xa.shape, 1e-30)])
-            rel = gap / scale ** 2
-            rows.append(dict(
-                size=f"{size}^2", N=n, ref_s=t_ref, exact_s=t_exact, iter_s=t_iter,
-                filter_s=t_filt, iter_x_exact=t_iter / t_exact, filter_x_exact=t_filt / t_exact,
-                exact_x_ref=t_exact / t_ref, iter_x_ref=t_iter / t_ref,
-                filter_x_ref=t_filt / t_ref,
-                gap_mean=gap.mean(), gap_max=gap.max(), gap_min=gap.min(),
-                rel_mean=rel.mean(), rel_max=rel.max(),
-                iters_mean=iters.mean(), hit_limit=(iters >= 1024).mean(),
-                nonunique=(codes > 0).mean(), enum=(codes >= 2).mean()))
-            print_row(rows[-1], header=len(rows) == 1)
-    return rows
+def synthetic(size: int, n: int, seed: int = 0):
+    """The whole synthetic case in memory: color_a, color_b (H, W, 3), y_full, y_a, y_b
+    (N, H, W, 3), albedo, normal (float64)."""
+    parts = synthetic_parts(size, n, seed)
+    _, albedo, normal = next(parts)
+    xa, xb = next(parts)
+    bases = list(parts)
+    return (xa, xb, *(np.stack([b[key] for b in bases]) for key in ("full", "a", "b")), albedo,
+            normal)
 
 
-COLS = [("size", "{:>6}"), ("N", "{:>2}"), ("ref_s", "{:8.4f}"), ("exact_s", "{:8.3f}"),
-        ("iter_s", "{:8.3f}"), ("filter_s", "{:8.3f}"), ("exact_x_ref", "{:8.1f}"),
-        ("iter_x_ref", "{:8.1f}"), ("filter_x_ref", "{:8.1f}"), ("iter_x_exact", "{:8.2f}"),
-        ("filter_x_exact", "{:8.2f}"), ("gap_mean", "{:9.2e}"), ("gap_max", "{:9.2e}"),
-        ("gap_min", "{:9.1e}"), ("rel_mean", "{:9.2e}"), ("rel_max", "{:9.2e}"),
-        ("iters_mean", "{:7.1f}"), ("hit_limit", "{:7.4f}"), ("nonunique", "{:7.4f}"),
-        ("enum", "{:7.4f}")]
+def write_case(folder: Path, size: int, n: int, seed: int = 0):
+    """The synthetic render and n base outputs as float32 EXRs in ``folder`` (reused when
+    present); returns (render path, input paths)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    render = folder / "render.exr"
+    inputs = [folder / f"base{i}.exr" for i in range(n)]
+    if render.exists() and all(p.exists() for p in inputs):
+        return render, inputs
+    parts = synthetic_parts(size, n, seed)
+    mu, albedo, normal = next(parts)
+    xa, xb = next(parts)
+    variance = 0.09 * mu
+    write_layers(render, {"color": 0.5 * (xa + xb), "color_a": xa, "color_b": xb,
+                          "variance": 0.5 * variance, "variance_a": variance,
+                          "variance_b": variance, "albedo": albedo, "normal": normal,
+                          "depth": np.ones(mu.shape[:2])}, metadata={"spp": 8})
+    for path, base in zip(inputs, parts):
+        write_layers(path, {"color": base["full"], "color_a": base["a"], "color_b": base["b"]})
+    return render, inputs
 
 
-def print_row(row, header=False):
-    if header:
-        print(" ".join(f"{name:>{max(len(fmt.format(row[name])), len(name))}}"
-                       for name, fmt in COLS), flush=True)
-    print(" ".join(f"{fmt.format(row[name]):>{len(name)}}" for name, fmt in COLS), flush=True)
+def run_job(render: Path, inputs: list[Path], output: Path, **params) -> dict:
+    """One ``ensemble_job.py`` process: its phases plus wall seconds and peak RSS (MiB)."""
+    command = [sys.executable, str(HERE / "ensemble_job.py"), str(render), str(output),
+               *map(str, inputs)]
+    if params:
+        command += ["--param", *(f"{k}={v}" for k, v in params.items())]
+    start = time.perf_counter()
+    child = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    _, status, usage = os.wait4(child.pid, 0)
+    wall = time.perf_counter() - start
+    stdout, stderr = child.stdout.read(), child.stderr.read()
+    child.returncode = os.waitstatus_to_exitcode(status)
+    if child.returncode:
+        raise RuntimeError(f"{' '.join(command)} failed:\n{stderr[-3000:]}")
+    phases = json.loads(stdout.strip().splitlines()[-1])
+    return dict(phases, wall_s=wall, rss_mib=usage.ru_maxrss / 1024.0)
+
+
+def fitted_exponent(xs, ys) -> float:
+    """Least-squares slope of log y against log x."""
+    return float(np.polyfit(np.log(xs), np.log(ys), 1)[0])
+
+
+def numpy_weight_filter(weights, y_full, y_a, y_b, albedo, normal, *, radius=7, sigma_spatial=3.0,
+                        sigma_color=2.0, sigma_albedo=0.25, sigma_normal=0.15):
+    """Eq. 32-34 in vectorised NumPy (float64), the baseline for the numba filter: for each window
+    offset the kernel of every pixel at once on zero-padded shifted images (out-of-image
+    neighbours get kappa 0); the colour distance is the channel mean of Eq. 33 (zero-variance
+    guard as :mod:`mcbench.bilateral`). weights, y_*: (N, H, W, C); returns (N, H, W, C)."""
+    z = np.einsum("nhwc,nhwc->hwc", weights, y_full)
+    var = 0.5 * (np.einsum("nhwc,nhwc->hwc", weights, y_a) - np.einsum("nhwc,nhwc->hwc", weights, y_b)) ** 2
+    n, h, w, c = weights.shape
+    r = radius
+
+    def pad(a):
+        return np.pad(a, [(0, 0)] * (a.ndim - 3) + [(r, r), (r, r), (0, 0)])
+
+    zp, vp, ap, np_ = pad(z), pad(var), pad(albedo), pad(normal)
+    inside = pad(np.ones((h, w, 1)))
+    wp = pad(weights)
+    acc = np.zeros_like(weights)
+    total = np.zeros((h, w, 1))
+    for dy in range(-r, r + 1):
+        for dx in range(-r, r + 1):
+            window = (slice(r + dy, r + dy + h), slice(r + dx, r + dx + w))
+            num = (z - zp[window]) ** 2
+            den = var + vp[window]
+            safe = den > 1e-20
+            term = np.where(safe, num / np.where(safe, den, 1.0), np.where(num == 0, 0.0, np.inf))
+            e = ((dy * dy + dx * dx) / (2 * sigma_spatial ** 2)
+                 + term.mean(axis=2, keepdims=True) / (2 * sigma_color ** 2)
+                 + ((albedo - ap[window]) ** 2).sum(2, keepdims=True) / (2 * sigma_albedo ** 2)
+                 + ((normal - np_[window]) ** 2).sum(2, keepdims=True) / (2 * sigma_normal ** 2))
+            kappa = np.exp(-e) * inside[window]
+            acc += kappa[None] * wp[(slice(None), *window)]
+            total += kappa
+    return acc / total[None]
+
+
+def filter_against_numpy(size: int = 256, n: int = 4, repeats: int = 2):
+    """Seconds of the numba weight filter and of the NumPy baseline on one case, and the relMSE
+    between the blends of their filtered weights."""
+    from methods import ensemble as E
+    from timing import timed
+
+    rng = np.random.default_rng(1)
+    mu, albedo, normal = truth_and_features(size)
+    xa, xb = (mu + np.sqrt(mu) * 0.3 * rng.standard_normal(mu.shape) for _ in range(2))
+    y = {k: np.stack([mu + 0.05 * (i + 1) / n + 0.02 * rng.standard_normal(mu.shape) for i in range(n)])
+         for k in ("full", "a", "b")}
+    raw = E.solve_weights(xa, xb, y["a"], y["b"], solver="exact")
+    E.filter_weights(raw[:, :16, :16], y["full"][:, :16, :16], y["a"][:, :16, :16],
+                     y["b"][:, :16, :16], albedo[:16, :16], normal[:16, :16])   # compile
+    t_numba, fast = timed(lambda: E.filter_weights(raw, y["full"], y["a"], y["b"], albedo, normal), repeats)
+    t_numpy, slow = timed(lambda: numpy_weight_filter(raw, y["full"], y["a"], y["b"], albedo, normal), 1)
+    blend_fast = np.einsum("nhwc,nhwc->hwc", fast, y["full"])
+    blend_slow = np.einsum("nhwc,nhwc->hwc", slow, y["full"])
+    relmse = float(np.mean((blend_fast - blend_slow) ** 2 / (blend_slow ** 2 + 1e-2)))
+    return t_numba, t_numpy, relmse
 
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--sizes", type=int, nargs="+", default=[512, 1024])
-    ap.add_argument("--n", type=int, nargs="+", default=[2, 4, 8])
-    ap.add_argument("--quick", action="store_true", help="small sizes for a smoke run")
-    ap.add_argument("--repeats", type=int, default=1, help="best of R timings")
+    ap.add_argument("--quick", action="store_true", help="small sizes (a smoke run of the script)")
+    ap.add_argument("--keep", type=Path, help="folder for the synthetic EXRs (kept between runs)")
     args = ap.parse_args(argv)
-    sizes = [64, 128] if args.quick else args.sizes
-    import numba
-    print(f"numba threads: {numba.get_num_threads()}; ref = np.einsum sum_i y_i^A y_i^B "
-          f"over (N, H, W, 3); *_x_ref / *_x_exact are time ratios; gap = L(iter) - L(exact) "
-          f"per pixel-channel, rel = gap / scale^2")
-    run(sizes, args.n, args.repeats)
+    sys.path.insert(0, str(HERE))
+    main_size = 256 if args.quick else 1024
+    sizes = [128, 256] if args.quick else [256, 512, 1024, 2048]
+    ns = [2, 4, 8]
+    n_sweep = [2, 3, 4, 6, 8]
+    load_before = os.getloadavg()
+    folder_ctx = tempfile.TemporaryDirectory(prefix="bench_ensemble_") if args.keep is None else None
+    root = Path(folder_ctx.name) if folder_ctx else args.keep
+    print(f"machine: {os.cpu_count()} CPUs, load average {load_before[0]:.2f} {load_before[1]:.2f} "
+          f"{load_before[2]:.2f}; numba threads {os.environ.get('NUMBA_NUM_THREADS', 'default')}",
+          flush=True)
+
+    def case(size, n):
+        return write_case(root / f"s{size}_n{n}", size, n)
+
+    # warm the numba cache once (compilation is not part of a job's cost)
+    render, inputs = case(64, 2)
+    for solver in ("iterative", "exact"):
+        run_job(render, inputs, root / "warm.exr", solver=solver)
+
+    results = {}
+
+    def job(size, n, solver):
+        key = (size, n, solver)
+        if key not in results:
+            render, inputs = case(size, n)
+            results[key] = run_job(render, inputs, root / "out.exr", solver=solver)
+        return results[key]
+
+    print(f"\n1. whole process at {main_size}^2 (C++ reference: public-code-facts.md, 1024^2; target "
+          f"wall <= {WALL_TARGET}x, RSS <= {RSS_TARGET}x)")
+    print(f"{'N':>2} {'solver':>9} {'wall_s':>7} {'import':>7} {'read':>6} {'combine':>8} {'write':>6} "
+          f"{'RSS_MiB':>8} {'C++_s':>6} {'x_C++':>6} {'C++MiB':>7} {'xRSS':>5}")
+    for n in ns:
+        for solver in ("iterative", "exact"):
+            r = job(main_size, n, solver)
+            cpp_s, cpp_mib = CPP_REFERENCE[n]
+            print(f"{n:>2} {solver:>9} {r['wall_s']:7.2f} {r['import_s']:7.2f} {r['read_s']:6.2f} "
+                  f"{r['combine_s']:8.2f} {r['write_s']:6.2f} {r['rss_mib']:8.0f} {cpp_s:6.1f} "
+                  f"{r['wall_s'] / cpp_s:6.2f} {cpp_mib:7.0f} {r['rss_mib'] / cpp_mib:5.2f}", flush=True)
+
+    print("\n2. scaling of the combine phase (fitted exponent b of time ~ x^b)")
+    for solver in ("iterative", "exact"):
+        times = [job(s, 4, solver)["combine_s"] for s in sizes]
+        print(f"   {solver:>9} vs pixels {[f'{s}^2' for s in sizes]}: "
+              f"{' '.join(f'{t:.2f}s' for t in times)} -> b = "
+              f"{fitted_exponent([s * s for s in sizes], times):.2f}", flush=True)
+        times = [job(main_size, n, solver)["combine_s"] for n in n_sweep]
+        print(f"   {solver:>9} vs N {n_sweep} at {main_size}^2: {' '.join(f'{t:.2f}s' for t in times)} "
+              f"-> b = {fitted_exponent(n_sweep, times):.2f}", flush=True)
+
+    t_numba, t_numpy, relmse = filter_against_numpy(128 if args.quick else 256)
+    print(f"\n3. weight filter, numba {t_numba:.3f} s vs NumPy baseline {t_numpy:.3f} s "
+          f"({t_numpy / t_numba:.1f}x faster); blend relMSE between them {relmse:.1e}")
+    load_after = os.getloadavg()
+    print(f"\n4. load average after: {load_after[0]:.2f} {load_after[1]:.2f} {load_after[2]:.2f}")
+    if folder_ctx:
+        folder_ctx.cleanup()
 
 
 if __name__ == "__main__":

@@ -1,7 +1,10 @@
-"""Generic cross (joint) bilateral filter, Zheng et al. 2021 Eq. 32-34.
+"""Generic cross (joint) bilateral filter, Zheng et al. 2021 Eq. 32-34, and the smoothing passes
+the authors' public code puts around it (a Gaussian blur of the guide variance, outlier
+removal: :func:`gaussian_blur`, :func:`remove_outliers`).
 
-Used by the ensemble's weight-map filter (``methods/ensemble.py``) and by the
-joint-bilateral base denoiser. All maps share one kernel per pixel:
+Used by the ensemble's weight-map filter (``methods/ensemble.py``), the one-hot selection's
+filters (``mcbench/selection.py``) and the joint-bilateral base denoiser. All maps share one
+kernel per pixel:
 
     kappa(p, q) = exp(-|p - q|^2 / (2 sigma_s^2))                       (spatial)
                 * exp(-D^2(g(p), g(q)) / (2 sigma_g^2))                  (colour guide, Eq. 33)
@@ -12,16 +15,34 @@ joint-bilateral base denoiser. All maps share one kernel per pixel:
 with q over the (2 radius + 1)^2 square window around p clipped at the image borders.
 
 Colour distance (Eq. 33) -- our documented reading of ``|z_p - z_q|^2 / (Var_p + Var_q)``
-for RGB is the per-channel mean::
+for RGB is the per-channel mean (``colour_distance="mean"``)::
 
     D^2 = 1/C sum_c (g_p,c - g_q,c)^2 / (v_p,c + v_q,c)
 
-with a guard on the division: when ``v_p,c + v_q,c <= 1e-20`` the channel's term is 0 if
-the numerator is 0 and +inf otherwise (kernel 0). Since kappa(p, p) = 1 the normaliser is
-always >= 1, so the output is finite for finite inputs.
+``colour_distance="sum"`` drops the 1/C, as the authors' public code does (so "sum" with
+sigma_g equals "mean" with sigma_g / sqrt(C)). The division is guarded: when
+``v_p,c + v_q,c <= 1e-20`` the channel's term is 0 if the numerator is 0 and "infinite"
+(kernel 0) otherwise. Since kappa(p, p) = 1 the normaliser is always >= 1, so the output is
+finite for finite inputs.
+
+Implementation. The kernel is symmetric, kappa(p, q) = kappa(q, p), so each pair of pixels is
+evaluated once and added to both ends (half of the (2r + 1)^2 - 1 offsets per pixel), and it is
+evaluated once per pair for all K maps (and their C channels). The image is cut into bands of
+:data:`BAND_ROWS` rows, one parallel work item each (numba ``prange``); a band owns its output
+rows, so pairs that cross a band border are evaluated by both bands (about r / BAND_ROWS extra
+work) and no two threads write the same memory. The inner loops run along image rows on planar
+copies of the guide and features, so they vectorise. ``dtype`` is the working precision of the
+kernel, the accumulation and the result: float64 by default (and for every caller that does not
+ask), float32 for the ensemble's weight maps, where its 1e-7 relative rounding is far below
+anything a weight map can show (the ensemble keeps its solver's geometry in float64). Neighbours
+with exponent above :data:`EXPONENT_CUTOFF` (kernel below 1.6e-38 of the centre's weight) count
+as 0.
 """
 
 from __future__ import annotations
+
+import math
+from typing import Literal
 
 import numpy as np
 from numba import prange
@@ -29,64 +50,239 @@ from numba import prange
 from mcbench.jit import cached_njit
 
 VARIANCE_FLOOR = 1e-20
+EXPONENT_CUTOFF = 87.0       # exp(-87) = 1.6e-38: the smallest normal float32 is 1.2e-38
+BAND_ROWS = 64               # output rows per parallel work item
+COLOUR_DISTANCES = ("mean", "sum")
+_IMPOSSIBLE = 1e30           # a colour term for "Var = 0 and the guides differ": kernel 0
 
 
-@cached_njit(parallel=True)
-def _cbf_kernel(values, guide, guide_var, use_guide, inv_two_sg2, feats, inv_two_ss2, radius):
-    """values (H, W, K), guide/guide_var (H, W, C), feats (H, W, F) pre-scaled so that the
-    feature term is exp(-sum_f (f_p - f_q)^2). Returns (H, W, K) float64."""
-    H, W, K = values.shape
-    C = guide.shape[2]
-    F = feats.shape[2]
-    out = np.zeros((H, W, K))
-    inv_c = 1.0 / max(C, 1)
-    for y in prange(H):
-        acc = np.empty(K)
-        for x in range(W):
-            for k in range(K):
-                acc[k] = 0.0
-            wsum = 0.0
-            y0 = max(0, y - radius)
-            y1 = min(H - 1, y + radius)
-            x0 = max(0, x - radius)
-            x1 = min(W - 1, x + radius)
-            for qy in range(y0, y1 + 1):
-                dy = qy - y
-                for qx in range(x0, x1 + 1):
-                    dx = qx - x
-                    e = (dy * dy + dx * dx) * inv_two_ss2
-                    for f in range(F):
-                        d = feats[y, x, f] - feats[qy, qx, f]
-                        e += d * d
-                    if use_guide:
-                        d2 = 0.0
-                        for c in range(C):
-                            num = guide[y, x, c] - guide[qy, qx, c]
-                            num = num * num
-                            den = guide_var[y, x, c] + guide_var[qy, qx, c]
-                            if den <= VARIANCE_FLOOR:
-                                if num != 0.0:
-                                    d2 = np.inf
-                                    break
-                            else:
-                                d2 += num / den
-                        if d2 == np.inf:
-                            continue
-                        e += d2 * inv_c * inv_two_sg2
-                    wq = np.exp(-e)
-                    if wq == 0.0:
+def _exp_constants(dtype) -> np.ndarray:
+    """Constants of :func:`_exp_neg_row` in ``dtype``: cutoff, log2(e), ln 2 split into a short
+    high part (n * hi exact for n < 128) and the rest, 1/2, the Taylor coefficients 1/k! for
+    k = 2..12, then 2^-(2^j) for j = 0..6."""
+    hi = 0.693359375 if np.dtype(dtype) == np.float32 else 0.6931471803691238
+    return np.array([EXPONENT_CUTOFF, 1.0 / math.log(2.0), hi, math.log(2.0) - hi, 0.5]
+                    + [1.0 / math.factorial(k) for k in range(2, 13)]
+                    + [2.0 ** -(2 ** j) for j in range(7)], dtype)
+
+
+@cached_njit(error_model="numpy")
+def _exp_neg_row(er, kr, c, m):
+    """kr[i] = exp(-er[i]) for i < m, er >= 0, 0 from the cutoff c[0] on; a loop that vectorises (the
+    C library's exp does not): exp(-e) = 2^-n exp(-f) with n = round(e / ln 2) (n < 128) and
+    |f| <= ln(2) / 2, exp(-f) by its Taylor series to degree 12 (Horner), 2^-n from the bits of
+    n. Relative error below 1e-7 in float32 and 5e-15 in float64 (tests/test_bilateral.py)."""
+    cutoff = c[0]
+    log2e = c[1]
+    hi = c[2]
+    lo = c[3]
+    half = c[4]
+    zero = half - half
+    one = half + half
+    for i in range(m):
+        e = er[i]
+        inside = e < cutoff
+        e = e if inside else zero
+        nf = np.floor(e * log2e + half)
+        f = (nf * hi - e) + nf * lo              # -(e - n ln 2)
+        p = c[15]
+        for k in range(14, 4, -1):
+            p = p * f + c[k]
+        p = (p * f + one) * f + one
+        n = np.int32(nf)
+        p = p * (c[16] if n & 1 else one)
+        p = p * (c[17] if n & 2 else one)
+        p = p * (c[18] if n & 4 else one)
+        p = p * (c[19] if n & 8 else one)
+        p = p * (c[20] if n & 16 else one)
+        p = p * (c[21] if n & 32 else one)
+        p = p * (c[22] if n & 64 else one)
+        kr[i] = p if inside else zero
+
+
+@cached_njit(error_model="numpy")
+def _add_weighted_row(out, wsum, values, krow, kk, y, band_row, x0, j0, src_y, src_j0, m, mc):
+    """One end of a row of pixel pairs: wsum[band_row, x0 + i] += krow[i] (i < m) and
+    out[g, y, j0 + j] += kk[j] values[g, src_y, src_j0 + j] (j < mc, every map g)."""
+    for i in range(m):
+        wsum[band_row, x0 + np.uint64(i)] += krow[i]
+    for g in range(values.shape[0]):
+        for j in range(mc):
+            u = np.uint64(j)
+            out[g, y, j0 + u] += kk[j] * values[g, src_y, src_j0 + u]
+
+
+@cached_njit(parallel=True, error_model="numpy")
+def _cbf_bands(values, channels, guide, guide_var, feats, spatial, consts, exp_consts, radius,
+               band_rows):
+    """values (G, H, W * channels): G maps of ``channels``-vectors per pixel; guide, guide_var
+    (Cg, H, W) planar (Cg = 0 for no colour term); feats (F, H, W) planar, pre-scaled so that the
+    feature term is sum_f (f_p - f_q)^2; spatial (r + 1, 2r + 1): |d|^2 / (2 sigma_s^2) for the
+    offset (dy, dx - r); consts: [colour scale 1/(2 sigma_g^2) (/ Cg for the mean), variance
+    floor, impossible term] and exp_consts (:func:`_exp_constants`) in the working dtype. Returns (G, H, W * channels)."""
+    G, H, WC = values.shape
+    W = WC // channels
+    Cg = guide.shape[0]
+    F = feats.shape[0]
+    colour_scale = consts[0]
+    floor = consts[1]
+    impossible = consts[2]
+    zero = consts[0] - consts[0]
+    one = zero + 1
+    out = np.empty_like(values)
+    nbands = (H + band_rows - 1) // band_rows
+    for band in prange(nbands):
+        y0 = band * band_rows
+        y1 = min(H, y0 + band_rows)
+        wsum = np.ones((y1 - y0, W), values.dtype)   # the centre pixel, kappa(p, p) = 1
+        for y in range(y0, y1):
+            for g in range(G):
+                for j in range(WC):
+                    out[g, y, j] = values[g, y, j]
+        erow = np.empty(W, values.dtype)
+        krow = np.empty(W, values.dtype)
+        kexp = np.empty(WC, values.dtype)
+        for y in range(max(0, y0 - radius), y1):
+            for dy in range(max(0, y0 - y), radius + 1):
+                y2 = y + dy
+                if y2 >= H:
+                    break
+                own1 = y >= y0          # the pair's upper pixel is in this band
+                own2 = y2 < y1          # ... its lower pixel
+                if not (own1 or own2):
+                    continue
+                for dx in range(1 if dy == 0 else -radius, radius + 1):
+                    xs = max(0, -dx)
+                    m = min(W, W - dx) - xs
+                    if m <= 0:
                         continue
-                    wsum += wq
-                    for k in range(K):
-                        acc[k] += wq * values[qy, qx, k]
-            inv = 1.0 / wsum
-            for k in range(K):
-                out[y, x, k] = acc[k] * inv
+                    # pixel p = (y, xs + i), q = (y2, xs + dx + i), i < m; unsigned offsets
+                    # (no negative-index wraparound) let these loops vectorise without views
+                    op = np.uint64(xs)
+                    oq = np.uint64(xs + dx)
+                    s = spatial[dy, dx + radius]
+                    for i in range(m):
+                        erow[i] = s
+                    for f in range(F):
+                        for i in range(m):
+                            u = np.uint64(i)
+                            d = feats[f, y, op + u] - feats[f, y2, oq + u]
+                            erow[i] += d * d
+                    for c in range(Cg):
+                        for i in range(m):
+                            u = np.uint64(i)
+                            num = guide[c, y, op + u] - guide[c, y2, oq + u]
+                            num = num * num
+                            den = guide_var[c, y, op + u] + guide_var[c, y2, oq + u]
+                            term = num / den if den > floor else (zero if num == zero else impossible)
+                            erow[i] += colour_scale * term
+                    _exp_neg_row(erow, krow, exp_consts, m)
+                    if channels == 1:
+                        kk = krow
+                    elif channels == 3:      # RGB vectors (the ensemble): unrolled, it vectorises
+                        kk = kexp
+                        for i in range(m):
+                            k = krow[i]
+                            kk[3 * i] = k
+                            kk[3 * i + 1] = k
+                            kk[3 * i + 2] = k
+                    else:
+                        kk = kexp
+                        for i in range(m):
+                            for c in range(channels):
+                                kk[i * channels + c] = krow[i]
+                    mc = m * channels
+                    jp = np.uint64(xs * channels)
+                    jq = np.uint64((xs + dx) * channels)
+                    if own1:      # p gets q's values
+                        _add_weighted_row(out, wsum, values, krow, kk, y, y - y0, op, jp, y2, jq, m,
+                                          mc)
+                    if own2:      # q gets p's values
+                        _add_weighted_row(out, wsum, values, krow, kk, y2, y2 - y0, oq, jq, y, jp, m,
+                                          mc)
+        inv = np.empty(WC, values.dtype)
+        for y in range(y0, y1):
+            for x in range(W):
+                q = one / wsum[y - y0, x]
+                for c in range(channels):
+                    inv[x * channels + c] = q
+            for g in range(G):
+                for j in range(WC):
+                    out[g, y, j] *= inv[j]
     return out
 
 
+def _planar(array, name, shape, dtype) -> np.ndarray:
+    """(H, W[, C]) -> contiguous (C, H, W) of ``dtype``; ``name`` for errors."""
+    a = np.asarray(array)
+    if a.ndim == 2:
+        a = a[:, :, None]
+    if a.ndim != 3 or a.shape[:2] != shape:
+        raise ValueError(f"{name} has shape {a.shape}, expected {shape}[+ (C,)]")
+    return np.ascontiguousarray(np.moveaxis(a, 2, 0), dtype=dtype)
+
+
+def cross_bilateral_filter_vectors(values, guide, guide_variance, features, feature_sigmas,
+                                   sigma_spatial, sigma_guide, radius, *,
+                                   colour_distance: Literal["mean", "sum"] = "mean",
+                                   dtype=np.float64) -> np.ndarray:
+    """Filter G maps of per-pixel C-vectors, values (G, H, W, C), with one shared kernel per pixel
+    (Eq. 32-34); the arguments as :func:`cross_bilateral_filter`. ``values`` is used without a
+    copy when it is already C-contiguous of ``dtype`` (e.g. the ensemble's (N, H, W, 3) float32
+    weights). Returns (G, H, W, C) of ``dtype`` (float32 or float64)."""
+    dtype = np.dtype(dtype)
+    if dtype not in (np.float32, np.float64):
+        raise ValueError(f"dtype must be float32 or float64, got {dtype}")
+    if colour_distance not in COLOUR_DISTANCES:
+        raise ValueError(f"colour_distance must be one of {COLOUR_DISTANCES}, got '{colour_distance}'")
+    vals = np.ascontiguousarray(values, dtype=dtype)
+    if vals.ndim != 4:
+        raise ValueError(f"values must be (G, H, W, C), got shape {vals.shape}")
+    G, H, W, C = vals.shape
+    features = list(features or [])
+    feature_sigmas = list(feature_sigmas or [])
+    if len(features) != len(feature_sigmas):
+        raise ValueError(f"{len(features)} features but {len(feature_sigmas)} feature sigmas")
+    radius = int(radius)
+    if radius < 0:
+        raise ValueError(f"radius must be >= 0, got {radius}")
+    if not sigma_spatial > 0:
+        raise ValueError(f"sigma_spatial must be > 0, got {sigma_spatial}")
+    scaled = []
+    for i, (f, s) in enumerate(zip(features, feature_sigmas)):
+        if not s > 0:
+            raise ValueError(f"feature sigma {i} must be > 0, got {s}")
+        scaled.append(_planar(np.asarray(f, np.float64) / (np.sqrt(2.0) * float(s)),
+                              f"feature {i}", (H, W), dtype))
+    feats = np.concatenate(scaled, axis=0) if scaled else np.zeros((0, H, W), dtype)
+    if guide is not None:
+        g = _planar(guide, "guide", (H, W), dtype)
+        gv = _planar(guide_variance, "guide_variance", (H, W), dtype)
+        if gv.shape != g.shape:
+            raise ValueError(f"guide {g.shape[::-1]} / guide_variance {gv.shape[::-1]} (as W, H, C) "
+                             f"do not match")
+        if not sigma_guide > 0:
+            raise ValueError(f"sigma_guide must be > 0, got {sigma_guide}")
+        np.maximum(gv, 0, out=gv)
+        colour_scale = 1.0 / (2.0 * float(sigma_guide) ** 2)
+        if colour_distance == "mean":
+            colour_scale /= g.shape[0]
+    else:
+        g = gv = np.zeros((0, H, W), dtype)
+        colour_scale = 0.0
+    offsets = np.arange(-radius, radius + 1)
+    spatial = ((np.arange(radius + 1)[:, None] ** 2 + offsets[None, :] ** 2)
+               / (2.0 * float(sigma_spatial) ** 2)).astype(dtype)
+    consts = np.array([colour_scale, VARIANCE_FLOOR, _IMPOSSIBLE], dtype)
+    out = _cbf_bands(vals.reshape(G, H, W * C), C, g, gv, feats, spatial, consts,
+                     _exp_constants(dtype), radius, BAND_ROWS)
+    return out.reshape(G, H, W, C)
+
+
 def cross_bilateral_filter(values, guide, guide_variance, features, feature_sigmas,
-                           sigma_spatial, sigma_guide, radius) -> np.ndarray:
+                           sigma_spatial, sigma_guide, radius, *,
+                           colour_distance: Literal["mean", "sum"] = "mean",
+                           dtype=np.float64) -> np.ndarray:
     """Filter K maps with one shared cross-bilateral kernel per pixel (Eq. 32-34).
 
     Parameters
@@ -101,64 +297,97 @@ def cross_bilateral_filter(values, guide, guide_variance, features, feature_sigm
     sigma_spatial : positive float, pixels (sigma_s).
     sigma_guide : positive float, unitless (sigma_z, in units of the normalised distance D).
     radius : int >= 0, half width of the square window in pixels.
+    colour_distance : ``"mean"`` (default) or ``"sum"`` over the guide's channels (Eq. 33).
+    dtype : working precision and result type, float64 (default) or float32.
 
     Returns
     -------
-    (K, H, W) float64 array: the normalised weighted averages (Eq. 34). Finite for finite
+    (K, H, W) array of ``dtype``: the normalised weighted averages (Eq. 34). Finite for finite
     inputs (the centre pixel always has weight 1).
     """
-    values = np.asarray(values, dtype=np.float64)
+    values = np.asarray(values)
     if values.ndim == 2:
         values = values[None]
     if values.ndim != 3:
         raise ValueError(f"values must be (K, H, W), got shape {values.shape}")
-    K, H, W = values.shape
-    features = list(features or [])
-    feature_sigmas = list(feature_sigmas or [])
-    if len(features) != len(feature_sigmas):
-        raise ValueError(f"{len(features)} features but {len(feature_sigmas)} feature sigmas")
-    radius = int(radius)
-    if radius < 0:
-        raise ValueError(f"radius must be >= 0, got {radius}")
-    if not sigma_spatial > 0:
-        raise ValueError(f"sigma_spatial must be > 0, got {sigma_spatial}")
+    out = cross_bilateral_filter_vectors(values[..., None], guide, guide_variance, features,
+                                         feature_sigmas, sigma_spatial, sigma_guide, radius,
+                                         colour_distance=colour_distance, dtype=dtype)
+    return out[..., 0]
 
-    scaled = []
-    for i, (f, s) in enumerate(zip(features, feature_sigmas)):
-        f = np.asarray(f, dtype=np.float64)
-        if f.ndim == 2:
-            f = f[:, :, None]
-        if f.ndim != 3 or f.shape[:2] != (H, W):
-            raise ValueError(f"feature {i} has shape {f.shape}, expected ({H}, {W}[, C])")
-        if not s > 0:
-            raise ValueError(f"feature sigma {i} must be > 0, got {s}")
-        scaled.append(f / (np.sqrt(2.0) * float(s)))
-    feats = (np.ascontiguousarray(np.concatenate(scaled, axis=2)) if scaled
-             else np.zeros((H, W, 0)))
 
-    if guide is not None:
-        guide = np.asarray(guide, dtype=np.float64)
-        if guide.ndim == 2:
-            guide = guide[:, :, None]
-        gvar = np.asarray(guide_variance, dtype=np.float64)
-        if gvar.ndim == 2:
-            gvar = gvar[:, :, None]
-        if guide.shape[:2] != (H, W) or gvar.shape != guide.shape:
-            raise ValueError(f"guide {guide.shape} / guide_variance {gvar.shape} do not match "
-                             f"the values' image size ({H}, {W})")
-        if not sigma_guide > 0:
-            raise ValueError(f"sigma_guide must be > 0, got {sigma_guide}")
-        use_guide = True
-        inv_two_sg2 = 1.0 / (2.0 * float(sigma_guide) ** 2)
-        guide = np.ascontiguousarray(guide)
-        gvar = np.ascontiguousarray(np.maximum(gvar, 0.0))
-    else:
-        guide = np.zeros((H, W, 1))
-        gvar = np.zeros((H, W, 1))
-        use_guide = False
-        inv_two_sg2 = 0.0
+# ---------------------------------------------------------------------------------------
+# the passes the authors' public code puts around the filter (public-code-facts.md, 1-2)
+# ---------------------------------------------------------------------------------------
+def gaussian_kernel(kernel_size: int) -> np.ndarray:
+    """The normalised 1-D Gaussian of OpenCV's ``GaussianBlur`` with sigma 0 (for sizes above 7,
+    where OpenCV computes it): sigma = 0.3 ((kernel_size - 1) / 2 - 1) + 0.8 (1.7 for 9), taps
+    exp(-x^2 / (2 sigma^2)) at x = -(k - 1)/2 .. (k - 1)/2 divided by their sum. (kernel_size,)
+    float64."""
+    if kernel_size < 1 or kernel_size % 2 == 0:
+        raise ValueError(f"kernel_size must be odd and positive, got {kernel_size}")
+    sigma = 0.3 * ((kernel_size - 1) / 2 - 1) + 0.8
+    x = np.arange(kernel_size) - (kernel_size - 1) / 2
+    taps = np.exp(-x ** 2 / (2 * sigma ** 2))
+    return taps / taps.sum()
 
-    vals = np.ascontiguousarray(np.moveaxis(values, 0, -1))  # (H, W, K)
-    out = _cbf_kernel(vals, guide, gvar, use_guide, inv_two_sg2, feats,
-                      1.0 / (2.0 * float(sigma_spatial) ** 2), radius)
-    return np.ascontiguousarray(np.moveaxis(out, -1, 0))
+
+def gaussian_blur(image, *, kernel_size: int = 9) -> np.ndarray:
+    """Separable Gaussian blur of an (H, W) or (H, W, C) image with :func:`gaussian_kernel`,
+    borders reflected without repeating the edge pixel (OpenCV's default BORDER_REFLECT_101,
+    NumPy's ``pad`` mode "reflect"; an axis of length 1 is constant). Returns float64 of the
+    image's shape."""
+    a = np.asarray(image, np.float64)
+    taps = gaussian_kernel(kernel_size)
+    r = kernel_size // 2
+    for axis in (0, 1):
+        length = a.shape[axis]
+        widths = [(0, 0)] * a.ndim
+        widths[axis] = (r, r)
+        padded = np.pad(a, widths, mode="reflect" if length > 1 else "edge")
+        out = np.zeros_like(a)
+        for k, tap in enumerate(taps):
+            out += tap * np.take(padded, np.arange(k, k + length), axis=axis)
+        a = out
+    return a
+
+
+def _window_sums(a, radius):
+    """Sums of a (H, W, C) over the (2 radius + 1)^2 window around each pixel clipped at the
+    image borders (integral image, float64)."""
+    h, w = a.shape[:2]
+    integral = np.zeros((h + 1, w + 1) + a.shape[2:])
+    integral[1:, 1:] = a.cumsum(axis=0).cumsum(axis=1)
+    y = np.arange(h)
+    x = np.arange(w)
+    y0, y1 = np.maximum(y - radius, 0), np.minimum(y + radius + 1, h)
+    x0, x1 = np.maximum(x - radius, 0), np.minimum(x + radius + 1, w)
+    return (integral[y1][:, x1] - integral[y0][:, x1] - integral[y1][:, x0]
+            + integral[y0][:, x0])
+
+
+def remove_outliers(maps, *, radius: int = 3, threshold: float = 2.5) -> np.ndarray:
+    """The public code's outlier pass over filtered maps (``remove_outliers<3>(f, 2.5)``), our
+    reading. For each map, pixel and channel independently: the mean m and the (population)
+    standard deviation s of the *other* pixels of the (2 radius + 1)^2 window (the centre is
+    left out, as the public code does, so an outlier does not inflate its own s; the window is
+    clipped at the image borders like the bilateral filter's); a value with |v - m| > threshold s
+    is replaced by m. (The public code instead replaces the whole pixel, all channels, by a
+    7 x 7 Gaussian blur of the map when any channel is an outlier, and reflects at the borders.)
+
+    maps : (G, H, W, C) or (H, W, C). Returns an array of the same shape and dtype; the caller
+    re-projects weights onto their constraint (the replacement is per map)."""
+    a = np.asarray(maps)
+    stacked = a if a.ndim == 4 else a[None]
+    out = np.array(stacked, copy=True)
+    for g in range(stacked.shape[0]):
+        v = np.asarray(stacked[g], np.float64)
+        others = _window_sums(np.ones(v.shape[:2] + (1,)), radius) - 1.0
+        total = _window_sums(v, radius) - v
+        squares = _window_sums(v * v, radius) - v * v
+        count = np.maximum(others, 1.0)
+        mean = total / count
+        std = np.sqrt(np.maximum(squares / count - mean * mean, 0.0))
+        outlier = (np.abs(v - mean) > threshold * std) & (others > 0)
+        out[g][outlier] = mean[outlier]
+    return out if a.ndim == 4 else out[0]

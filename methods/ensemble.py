@@ -103,7 +103,8 @@ from typing import Literal
 import numpy as np
 from numba import prange
 
-from mcbench.bilateral import cross_bilateral_filter
+from mcbench.bilateral import (COLOUR_DISTANCES, cross_bilateral_filter_vectors, gaussian_blur,
+                               remove_outliers)
 from mcbench.jit import cached_njit
 from mcbench.buffers import Denoised, RenderBuffers
 
@@ -261,8 +262,10 @@ def _iterative_one(ya, yb, xa, xb, w, order, state, max_iterations, tolerance):
 
 
 @cached_njit(parallel=True)
-def _iterative_kernel(ya, yb, xa, xb, seed_state, max_iterations, tolerance):
-    """ya, yb: (P, N, D); xa, xb: (P, D). Returns weights (P, N) and iteration counts (P,)."""
+def _iterative_kernel(ya, yb, xa, xb, seed_state, max_iterations, tolerance, first_problem):
+    """ya, yb: (P, N, D); xa, xb: (P, D), problems first_problem .. first_problem + P - 1 of the
+    image (the generator of problem p is seeded from (seed, p), so a block of rows solved alone
+    gets the numbers the whole image would). Returns weights (P, N) and iteration counts (P,)."""
     P, n = ya.shape[0], ya.shape[1]
     seed_state = _mix64(seed_state)
     out = np.empty((P, n))
@@ -272,7 +275,7 @@ def _iterative_kernel(ya, yb, xa, xb, seed_state, max_iterations, tolerance):
         w = np.empty(n)
         order = np.empty(n, np.int64)
         for p in range(c * _CHUNK, min(P, (c + 1) * _CHUNK)):
-            state = _mix64(seed_state + np.uint64(p))
+            state = _mix64(seed_state + np.uint64(first_problem + p))
             iters[p] = _iterative_one(ya[p], yb[p], xa[p], xb[p], w, order, state,
                                       max_iterations, tolerance)
             for j in range(n):
@@ -888,14 +891,32 @@ def qp_simplex_weights(points, targets) -> np.ndarray:
 # ---------------------------------------------------------------------------------------
 # public API
 # ---------------------------------------------------------------------------------------
-def _check_finite(named: dict) -> None:
-    bad = {}
-    for name, arr in named.items():
+WEIGHTS = ("simplex", "unconstrained")
+CHANNELS = ("rgb", "single")
+GUIDE_VARIANCE_BLURS = ("none", "gaussian9")
+BLOCK_PIXELS = 1 << 16   # pixels per block of rows that combine() solves at once (memory bound)
+_SIMPLEX_TOL = {np.dtype(np.float64): 1e-6, np.dtype(np.float32): 1e-4}  # |sum - 1| after filtering
+
+
+def _nonfinite_pixels(arrays) -> int:
+    """Number of pixels (H, W) where any of ``arrays`` (each (H, W, C) or (N, H, W, C)) holds a
+    NaN/Inf in any channel (or input)."""
+    bad = None
+    for arr in arrays:
+        arr = np.asarray(arr)
         finite = np.isfinite(arr)
-        # collapse everything but the pixel axes (H, W): leading N and trailing C
         if arr.ndim == 4:
             finite = finite.all(axis=0)
-        count = int((~finite.reshape(finite.shape[0], finite.shape[1], -1).all(axis=2)).sum())
+        pixel_bad = ~finite.reshape(finite.shape[0], finite.shape[1], -1).all(axis=2)
+        bad = pixel_bad if bad is None else bad | pixel_bad
+    return 0 if bad is None else int(bad.sum())
+
+
+def _check_finite(named: dict) -> None:
+    """named: {name: array or list of arrays}; raises ValueError with the bad pixel counts."""
+    bad = {}
+    for name, arrays in named.items():
+        count = _nonfinite_pixels(arrays if isinstance(arrays, list) else [arrays])
         if count:
             bad[name] = count
     if bad:
@@ -904,50 +925,82 @@ def _check_finite(named: dict) -> None:
                          f"of the ensemble inputs ({detail})")
 
 
-def _prepare(color_a, color_b, denoised_a, denoised_b):
-    xa = np.asarray(color_a, np.float64)
-    xb = np.asarray(color_b, np.float64)
-    ya = np.asarray(denoised_a, np.float64)
-    yb = np.asarray(denoised_b, np.float64)
+def _check_shapes(xa, xb, ya, yb):
     if xa.ndim != 3 or xa.shape != xb.shape:
         raise ValueError(f"color_a {xa.shape} and color_b {xb.shape} must both be (H, W, C)")
     if ya.ndim != 4 or ya.shape != yb.shape or ya.shape[1:] != xa.shape or ya.shape[0] < 1:
         raise ValueError(f"denoised_a {ya.shape} and denoised_b {yb.shape} must both be "
                          f"(N, H, W, C) with N >= 1 and (H, W, C) = {xa.shape}")
-    _check_finite({"color_a": xa, "color_b": xb, "denoised_a": ya, "denoised_b": yb})
-    n = ya.shape[0]
-    # (P, N) contiguous per pixel-channel
-    ya_p = np.ascontiguousarray(ya.reshape(n, -1).T)
-    yb_p = np.ascontiguousarray(yb.reshape(n, -1).T)
-    return xa.ravel(), xb.ravel(), ya_p, yb_p, ya.shape
+
+
+def _check_choices(**named) -> None:
+    choices = {"solver": SOLVERS, "weights": WEIGHTS, "channels": CHANNELS,
+               "guide_variance_blur": GUIDE_VARIANCE_BLURS, "colour_distance": COLOUR_DISTANCES}
+    for name, value in named.items():
+        if value not in choices[name]:
+            raise ValueError(f"unknown ensemble {name} '{value}'; choose one of {choices[name]}")
 
 
 def _seed_state(seed) -> np.uint64:
     return np.uint64(int(seed) % (1 << 64))
 
 
-WEIGHTS = ("simplex", "unconstrained")
-CHANNELS = ("rgb", "single")
-
-
-def _problems(xa, xb, ya_p, yb_p, shape, channels):
-    """Solver inputs ya, yb (P, N, D) and xa, xb (P, D): one problem per pixel-channel with
-    D = 1 (``"rgb"``) or one per pixel with its D = C channels sharing the weights
-    (``"single"``)."""
-    n, h, w, c = shape
+def _problems(xa, xb, ya, yb, channels):
+    """Solver inputs from float64 blocks xa, xb (T, W, C), ya, yb (N, T, W, C): per pixel-channel
+    ya_p, yb_p (P, N) and xa_p, xb_p (P,) (``"rgb"``, P = T W C in (row, column, channel)
+    order), or per pixel (P = T W) ya, yb (P, N, C) and xa, xb (P, C) (``"single"``)."""
+    n, c = ya.shape[0], xa.shape[2]
     if channels == "rgb":
-        return ya_p.reshape(-1, n, 1), yb_p.reshape(-1, n, 1), xa.reshape(-1, 1), xb.reshape(-1, 1)
-
-    def per_pixel(y):
-        return np.ascontiguousarray(y.reshape(h * w, c, n).transpose(0, 2, 1))
-
-    return per_pixel(ya_p), per_pixel(yb_p), xa.reshape(h * w, c), xb.reshape(h * w, c)
+        return (np.ascontiguousarray(ya.reshape(n, -1).T), np.ascontiguousarray(yb.reshape(n, -1).T),
+                xa.ravel(), xb.ravel())
+    return (np.ascontiguousarray(ya.reshape(n, -1, c).transpose(1, 0, 2)),
+            np.ascontiguousarray(yb.reshape(n, -1, c).transpose(1, 0, 2)),
+            xa.reshape(-1, c), xb.reshape(-1, c))
 
 
 def _stacked_points(ya, yb, xa, xb):
     """Eq. 25 summed over D channels: points (P, N, 2D) a_i = (y_i^A, y_i^B) and targets
     (P, 2D) b = (x^B, x^A)."""
     return np.concatenate([ya, yb], axis=2), np.concatenate([xb, xa], axis=1)
+
+
+def _solve_block(xa, xb, ya, yb, *, solver, seed, max_iterations, tolerance, weights, channels,
+                 first_row):
+    """Weights of the rows first_row .. first_row + T - 1 of an image: float64 xa, xb (T, W, C),
+    ya, yb (N, T, W, C), all finite. Returns (N, T, W, C) float64 weights and (T, W, C) info
+    (see :func:`solve_weights`); a block gets exactly the weights of the whole image's solve."""
+    n, t, wd, c = ya.shape
+    ya_k, yb_k, xa_k, xb_k = _problems(xa, xb, ya, yb, channels)
+    per_problem = c if channels == "rgb" else 1
+    if channels == "rgb":
+        ya_d, yb_d, xa_d, xb_d = (ya_k.reshape(-1, n, 1), yb_k.reshape(-1, n, 1), xa_k.reshape(-1, 1),
+                                  xb_k.reshape(-1, 1))
+    else:
+        ya_d, yb_d, xa_d, xb_d = ya_k, yb_k, xa_k, xb_k
+    if weights == "unconstrained":
+        if channels == "rgb":
+            w = _unconstrained_kernel(ya_k, yb_k, xa_k, xb_k)
+        else:
+            w = unconstrained_least_squares(*_stacked_points(ya_d, yb_d, xa_d, xb_d))
+        info = np.zeros(w.shape[0], np.int64)
+    elif solver == "iterative":
+        if int(max_iterations) < 1:
+            raise ValueError(f"max_iterations must be >= 1, got {max_iterations}")
+        w, info = _iterative_kernel(ya_d, yb_d, xa_d, xb_d, _seed_state(seed), int(max_iterations),
+                                    float(tolerance), first_row * wd * per_problem)
+    elif solver == "exact" and channels == "single":
+        w, info = _shared_exact_kernel(ya_d, yb_d, xa_d, xb_d)
+    elif solver == "exact":
+        if n > MAX_EXACT_N:
+            raise ValueError(f"exact solver supports N <= {MAX_EXACT_N} denoisers, got {n}")
+        w, info = _exact_kernel(ya_k, yb_k, xa_k, xb_k)
+    else:
+        w = qp_simplex_weights(*_stacked_points(ya_d, yb_d, xa_d, xb_d))
+        info = np.zeros(w.shape[0], np.int64)
+    if channels == "rgb":
+        return np.ascontiguousarray(w.T).reshape(n, t, wd, c), info.reshape(t, wd, c)
+    return (np.ascontiguousarray(np.broadcast_to(w.T.reshape(n, t, wd, 1), (n, t, wd, c))),
+            np.ascontiguousarray(np.broadcast_to(info.reshape(t, wd, 1), (t, wd, c))))
 
 
 def solve_weights(color_a, color_b, denoised_a, denoised_b, solver="iterative", seed=0,
@@ -979,6 +1032,9 @@ def solve_weights(color_a, color_b, denoised_a, denoised_b, solver="iterative", 
         ``"single"`` (one per pixel shared by the C channels, minimising the sum over the
         channels of Eq. 13, Sec. 5.2.3; the weights are repeated along C).
 
+    All arithmetic is float64 (the solvers' geometry needs it: Eq. 29's c1 and the hull tests
+    subtract nearly equal radiance values).
+
     Returns
     -------
     (N, H, W, C) float64 weights, each pixel-channel summing to 1 (and >= 0 for
@@ -989,39 +1045,13 @@ def solve_weights(color_a, color_b, denoised_a, denoised_b, solver="iterative", 
     ValueError on shape mismatch, unknown solver/weights/channels, or NaN/Inf in any input
     (the message gives the number of bad pixels).
     """
-    for name, value, choices in (("solver", solver, SOLVERS), ("weights", weights, WEIGHTS),
-                                 ("channels", channels, CHANNELS)):
-        if value not in choices:
-            raise ValueError(f"unknown ensemble {name} '{value}'; choose one of {choices}")
-    xa, xb, ya_p, yb_p, shape = _prepare(color_a, color_b, denoised_a, denoised_b)
-    n, h, wd, c = shape
-    ya_k, yb_k, xa_k, xb_k = _problems(xa, xb, ya_p, yb_p, shape, channels)
-    if weights == "unconstrained":
-        if channels == "rgb":
-            w = _unconstrained_kernel(ya_p, yb_p, xa, xb)
-        else:
-            w = unconstrained_least_squares(*_stacked_points(ya_k, yb_k, xa_k, xb_k))
-        info = np.zeros(w.shape[0], np.int64)
-    elif solver == "iterative":
-        if int(max_iterations) < 1:
-            raise ValueError(f"max_iterations must be >= 1, got {max_iterations}")
-        w, info = _iterative_kernel(ya_k, yb_k, xa_k, xb_k, _seed_state(seed),
-                                    int(max_iterations), float(tolerance))
-    elif solver == "exact" and channels == "single":
-        w, info = _shared_exact_kernel(ya_k, yb_k, xa_k, xb_k)
-    elif solver == "exact":
-        if n > MAX_EXACT_N:
-            raise ValueError(f"exact solver supports N <= {MAX_EXACT_N} denoisers, got {n}")
-        w, info = _exact_kernel(ya_p, yb_p, xa, xb)
-    else:
-        w = qp_simplex_weights(*_stacked_points(ya_k, yb_k, xa_k, xb_k))
-        info = np.zeros(w.shape[0], np.int64)
-    if channels == "rgb":
-        result = np.ascontiguousarray(w.T).reshape(shape)
-        info = info.reshape(shape[1:])
-    else:
-        result = np.ascontiguousarray(np.broadcast_to(w.T.reshape(n, h, wd, 1), shape))
-        info = np.ascontiguousarray(np.broadcast_to(info.reshape(h, wd, 1), shape[1:]))
+    _check_choices(solver=solver, weights=weights, channels=channels)
+    xa, xb, ya, yb = (np.asarray(a, np.float64) for a in (color_a, color_b, denoised_a, denoised_b))
+    _check_shapes(xa, xb, ya, yb)
+    _check_finite({"color_a": xa, "color_b": xb, "denoised_a": ya, "denoised_b": yb})
+    result, info = _solve_block(xa, xb, ya, yb, solver=solver, seed=seed,
+                                max_iterations=max_iterations, tolerance=tolerance,
+                                weights=weights, channels=channels, first_row=0)
     if return_info:
         return result, info
     return result
@@ -1033,36 +1063,87 @@ def combine_with(weights, denoised) -> np.ndarray:
                      np.asarray(denoised, np.float64))
 
 
+def _onto_constraint(weights, *, nonnegative, check):
+    """In place: filtered (N, H, W, C) weights back onto the simplex (clip at 0, divide by the
+    sum; with ``check`` first assert that the sum stayed within rounding of 1) or, for
+    unconstrained weights, onto sum one (add (1 - sum) / N)."""
+    n = weights.shape[0]
+    total = weights.sum(axis=0)
+    if not nonnegative:
+        weights += (1.0 - total) / n
+        return
+    if check:
+        assert np.all(np.abs(total - 1.0) < _SIMPLEX_TOL[weights.dtype]), \
+            "filtered weights left the simplex"
+    np.maximum(weights, 0.0, out=weights)
+    weights /= weights.sum(axis=0)
+
+
+def _filter_raw_weights(values, guide, guide_variance, albedo, normal, *, radius, sigma_spatial,
+                        sigma_color, sigma_albedo, sigma_normal, nonnegative, guide_variance_blur,
+                        outlier_removal, colour_distance, dtype):
+    """Sec. 4.2 on raw weights ``values`` (N, H, W, C) with the guide z and Var[z] (H, W, C) given,
+    plus the public code's optional passes; returns (N, H, W, C) weights of ``dtype``."""
+    if guide_variance_blur == "gaussian9":
+        guide_variance = gaussian_blur(guide_variance, kernel_size=9)
+    out = cross_bilateral_filter_vectors(values, guide, guide_variance, [albedo, normal],
+                                         [sigma_albedo, sigma_normal], sigma_spatial, sigma_color,
+                                         radius, colour_distance=colour_distance, dtype=dtype)
+    _onto_constraint(out, nonnegative=nonnegative, check=True)
+    if outlier_removal:
+        out = remove_outliers(out, radius=OUTLIER_RADIUS, threshold=OUTLIER_THRESHOLD)
+        _onto_constraint(out, nonnegative=nonnegative, check=False)
+    return out
+
+
+OUTLIER_RADIUS = 3         # the public code's 7 x 7 window
+OUTLIER_THRESHOLD = 2.5    # ... and its 2.5 standard deviations
+
+
 def filter_weights(weights, denoised_full, denoised_a, denoised_b, albedo, normal, radius=7,
                    sigma_spatial=3.0, sigma_color=2.0, sigma_albedo=0.25, sigma_normal=0.15,
-                   *, nonnegative=True):
+                   *, nonnegative=True, guide_variance_blur="none", outlier_removal=False,
+                   colour_distance="mean", dtype=np.float64):
     """Cross-bilateral filter of the raw weight maps (Sec. 4.2, Eq. 32-34).
 
     weights, denoised_full, denoised_a, denoised_b : (N, H, W, C); albedo, normal (H, W, 3).
     The guide is the raw combined image z = sum w y_i with Var[z] ~ (z^A - z^B)^2 / 2; all
     N x C maps share one kernel per pixel. Defaults are the paper's (radius 7 px,
-    sigma_s 3, sigma_z 2, sigma_albedo 0.25, sigma_normal 0.15).
-    Returns (N, H, W, C) float64 weights on the simplex; with ``nonnegative=False``
+    sigma_s 3, sigma_z 2, sigma_albedo 0.25, sigma_normal 0.15). The public code's passes
+    (:func:`combine`): ``guide_variance_blur="gaussian9"`` blurs Var[z] with
+    :func:`mcbench.bilateral.gaussian_blur` (9 x 9) first, ``outlier_removal=True`` runs
+    :func:`mcbench.bilateral.remove_outliers` (7 x 7, 2.5 sigma) on the filtered maps and
+    re-projects them, ``colour_distance="sum"`` sums Eq. 33 over the channels. ``dtype`` is the
+    filter's working precision (:mod:`mcbench.bilateral`; :func:`combine` uses float32).
+    Returns (N, H, W, C) weights of ``dtype`` on the simplex; with ``nonnegative=False``
     (unconstrained weights, Sec. 5.2.1) weights summing to one, of any sign: no clipping,
     and the sum is restored against rounding by adding (1 - sum) / N to each weight.
     """
+    _check_choices(guide_variance_blur=guide_variance_blur, colour_distance=colour_distance)
     w = np.asarray(weights, np.float64)
-    n, h, wd, c = w.shape
     z = combine_with(w, denoised_full)
-    za = combine_with(w, denoised_a)
-    zb = combine_with(w, denoised_b)
-    var = 0.5 * (za - zb) ** 2
-    values = np.moveaxis(w, 3, 1).reshape(n * c, h, wd)  # (N*C, H, W)
-    out = cross_bilateral_filter(values, z, var, [albedo, normal],
-                                 [sigma_albedo, sigma_normal], sigma_spatial, sigma_color,
-                                 radius)
-    out = np.moveaxis(out.reshape(n, c, h, wd), 1, 3)
-    total = out.sum(axis=0)
-    if not nonnegative:
-        return np.ascontiguousarray(out + (1.0 - total) / n)
-    assert np.all(np.abs(total - 1.0) < 1e-6), "filtered weights left the simplex"
-    out = np.maximum(out, 0.0)
-    return np.ascontiguousarray(out / out.sum(axis=0, keepdims=True))
+    var = 0.5 * (combine_with(w, denoised_a) - combine_with(w, denoised_b)) ** 2
+    return _filter_raw_weights(w, z, var, albedo, normal, radius=radius,
+                               sigma_spatial=sigma_spatial, sigma_color=sigma_color,
+                               sigma_albedo=sigma_albedo, sigma_normal=sigma_normal,
+                               nonnegative=nonnegative, guide_variance_blur=guide_variance_blur,
+                               outlier_removal=outlier_removal, colour_distance=colour_distance,
+                               dtype=dtype)
+
+
+def _rows_of(inputs, which, rows) -> np.ndarray:
+    """The inputs' results on image ``which`` for the rows ``rows``: (N, T, W, C) float64."""
+    return np.stack([np.asarray(d.image(which)[rows], np.float64) for d in inputs])
+
+
+def blend(weights, inputs, which) -> np.ndarray:
+    """Eq. 35 for image ``which`` (``"full"``, ``"a"``, ``"b"``) of the Denoised ``inputs``:
+    sum_i w_i y_i accumulated in float64 one input at a time; weights (N, H, W, C). Returns
+    (H, W, C) float64."""
+    out = np.zeros(np.shape(weights)[1:])
+    for w, d in zip(weights, inputs):
+        out += w * np.asarray(d.image(which), np.float64)
+    return out
 
 
 def combine(buffers: RenderBuffers, inputs: list[Denoised], *,
@@ -1071,7 +1152,10 @@ def combine(buffers: RenderBuffers, inputs: list[Denoised], *,
             weights: Literal["simplex", "unconstrained"] = "simplex",
             channels: Literal["rgb", "single"] = "rgb",
             radius: int = 7, sigma_spatial: float = 3.0, sigma_color: float = 2.0,
-            sigma_albedo: float = 0.25, sigma_normal: float = 0.15) -> Denoised:
+            sigma_albedo: float = 0.25, sigma_normal: float = 0.15,
+            guide_variance_blur: Literal["none", "gaussian9"] = "none",
+            outlier_removal: bool = False,
+            colour_distance: Literal["mean", "sum"] = "mean") -> Denoised:
     """Ensemble of the ``inputs`` (Sec. 4): solve raw weights from the half buffers, filter
     them (unless ``filter=False``, an ablation), and combine (Eq. 35).
 
@@ -1079,7 +1163,14 @@ def combine(buffers: RenderBuffers, inputs: list[Denoised], *,
     "unconstrained"`` drops w >= 0 (sum one only; the weight filter then does not clip);
     ``channels="single"`` shares one weight vector per pixel by the RGB channels;
     ``solver="qp"`` solves the same problems with a general QP solver (slow; Fig. 6);
-    ``filter=False`` keeps the raw weights. See :func:`solve_weights`.
+    ``filter=False`` keeps the raw weights. See :func:`solve_weights`. The authors' public
+    code's passes around the filter (see :func:`filter_weights`): ``guide_variance_blur``,
+    ``outlier_removal``, ``colour_distance``.
+
+    Memory: the rows are solved in blocks of about :data:`BLOCK_PIXELS` pixels (float64 copies
+    of one block only), straight into the float32 raw weight maps, the guide z and Var[z]; the
+    weight filter works in float32 (its rounding, 1e-7 relative, is far below what a weight map
+    can show) and the blend accumulates in float64.
 
     Returns Denoised(full, a, b, extras) with float32 images; ``extras`` holds
     ``weights_raw_{i}`` and ``weights_filtered_{i}`` (H, W, 3) per input i (with
@@ -1090,27 +1181,51 @@ def combine(buffers: RenderBuffers, inputs: list[Denoised], *,
     """
     if not inputs:
         raise ValueError("the ensemble needs at least one input")
-    y_full = np.stack([np.asarray(d.full, np.float64) for d in inputs])
-    y_a = np.stack([np.asarray(d.a, np.float64) for d in inputs])
-    y_b = np.stack([np.asarray(d.b, np.float64) for d in inputs])
-    _check_finite({"denoised_full": y_full})
-    raw = solve_weights(buffers.color_a, buffers.color_b, y_a, y_b, solver=solver, seed=seed,
-                        max_iterations=max_iterations, tolerance=tolerance, weights=weights,
-                        channels=channels)
+    _check_choices(solver=solver, weights=weights, channels=channels,
+                   guide_variance_blur=guide_variance_blur, colour_distance=colour_distance)
+    xa, xb = np.asarray(buffers.color_a), np.asarray(buffers.color_b)
+    for i, d in enumerate(inputs):
+        for which in ("full", "a", "b"):
+            if np.shape(d.image(which)) != xa.shape:
+                raise ValueError(f"ensemble input {i} ({d.source}) image {which} has shape "
+                                 f"{np.shape(d.image(which))}, the render's is {xa.shape}")
+    _check_shapes(xa, xb, np.empty((1,) + xa.shape, np.uint8), np.empty((1,) + xa.shape, np.uint8))
+    _check_finite({"color_a": xa, "color_b": xb, "denoised_a": [d.a for d in inputs],
+                   "denoised_b": [d.b for d in inputs], "denoised_full": [d.full for d in inputs]})
+    n = len(inputs)
+    h, wd, c = xa.shape
+    raw = np.empty((n, h, wd, c), np.float32)
+    guide = np.empty((h, wd, c), np.float32)
+    guide_variance = np.empty((h, wd, c), np.float32)
+    step = max(1, BLOCK_PIXELS // max(wd, 1))
+    for y0 in range(0, h, step):
+        rows = slice(y0, min(h, y0 + step))
+        ya, yb = _rows_of(inputs, "a", rows), _rows_of(inputs, "b", rows)
+        w, _ = _solve_block(np.asarray(xa[rows], np.float64), np.asarray(xb[rows], np.float64),
+                            ya, yb, solver=solver, seed=seed, max_iterations=max_iterations,
+                            tolerance=tolerance, weights=weights, channels=channels,
+                            first_row=y0)
+        raw[:, rows] = w
+        if filter:
+            guide[rows] = combine_with(w, _rows_of(inputs, "full", rows))
+            guide_variance[rows] = 0.5 * (combine_with(w, ya) - combine_with(w, yb)) ** 2
     if filter:
-        filt = filter_weights(raw, y_full, y_a, y_b, buffers.albedo, buffers.normal,
-                              radius=radius, sigma_spatial=sigma_spatial,
-                              sigma_color=sigma_color, sigma_albedo=sigma_albedo,
-                              sigma_normal=sigma_normal, nonnegative=weights == "simplex")
+        filt = _filter_raw_weights(raw, guide, guide_variance, buffers.albedo, buffers.normal,
+                                   radius=radius, sigma_spatial=sigma_spatial,
+                                   sigma_color=sigma_color, sigma_albedo=sigma_albedo,
+                                   sigma_normal=sigma_normal, nonnegative=weights == "simplex",
+                                   guide_variance_blur=guide_variance_blur,
+                                   outlier_removal=outlier_removal,
+                                   colour_distance=colour_distance, dtype=np.float32)
     else:
         filt = raw
+    del guide, guide_variance
     extras = {}
-    for i in range(len(inputs)):
-        extras[f"weights_raw_{i}"] = raw[i].astype(np.float32)
-    for i in range(len(inputs)):
-        extras[f"weights_filtered_{i}"] = filt[i].astype(np.float32)
-    images = {key: combine_with(filt, y).astype(np.float32)
-              for key, y in (("full", y_full), ("a", y_a), ("b", y_b))}
+    for i in range(n):
+        extras[f"weights_raw_{i}"] = raw[i]
+    for i in range(n):
+        extras[f"weights_filtered_{i}"] = filt[i]
+    images = {key: blend(filt, inputs, key).astype(np.float32) for key in ("full", "a", "b")}
     bad = [key for key, image in images.items() if not np.isfinite(image).all()]
     if bad:
         raise ValueError(f"ensemble ({weights} weights) combined image(s) {bad} overflow "

@@ -6,12 +6,13 @@ brute-force loops of the bilateral filter and of the weight filter (Eq. 32-34)."
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numba
 import numpy as np
 import pytest
 import qpsolvers
 
-from mcbench.bilateral import cross_bilateral_filter
 from mcbench.buffers import Denoised
 from methods import ensemble as E
 
@@ -573,51 +574,46 @@ def test_combine_end_to_end(filter_, make_render_buffers):
 
 
 # ---------------------------------------------------------------------------------------
-# cross-bilateral filter vs brute force
+# the output before the float32, block-wise rewrite (issue 14)
 # ---------------------------------------------------------------------------------------
-def brute_force_cbf(values, guide, gvar, features, sigmas, ss, sg, radius):
-    K, H, W = values.shape
-    out = np.zeros_like(values)
-    for y in range(H):
-        for x in range(W):
-            acc = np.zeros(K)
-            wsum = 0.0
-            for qy in range(max(0, y - radius), min(H, y + radius + 1)):
-                for qx in range(max(0, x - radius), min(W, x + radius + 1)):
-                    k = np.exp(-((qy - y) ** 2 + (qx - x) ** 2) / (2 * ss ** 2))
-                    for f, sf in zip(features, sigmas):
-                        f = f if f.ndim == 3 else f[:, :, None]
-                        k *= np.exp(-np.sum((f[y, x] - f[qy, qx]) ** 2) / (2 * sf ** 2))
-                    if guide is not None:
-                        terms = []
-                        for c in range(guide.shape[2]):
-                            num = (guide[y, x, c] - guide[qy, qx, c]) ** 2
-                            den = gvar[y, x, c] + gvar[qy, qx, c]
-                            if den <= 1e-20:
-                                terms.append(0.0 if num == 0 else np.inf)
-                            else:
-                                terms.append(num / den)
-                        k *= np.exp(-np.mean(terms) / (2 * sg ** 2))
-                    acc += k * values[:, qy, qx]
-                    wsum += k
-            out[:, y, x] = acc / wsum
-    return out
+BEFORE = Path(__file__).parent / "data" / "ensemble_blend_before.npz"
 
 
-def test_cross_bilateral_matches_brute_force():
-    rng = np.random.default_rng(15)
-    H, W, K = 9, 11, 2
-    values = rng.normal(size=(K, H, W))
-    guide = rng.uniform(0, 1, (H, W, 3))
-    gvar = rng.uniform(0, 0.05, (H, W, 3))
-    gvar[2:4, 3:6] = 0.0  # exercise the zero-variance guard
-    guide[2:4, 3:5] = 0.5
-    feats = [rng.uniform(0, 1, (H, W, 3)), rng.uniform(0, 1, (H, W))]
-    sig = [0.4, 0.3]
-    got = cross_bilateral_filter(values, guide, gvar, feats, sig, 2.0, 1.5, 3)
-    ref = brute_force_cbf(values, guide, gvar, feats, sig, 2.0, 1.5, 3)
-    assert got.shape == (K, H, W) and got.dtype == np.float64
-    np.testing.assert_allclose(got, ref, rtol=1e-10, atol=1e-12)
-    got2 = cross_bilateral_filter(values, None, None, [], [], 1.0, 1.0, 2)
-    ref2 = brute_force_cbf(values, None, None, [], [], 1.0, 1.0, 2)
-    np.testing.assert_allclose(got2, ref2, rtol=1e-10, atol=1e-12)
+@pytest.mark.parametrize("n", [3, 5])
+@pytest.mark.parametrize("solver", ["iterative", "exact"])
+def test_combine_matches_the_output_before_the_rewrite(n, solver, make_render_buffers,
+                                                       monkeypatch):
+    """tests/data/ensemble_blend_before.npz holds combine()'s full, A and B blends on this
+    deterministic case as computed by the float64, whole-image code before issue 14 (commit
+    9ec8741). The float32 filter and the block-wise solve (blocks of 5 rows here, so blocks
+    and filter bands both cut the 32 x 36 image) must stay within 1e-6 relMSE of it."""
+    monkeypatch.setattr(E, "BLOCK_PIXELS", 5 * 36)
+    before = np.load(BEFORE)
+    buffers, inputs, _ = synthetic_scene(make_render_buffers, np.random.default_rng(100 + n),
+                                         H=32, W=36, n=n)
+    out = E.combine(buffers, inputs, solver=solver)
+    for which in ("full", "a", "b"):
+        expected = before[f"{solver}_n{n}_{which}"].astype(np.float64)
+        got = out.image(which).astype(np.float64)
+        relmse = np.mean((got - expected) ** 2 / (expected ** 2 + 1e-2))
+        assert relmse < 1e-6, (which, relmse)
+        # power: the unfiltered blend is far from it
+    unfiltered = E.combine(buffers, inputs, solver=solver, filter=False).full.astype(np.float64)
+    expected = before[f"{solver}_n{n}_full"].astype(np.float64)
+    assert np.mean((unfiltered - expected) ** 2 / (expected ** 2 + 1e-2)) > 1e-4
+
+
+def test_solve_in_blocks_equals_whole_image(monkeypatch, make_render_buffers):
+    """combine solves blocks of rows; its raw weights equal solve_weights on the whole image
+    bit for bit, for every solver and channel option (the iterative solver's generator is keyed
+    by the problem's index in the image)."""
+    buffers, inputs, (xa, xb, *_) = synthetic_scene(make_render_buffers,
+                                                    np.random.default_rng(7), H=11, W=6, n=3)
+    ya, yb = (np.stack([d.image(k) for d in inputs]).astype(np.float64) for k in ("a", "b"))
+    monkeypatch.setattr(E, "BLOCK_PIXELS", 2 * 6)      # 2 rows per block, the last one short
+    for solver in E.SOLVERS:
+        for channels in E.CHANNELS:
+            whole = E.solve_weights(xa, xb, ya, yb, solver=solver, channels=channels)
+            out = E.combine(buffers, inputs, solver=solver, channels=channels, filter=False)
+            got = np.stack([out.extras[f"weights_raw_{i}"] for i in range(3)])
+            assert np.array_equal(got, whole.astype(np.float32)), (solver, channels)

@@ -392,16 +392,20 @@ def test_unconstrained_filter_keeps_negative_weights(make_render_buffers):
                             nonnegative=False)
     np.testing.assert_allclose(filt.sum(axis=0), 1.0, atol=1e-12 * np.abs(raw).max())
     out = E.combine(buffers, inputs, weights="unconstrained")
+    filt32 = E.filter_weights(raw, y_full, y_a, y_b, buffers.albedo, buffers.normal,
+                              nonnegative=False, dtype=np.float32)   # combine's precision
     for i in range(n):
-        assert np.array_equal(out.extras[f"weights_filtered_{i}"], filt[i].astype(np.float32))
+        assert np.array_equal(out.extras[f"weights_filtered_{i}"], filt32[i])
+    np.testing.assert_allclose(filt32, filt, rtol=0, atol=1e-5 * np.abs(raw).max())
     assert (raw.min(axis=0) < -0.1).mean() > 0.5
     assert (filt.min(axis=0) < -0.1).mean() > 0.5
 
 
 def test_defaults_leave_combine_unchanged(make_render_buffers):
-    """The defaults (iterative solver, simplex, per-channel weights, filter) give exactly the
-    output of the explicit old defaults and of the solve -> filter -> combine path of
-    solve_weights(..., solver="iterative"), bit for bit."""
+    """The defaults (iterative solver, simplex, per-channel weights, filter, no post-processing
+    of the public code) give exactly the output of the explicit defaults and of the
+    solve -> filter (float32, as combine) -> blend path of solve_weights(..., solver="iterative"),
+    bit for bit."""
     rng = np.random.default_rng(12)
     H, W, n = 14, 15, 3
     truth = rng.uniform(0.2, 1.0, (H, W, 3))
@@ -418,16 +422,21 @@ def test_defaults_leave_combine_unchanged(make_render_buffers):
     y_full, y_a, y_b = (np.stack([np.asarray(getattr(d, k), np.float64) for d in inputs])
                         for k in ("full", "a", "b"))
     raw = E.solve_weights(buffers.color_a, buffers.color_b, y_a, y_b, solver="iterative")
-    filt = E.filter_weights(raw, y_full, y_a, y_b, buffers.albedo, buffers.normal)
-    for got in (default, explicit):
-        assert np.array_equal(got.full, E.combine_with(filt, y_full).astype(np.float32))
-        assert np.array_equal(got.a, E.combine_with(filt, y_a).astype(np.float32))
-        assert np.array_equal(got.b, E.combine_with(filt, y_b).astype(np.float32))
+    # combine filters in float32 (mcbench.bilateral) and blends with E.blend
+    filt = E.filter_weights(raw, y_full, y_a, y_b, buffers.albedo, buffers.normal,
+                            dtype=np.float32)
+    for got in (default, explicit, E.combine(buffers, inputs, guide_variance_blur="none",
+                                             outlier_removal=False, colour_distance="mean")):
+        for which in ("full", "a", "b"):
+            assert np.array_equal(got.image(which), E.blend(filt, inputs, which).astype(np.float32))
         for i in range(n):
             assert np.array_equal(got.extras[f"weights_raw_{i}"], raw[i].astype(np.float32))
-            assert np.array_equal(got.extras[f"weights_filtered_{i}"], filt[i].astype(np.float32))
+            assert np.array_equal(got.extras[f"weights_filtered_{i}"], filt[i])
+    np.testing.assert_allclose(default.full, E.combine_with(filt, y_full), rtol=1e-6, atol=1e-7)
     # the options do change the result (the comparison above has power)
-    for change in (dict(weights="unconstrained"), dict(channels="single"), dict(filter=False)):
+    for change in (dict(weights="unconstrained"), dict(channels="single"), dict(filter=False),
+                   dict(guide_variance_blur="gaussian9"), dict(outlier_removal=True),
+                   dict(colour_distance="sum")):
         assert not np.array_equal(E.combine(buffers, inputs, **change).full, default.full)
 
 

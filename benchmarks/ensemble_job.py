@@ -1,0 +1,63 @@
+"""One ensemble job as the DAG runs it, for ``bench_ensemble.py`` to time as a whole process:
+
+    python benchmarks/ensemble_job.py RENDER.exr OUT.exr INPUT1.exr ... [--param key=value ...]
+
+Like :func:`mcbench.steps.run_method` for a combiner: read the render (``RenderBuffers.load``) and
+each input (``Denoised.load(..., extras=True)``), ``methods.ensemble.combine``, write the output
+EXR (``write_layers``). Prints one JSON line: seconds spent importing, reading, combining and
+writing (wall, ``time.perf_counter``). The parent measures the whole process (wall time and
+peak RSS from ``os.wait4``).
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+from pathlib import Path
+
+START = time.perf_counter()
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from mcbench.buffers import Denoised, RenderBuffers  # noqa: E402
+from mcbench.exr import write_layers  # noqa: E402
+from methods import ensemble  # noqa: E402
+
+
+def parse_params(items):
+    """``key=value`` strings to combine() keywords (ints, floats and booleans recognised)."""
+    params = {}
+    for item in items:
+        key, value = item.split("=", 1)
+        for cast in (int, float):
+            try:
+                value = cast(value)
+                break
+            except ValueError:
+                continue
+        if value in ("True", "False"):
+            value = value == "True"
+        params[key] = value
+    return params
+
+
+def main(argv):
+    params = []
+    if "--param" in argv:
+        at = argv.index("--param")
+        argv, params = argv[:at], [p for p in argv[at + 1:] if p != "--param"]
+    render, output, *inputs = argv
+    imported = time.perf_counter()
+    buffers = RenderBuffers.load(render)
+    denoised = [Denoised.load(path, extras=True) for path in inputs]
+    read = time.perf_counter()
+    result = ensemble.combine(buffers, denoised, **parse_params(params))
+    combined = time.perf_counter()
+    write_layers(output, result.layers())
+    written = time.perf_counter()
+    print(json.dumps({"import_s": imported - START, "read_s": read - imported,
+                      "combine_s": combined - read, "write_s": written - combined}))
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])
