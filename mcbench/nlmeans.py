@@ -106,12 +106,12 @@ def nl_means_filter_reference(values: np.ndarray, guide: np.ndarray, guide_varia
 # Compiled path
 # ---------------------------------------------------------------------------------------------
 
-@cached_njit()
+@cached_njit(error_model="numpy")
 def _clamp(i, n):
     return 0 if i < 0 else (n - 1 if i >= n else i)
 
 
-@cached_njit()
+@cached_njit(error_model="numpy")
 def nl_means_distance_rows(guide, variance, y0, rows, dy, dx, patch, k, alpha, epsilon, clamp,
                            dmap, hsum, out):
     """Patch distance d²(p, p + o) (module docstring, RKZ12 Eq. 5-6) for o = (dy, dx) and the
@@ -135,14 +135,17 @@ def nl_means_distance_rows(guide, variance, y0, rows, dy, dx, patch, k, alpha, e
         yq = _clamp(yp + dy, h)
         drow = dmap[r]
         drow[:] = 0.0
+        dv = drow[x0:x1]                  # views indexed from 0, so that the loops vectorise
         for ch in range(c):
+            gp, gq = guide[ch, yp, x0:x1], guide[ch, yq, x0 + dx:x1 + dx]
+            vp_row, vq_row = variance[ch, yp, x0:x1], variance[ch, yq, x0 + dx:x1 + dx]
+            for i in range(x1 - x0):
+                vp = vp_row[i]
+                vq = vq_row[i]
+                diff = gp[i] - gq[i]
+                dv[i] += (diff * diff - alpha * (vp + min(vp, vq))) / (epsilon + k2 * (vp + vq))
             gp, gq = guide[ch, yp], guide[ch, yq]
             vp_row, vq_row = variance[ch, yp], variance[ch, yq]
-            for x in range(x0, x1):
-                vp = vp_row[x]
-                vq = vq_row[x + dx]
-                diff = gp[x] - gq[x + dx]
-                drow[x] += (diff * diff - alpha * (vp + min(vp, vq))) / (epsilon + k2 * (vp + vq))
             for x in range(w):
                 if x >= x0 and x < x1:
                     continue
@@ -165,9 +168,11 @@ def nl_means_distance_rows(guide, variance, y0, rows, dy, dx, patch, k, alpha, e
         drow = dmap[r]
         hrow = hsum[r]
         hrow[:] = 0.0
+        hv = hrow[lo:hi]
         for n in range(-patch, patch + 1):
-            for x in range(lo, hi):
-                hrow[x] += drow[x + n]
+            dv = drow[lo + n:hi + n]
+            for i in range(hi - lo):
+                hv[i] += dv[i]
         for x in range(w):
             if x >= lo and x < hi:
                 continue
@@ -187,7 +192,7 @@ def nl_means_distance_rows(guide, variance, y0, rows, dy, dx, patch, k, alpha, e
             orow[x] *= norm
 
 
-@cached_njit(parallel=True)
+@cached_njit(parallel=True, error_model="numpy")
 def _nl_means_kernel(values, guide, variance, radius, patch, k, alpha, epsilon, band):
     """values: (K, H, W); guide, variance: (C, H, W) float64 planes. Returns (K, H, W)."""
     nv, h, w = values.shape

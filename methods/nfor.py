@@ -69,7 +69,7 @@ from numba import prange
 
 from mcbench.buffers import Denoised, RenderBuffers
 from mcbench.jit import cached_njit
-from mcbench.nlmeans import nl_means_filter
+from mcbench.nlmeans import nl_means_distance_rows, nl_means_filter
 from mcbench.progress import StageLog
 
 KIND = "denoiser"
@@ -79,6 +79,7 @@ NLM_EPSILON = 1e-10
 NLM_ALPHA = 1.0
 DISTANCE_CLAMP = 1e4
 PIVOT_TOLERANCE = 1e-9
+FEATURE_RESOLUTION = 1e-9
 CHUNK_ROWS = 8
 
 FEATURE_PREFILTER = dict(radius=5, patch_radius=3, k=0.5)       # Sec. 5.1
@@ -94,89 +95,55 @@ SECOND_PASS_K = 1.0                                              # Sec. 5.4
 # Numba kernels
 # ---------------------------------------------------------------------------------------------
 
-@cached_njit()
-def _clamp(i, n):
-    if i < 0:
-        return 0
-    if i >= n:
-        return n - 1
-    return i
-
-
-@cached_njit()
-def _weights_block(guide, variance, y0, y1, radius, patch, k, alpha, eps, clamp_d):
-    """NL-means weights w(p, p + o) for the pixels p in rows [y0, y1) and every window offset.
-
-    guide, variance: (H, W, C) float64. Returns (n_offsets, y1 - y0, W) float64; offset index
-    (dy + R) * (2R + 1) + (dx + R). Distances follow Rousselle et al. 2012 Eq. 5-6, averaged over
-    channels and over the patch with replicated edges; weight 0 where p + o leaves the image.
+@cached_njit(error_model="numpy")
+def _weights_into(guide, variance, y0, rows, radius, patch, k, alpha, eps, clamp_d, dmap, hsum, dist, out):
+    """NL-means weights w(p, p + o) of the pixels p in rows [y0, y0 + rows), written to
+    ``out[:rows, :, :]`` with shape (rows, W, n_offsets), pixel-major: offset index
+    (dy + R) (2R + 1) + (dx + R). guide, variance: (C, H, W) float64 planes. Distances follow
+    Rousselle et al. 2012 Eq. 5-6 (:func:`mcbench.nlmeans.nl_means_distance_rows`, per-pixel
+    distances clipped at ``clamp_d``); weight exp(-d) (1 for d <= 0), 0 where p + o leaves the
+    image. dmap, hsum: scratch (rows + 2 patch, W); dist: scratch (rows, W).
     """
-    h, w, c = guide.shape
+    c, h, w = guide.shape
     side = 2 * radius + 1
-    rows = y1 - y0
-    out = np.zeros((side * side, rows, w))
-    ra = y0 - patch
-    nr = rows + 2 * patch
-    dmap = np.empty((nr, w))
-    hsum = np.empty((nr, w))
-    k2 = k * k
-    norm = 1.0 / ((2 * patch + 1) * (2 * patch + 1))
     for dy in range(-radius, radius + 1):
         for dx in range(-radius, radius + 1):
             o = (dy + radius) * side + (dx + radius)
-            # per-pixel distance map on the rows the patches touch (edge-replicated rows)
-            for r in range(nr):
-                yp = _clamp(ra + r, h)
-                yq = _clamp(yp + dy, h)
-                for x in range(w):
-                    xq = _clamp(x + dx, w)
-                    acc = 0.0
-                    for ch in range(c):
-                        vp = variance[yp, x, ch]
-                        vq = variance[yq, xq, ch]
-                        diff = guide[yp, x, ch] - guide[yq, xq, ch]
-                        num = diff * diff - alpha * (vp + min(vp, vq))
-                        acc += num / (eps + k2 * (vp + vq))
-                    acc /= c
-                    if acc > clamp_d:
-                        acc = clamp_d
-                    dmap[r, x] = acc
-            # horizontal patch sums (edge replication)
-            for r in range(nr):
-                for x in range(w):
-                    s = 0.0
-                    for nx in range(-patch, patch + 1):
-                        s += dmap[r, _clamp(x + nx, w)]
-                    hsum[r, x] = s
-            # vertical patch sums and weights
+            nl_means_distance_rows(guide, variance, y0, rows, dy, dx, patch, k, alpha, eps, clamp_d,
+                                   dmap, hsum, dist)
             for r in range(rows):
-                y = y0 + r
-                if y + dy < 0 or y + dy >= h:
-                    continue
+                inside_y = 0 <= y0 + r + dy < h
                 for x in range(w):
-                    if x + dx < 0 or x + dx >= w:
-                        continue
-                    s = 0.0
-                    for ny in range(-patch, patch + 1):
-                        # patch row y + ny, clamped to the image, mapped into the dmap rows
-                        s += hsum[_clamp(y + ny, h) - ra, x]
-                    d = s * norm
-                    out[o, r, x] = np.exp(-d) if d > 0.0 else 1.0
+                    if inside_y and 0 <= x + dx < w:
+                        d = dist[r, x]
+                        out[r, x, o] = np.exp(-d) if d > 0.0 else 1.0
+                    else:
+                        out[r, x, o] = 0.0
+
+
+@cached_njit(error_model="numpy")
+def regression_weights(guide, variance, y0, y1, radius, patch, k, alpha, eps, clamp_d):
+    """(y1 - y0, W, (2R + 1)^2) NL-means weights of the regression for rows [y0, y1); guide,
+    variance (C, H, W) float64 planes (see :func:`_weights_into`)."""
+    c, h, w = guide.shape
+    rows = y1 - y0
+    side = 2 * radius + 1
+    out = np.empty((rows, w, side * side))
+    _weights_into(guide, variance, y0, rows, radius, patch, k, alpha, eps, clamp_d,
+                  np.empty((rows + 2 * patch, w)), np.empty((rows + 2 * patch, w)), np.empty((rows, w)), out)
     return out
 
 
-@cached_njit()
-def _design_row(xrow, features, qy, qx, y, x, nf):
-    """Row of the first-order design matrix of neighbour (qy, qx) about centre (y, x):
-    [1, dx, dy, f(q) - f(centre)...] (first-order regression of Bitterli et al. 2016)."""
-    xrow[0] = 1.0
-    xrow[1] = qx - x
-    xrow[2] = qy - y
-    for f in range(nf):
-        xrow[3 + f] = features[qy, qx, f] - features[y, x, f]
+@cached_njit(fastmath={"reassoc", "contract"}, error_model="numpy")
+def _dot(a, b, n):
+    """sum_{i < n} a[i] b[i] in float64, reassociated so that it vectorises (SIMD partial sums)."""
+    s = 0.0
+    for i in range(n):
+        s += a[i] * b[i]
+    return s
 
 
-@cached_njit()
+@cached_njit(error_model="numpy")
 def _minus_kept_products(value, lmat, keep, i, j):
     """value - sum over kept columns m < j of lmat[i, m] lmat[j, m] (Cholesky update), in order."""
     for m in range(j):
@@ -185,7 +152,7 @@ def _minus_kept_products(value, lmat, keep, i, j):
     return value
 
 
-@cached_njit()
+@cached_njit(error_model="numpy")
 def _solve_normal_equations(a, b, d, nch, tol, beta):
     """Solve a beta = b (a: (d, d) SPD-ish, b: (d, nch)) by Cholesky on the diagonally scaled
     matrix, dropping columns whose pivot is below ``tol`` (their coefficients are 0)."""
@@ -235,55 +202,86 @@ def _solve_normal_equations(a, b, d, nch, tol, beta):
     return keep[0]
 
 
-@cached_njit(parallel=True)
+@cached_njit(parallel=True, error_model="numpy")
 def _collaborative_regression(color, guide, guide_variance, features, radius, patch, k, alpha, eps,
-                              clamp_d, tol, chunk):
+                              clamp_d, tol, feature_resolution, chunk):
     """Collaborative first-order regression (Bitterli et al. 2016 Sec. 5.2).
 
-    color: (H, W, 3) values to filter; guide, guide_variance: (H, W, C) for the NL-means weights;
-    features: (H, W, F). Returns (H, W, 3) float64.
+    color: (H, W, 3) values to filter; guide, guide_variance: (C, H, W) planes for the NL-means
+    weights; features: (H, W, F). Returns (H, W, 3) float64.
+
+    Per chunk of rows: the chunk's weights (rows, W, (2R+1)^2), then per pixel p the neighbours
+    q with w_pq > 0 gathered into columns z_i(q) (design row [1, dx, dy, f(q) - f(p)] and the
+    colour), the normal equations A_ij = sum_q w z_i z_j, b_ic = sum_q w z_i y_c as dot
+    products over q (float64), the pivot-dropping Cholesky solve, and the fit evaluated at
+    every q and accumulated. Feature differences within ``feature_resolution`` (relative) of
+    zero are rounding noise of the prefilter and count as 0.
     """
     h, w, nch = color.shape
     nf = features.shape[2]
     d = 3 + nf
     side = 2 * radius + 1
+    nwin = side * side
     nchunks = (h + chunk - 1) // chunk
     span = chunk + 2 * radius
     acc = np.zeros((nchunks, span, w, nch + 1))
     for ci in prange(nchunks):
         y0 = ci * chunk
         y1 = min(h, y0 + chunk)
+        rows = y1 - y0
         base = y0 - radius
-        weights = _weights_block(guide, guide_variance, y0, y1, radius, patch, k, alpha, eps, clamp_d)
+        weights = np.empty((rows, w, nwin))
+        _weights_into(guide, guide_variance, y0, rows, radius, patch, k, alpha, eps, clamp_d,
+                      np.empty((rows + 2 * patch, w)), np.empty((rows + 2 * patch, w)),
+                      np.empty((rows, w)), weights)
         a = np.zeros((d, d))
         b = np.zeros((d, nch))
         beta = np.zeros((d, nch))
-        xrow = np.zeros(d)
+        z = np.zeros((d + nch, nwin))        # columns z_i(q) of the gathered neighbours
+        wz = np.zeros(nwin)
+        wq = np.zeros(nwin)
+        pred = np.zeros(nwin)
+        qys = np.zeros(nwin, dtype=np.int64)
+        qxs = np.zeros(nwin, dtype=np.int64)
         for y in range(y0, y1):
-            qy0 = max(0, y - radius)
-            qy1 = min(h, y + radius + 1)
             for x in range(w):
-                qx0 = max(0, x - radius)
-                qx1 = min(w, x + radius + 1)
-                a[:, :] = 0.0
-                b[:, :] = 0.0
-                wsum = 0.0
-                for qy in range(qy0, qy1):
-                    for qx in range(qx0, qx1):
-                        wt = weights[(qy - y + radius) * side + (qx - x + radius), y - y0, x]
+                wrow = weights[y - y0, x]
+                fp = features[y, x]
+                n = 0
+                for oy in range(-radius, radius + 1):
+                    qy = y + oy
+                    for ox in range(-radius, radius + 1):
+                        wt = wrow[(oy + radius) * side + ox + radius]
                         if wt <= 0.0:
                             continue
-                        wsum += wt
-                        _design_row(xrow, features, qy, qx, y, x, nf)
-                        for i in range(d):
-                            wi = wt * xrow[i]
-                            for j in range(i, d):
-                                a[i, j] += wi * xrow[j]
-                            for ch in range(nch):
-                                b[i, ch] += wi * color[qy, qx, ch]
+                        qx = x + ox
+                        wq[n] = wt
+                        qys[n] = qy
+                        qxs[n] = qx
+                        z[0, n] = 1.0
+                        z[1, n] = ox
+                        z[2, n] = oy
+                        fq = features[qy, qx]
+                        for f in range(nf):
+                            diff = fq[f] - fp[f]
+                            if abs(diff) <= feature_resolution * max(abs(fq[f]), abs(fp[f])):
+                                diff = 0.0
+                            z[3 + f, n] = diff
+                        for ch in range(nch):
+                            z[d + ch, n] = color[qy, qx, ch]
+                        n += 1
+                wsum = 0.0
+                for m in range(n):
+                    wsum += wq[m]
                 for i in range(d):
-                    for j in range(i):
-                        a[i, j] = a[j, i]
+                    zi = z[i]
+                    for m in range(n):
+                        wz[m] = wq[m] * zi[m]
+                    for j in range(i + 1):
+                        a[i, j] = _dot(wz, z[j], n)
+                        a[j, i] = a[i, j]
+                    for ch in range(nch):
+                        b[i, ch] = _dot(wz, z[d + ch], n)
                 ok = _solve_normal_equations(a, b, d, nch, tol, beta)
                 finite = ok
                 for i in range(d):
@@ -294,19 +292,19 @@ def _collaborative_regression(color, guide, guide_variance, features, radius, pa
                     beta[:, :] = 0.0
                     for ch in range(nch):
                         beta[0, ch] = b[0, ch] / wsum
-                # evaluate the local fit over the window and accumulate (collaborative step)
-                for qy in range(qy0, qy1):
-                    for qx in range(qx0, qx1):
-                        wt = weights[(qy - y + radius) * side + (qx - x + radius), y - y0, x]
-                        if wt <= 0.0:
-                            continue
-                        _design_row(xrow, features, qy, qx, y, x, nf)
-                        for ch in range(nch):
-                            pred = 0.0
-                            for i in range(d):
-                                pred += xrow[i] * beta[i, ch]
-                            acc[ci, qy - base, qx, ch] += wt * pred
-                        acc[ci, qy - base, qx, nch] += wt
+                # evaluate the local fit at every neighbour and accumulate (collaborative step)
+                for ch in range(nch):
+                    for m in range(n):
+                        pred[m] = 0.0
+                    for i in range(d):
+                        zi = z[i]
+                        bi = beta[i, ch]
+                        for m in range(n):
+                            pred[m] += zi[m] * bi
+                    for m in range(n):
+                        acc[ci, qys[m] - base, qxs[m], ch] += wq[m] * pred[m]
+                for m in range(n):
+                    acc[ci, qys[m] - base, qxs[m], nch] += wq[m]
     out = np.zeros((h, w, nch))
     wsum_img = np.zeros((h, w))
     for ci in range(nchunks):
@@ -336,16 +334,17 @@ def collaborative_regression(color, guide, guide_variance, features, radius=REGR
     """Filter ``color`` (H, W, 3) by collaborative first-order regression on ``features`` (H, W, F)
     with NL-means weights from ``guide`` / ``guide_variance`` (H, W, C). Returns float64 (H, W, 3)."""
     as64 = lambda x: np.ascontiguousarray(x, dtype=np.float64)
-    guide = as64(guide)
-    guide_variance = np.maximum(as64(guide_variance), 0.0)
+    guide = np.asarray(guide, dtype=np.float64)
+    guide_variance = np.maximum(np.asarray(guide_variance, dtype=np.float64), 0.0)
     if guide.ndim == 2:
         guide, guide_variance = guide[..., None], guide_variance[..., None]
+    planes = lambda x: np.ascontiguousarray(np.moveaxis(x, 2, 0))
     features = as64(features)
     if features.ndim == 2:
         features = features[..., None]
-    return _collaborative_regression(as64(color), guide, guide_variance, features, int(radius),
+    return _collaborative_regression(as64(color), planes(guide), planes(guide_variance), features, int(radius),
                                      int(patch_radius), float(k), NLM_ALPHA, NLM_EPSILON,
-                                     DISTANCE_CLAMP, PIVOT_TOLERANCE, CHUNK_ROWS)
+                                     DISTANCE_CLAMP, PIVOT_TOLERANCE, FEATURE_RESOLUTION, CHUNK_ROWS)
 
 
 def _features(buffers: RenderBuffers, suffix: str) -> np.ndarray:

@@ -38,15 +38,19 @@ def test_registry_interface():
     assert module.KIND == "denoiser" and module.LABEL == "#4 NFOR"
 
 
+def planes(array):
+    return np.ascontiguousarray(np.moveaxis(array, 2, 0))
+
+
 def test_weights_match_mcbench_nlmeans():
     rng = np.random.default_rng(1)
     guide, variance = rng.random((10, 12, 3)), rng.random((10, 12, 3)) * 0.05
-    weights = nfor._weights_block(guide, variance, 0, 10, 3, 2, 0.7, 1.0, 1e-10, 1e4)
+    weights = nfor.regression_weights(planes(guide), planes(variance), 0, 10, 3, 2, 0.7, 1.0, 1e-10, 1e4)
     for dy, dx, expected, _ in nl_means_weight_maps(guide, variance, 3, 2, 0.7):
-        np.testing.assert_allclose(weights[(dy + 3) * 7 + dx + 3], expected, atol=1e-12)
+        np.testing.assert_allclose(weights[..., (dy + 3) * 7 + dx + 3], expected, atol=1e-12)
     # a row block gives the same weights as the whole image
-    np.testing.assert_allclose(nfor._weights_block(guide, variance, 3, 7, 3, 2, 0.7, 1.0, 1e-10, 1e4),
-                               weights[:, 3:7], atol=0)
+    np.testing.assert_allclose(nfor.regression_weights(planes(guide), planes(variance), 3, 7, 3, 2, 0.7, 1.0,
+                                                       1e-10, 1e4), weights[3:7], atol=0)
 
 
 def test_regression_matches_brute_force_lstsq():
@@ -56,13 +60,13 @@ def test_regression_matches_brute_force_lstsq():
     color, feat = rng.random((h, w, 3)), rng.random((h, w, 2))
     feat[..., 1] = 0.25  # a constant feature: rank-deficient normal equations
     got = nfor.collaborative_regression(color, guide, variance, feat, radius=r, patch_radius=1, k=0.7)
-    weights = nfor._weights_block(guide, variance, 0, h, r, 1, 0.7, 1.0, 1e-10, 1e4)
+    weights = nfor.regression_weights(planes(guide), planes(variance), 0, h, r, 1, 0.7, 1.0, 1e-10, 1e4)
     num, den = np.zeros((h, w, 3)), np.zeros((h, w))
     for y in range(h):
         for x in range(w):
             qs = [(qy, qx) for qy in range(max(0, y - r), min(h, y + r + 1))
                   for qx in range(max(0, x - r), min(w, x + r + 1))]
-            wq = np.array([weights[(qy - y + r) * (2 * r + 1) + qx - x + r, y, x] for qy, qx in qs])
+            wq = np.array([weights[y, x, (qy - y + r) * (2 * r + 1) + qx - x + r] for qy, qx in qs])
             design = np.array([[1.0, qx - x, qy - y, *(feat[qy, qx] - feat[y, x])] for qy, qx in qs])
             target = np.array([color[qy, qx] for qy, qx in qs])
             sw = np.sqrt(wq)[:, None]
