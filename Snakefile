@@ -31,6 +31,7 @@ include: "workflow/rules/training.smk"
 include: "workflow/rules/viewer.smk"
 include: "workflow/rules/figures.smk"
 include: "workflow/rules/comparisons.smk"
+include: "workflow/rules/oracle.smk"
 
 
 rule all:
@@ -46,4 +47,5 @@ rule all:
         expand(rules.comparison_onehot.output, metric=config["metrics"]),
         rules.comparison_ablations.output,
         expand(rules.comparison_ranking.output, metric=config["metrics"]),
+        expand(rules.oracle_study.output, scene=ORACLE_SCENE),
     default_target: True

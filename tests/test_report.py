@@ -124,7 +124,17 @@ def expected_items(config: dict) -> dict[str, dict]:
         "results/figures/gallery.png": ("Scenes", "Gallery", {"figure": "references"}),
         "results/figures/speed_error.png": ("Figures", "Speed against error", {"metric": "relmse"}),
     }
+    scene = config["scenes"][0]
+    items[f"results/oracle/{scene}/table.csv"] = ("Figures", "Ground-truth statistics (Fig. 11)",
+                                                  {"figure": "oracle table"})
+    items[f"results/oracle/{scene}/weights.png"] = ("Figures", "Ground-truth statistics (Fig. 11)",
+                                                    {"figure": "oracle weight maps"})
+    items["results/tables/comparisons/ablations.csv"] = ("Comparisons", "Ablations", {"table": "ablations"})
     for metric in config["metrics"]:
+        items[f"results/tables/comparisons/table1_{metric}.csv"] = (
+            "Comparisons", "Tables 1-2: one-hot selection", {"metric": metric})
+        items[f"results/tables/comparisons/ranking_{metric}.csv"] = (
+            "Comparisons", "Comparison rankings", {"metric": metric})
         items[f"results/tables/ranking_{metric}.csv"] = ("Rankings", "Score-and-rank tables", {"metric": metric})
         items[f"results/figures/error_{metric}.png"] = ("Figures", "Error against spp", {"metric": metric})
     return items

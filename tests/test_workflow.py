@@ -45,7 +45,7 @@ def test_tables_exist_and_ensemble_beats_noisy(smoke_run):
         assert list(table.columns) == ["candidate", "4", "64", "Avg."]
         assert (workdir / f"results/tables/ranking_{metric}.md").read_text().startswith("# Ranking")
     metrics = pd.read_csv(workdir / "results/metrics.csv")
-    assert len(metrics) == 3 * 2 * 6 * 4  # scenes × spp × (candidates + noisy) × metrics
+    assert len(metrics) == 3 * 2 * 11 * 4  # scenes × spp × (candidates + noisy) × metrics
     assert np.isfinite(metrics["value"]).all()
     relmse = metrics[metrics.metric == "relmse"].pivot_table(index=["scene", "spp"], columns="candidate", values="value")
     # At 32x32 the denoisers' blur of the Cornell box's light edge can cost more relMSE than
@@ -68,8 +68,22 @@ def test_tables_exist_and_ensemble_beats_noisy(smoke_run):
         for spp in (4, 64):
             np.testing.assert_allclose(table[str(spp)], per_spp.loc[table.index, spp], atol=5e-5)
         np.testing.assert_allclose(table["Avg."], per_spp.loc[table.index].mean(axis=1), atol=5e-5)
+    # the comparison methods: in metrics.csv and their own tables, not in the ranking pool
+    relmse_all = metrics[metrics.metric == "relmse"].pivot_table(index=["scene", "spp"], columns="candidate",
+                                                                 values="value")
+    table1 = pd.read_csv(workdir / "results/tables/comparisons/table1_relmse.csv")
+    cell = table1[(table1["size"].astype(str) == "2") & (table1["spp"].astype(str) == "4")].iloc[0]
+    wins = (relmse_all.xs(4, level="spp")["ensemble"]
+            < relmse_all.xs(4, level="spp")[["onehot_sbf", "onehot_nfor"]].min(axis=1))
+    assert (int(cell["cases"]), int(cell["wins"])) == (3, int(wins.sum())), table1
+    ranking_cmp = pd.read_csv(workdir / "results/tables/comparisons/ranking_relmse.csv")
+    assert {"onehot_sbf", "onehot_nfor", "onehot_post", "naive", "ensemble_unconstrained"} <= set(ranking_cmp["candidate"])
+    assert "unconstrained weights (5.2.1)" in (workdir / "results/tables/comparisons/ablations.md").read_text()
+    oracle = pd.read_csv(workdir / f"results/oracle/{config['scenes'][0]}/table.csv")
+    assert len(oracle) >= 9 and np.isfinite(oracle.select_dtypes("number")).all().all(), oracle
     timings = pd.read_csv(workdir / "results/timings.csv")
-    assert set(timings["method"]) == {"oidn", "jbf", "kpcn", "ensemble", "ensemble_exact"}
+    assert set(timings["method"]) == {"oidn", "jbf", "kpcn", "ensemble", "ensemble_exact", "onehot_sbf",
+                                      "onehot_nfor", "onehot_post", "naive", "ensemble_unconstrained"}
     assert (timings["seconds"] > 0).all()
     assert list((workdir / "results/benchmarks/methods").glob("*.tsv"))
 
