@@ -184,18 +184,78 @@ def _clip_normalise(w):
             w[j] = 1.0 / n
 
 
+START_RANDOM, START_VERTEX, START_PAIR = 0, 1, 2
+STARTS = ("random", "vertex", "pair")
+
+
 @cached_njit()
-def _iterative_one(ya, yb, xa, xb, w, order, state, max_iterations, tolerance):
+def _segment_point(ya, yb, xa, xb, i, j):
+    """Eq. 29 between base denoisers i and j (D channels summed): the clipped blending factor
+    alpha in [0, 1] of w = (1 - alpha) e_i + alpha e_j and its value sum_k (z^A - x^B)^2 +
+    (z^B - x^A)^2 (twice Eq. 25 up to a constant)."""
+    c1 = 0.0
+    c2 = 0.0
+    for k in range(ya.shape[1]):
+        da = ya[i, k] - ya[j, k]
+        db = yb[i, k] - yb[j, k]
+        c1 += da * da + db * db
+        c2 += (ya[i, k] - xb[k]) * da + (yb[i, k] - xa[k]) * db
+    alpha = 0.0
+    if c1 > 0.0:
+        alpha = min(1.0, max(0.0, c2 / c1))
+    value = 0.0
+    for k in range(ya.shape[1]):
+        ra = (1.0 - alpha) * ya[i, k] + alpha * ya[j, k] - xb[k]
+        rb = (1.0 - alpha) * yb[i, k] + alpha * yb[j, k] - xa[k]
+        value += ra * ra + rb * rb
+    return alpha, value
+
+
+@cached_njit()
+def _deterministic_start(ya, yb, xa, xb, w, start):
+    """Writes w: the best vertex e_j (``START_VERTEX``) or the best point of all vertices and
+    segments, i.e. the best two-denoiser ensemble by Eq. 29 (``START_PAIR``, O(N^2))."""
+    n = ya.shape[0]
+    best = np.inf
+    bi = 0
+    bj = 0
+    balpha = 0.0
+    for i in range(n):
+        _, value = _segment_point(ya, yb, xa, xb, i, i)
+        if value < best:
+            best = value
+            bi = i
+            bj = i
+    if start == START_PAIR:
+        for i in range(n):
+            for j in range(i + 1, n):
+                alpha, value = _segment_point(ya, yb, xa, xb, i, j)
+                if value < best:
+                    best = value
+                    bi = i
+                    bj = j
+                    balpha = alpha
+    for k in range(n):
+        w[k] = 0.0
+    w[bi] += 1.0 - balpha
+    w[bj] += balpha
+
+
+@cached_njit()
+def _iterative_one(ya, yb, xa, xb, w, order, state, max_iterations, tolerance, start):
     """One problem: ya, yb (N, D) with D channels sharing the weights (D = 1 per
     pixel-channel; D = C for one weight vector per pixel, whose Eq. 29 sums c1 and c2 over
     the channels); xa, xb (D,). Writes w (N,); returns the iteration count."""
     n = ya.shape[0]
     d = ya.shape[1]
-    # random start in [0, 1]^N, normalised (Sec. 4.1.2)
-    for j in range(n):
-        state, bits = _next(state)
-        w[j] = _uniform(bits)
-    _clip_normalise(w)
+    if start == START_RANDOM:
+        # random start in [0, 1]^N, normalised (Sec. 4.1.2)
+        for j in range(n):
+            state, bits = _next(state)
+            w[j] = _uniform(bits)
+        _clip_normalise(w)
+    else:
+        _deterministic_start(ya, yb, xa, xb, w, start)
     it = 0
     while it < max_iterations:
         # freshly shuffled cycle (Fisher-Yates)
@@ -262,7 +322,8 @@ def _iterative_one(ya, yb, xa, xb, w, order, state, max_iterations, tolerance):
 
 
 @cached_njit(parallel=True)
-def _iterative_kernel(ya, yb, xa, xb, seed_state, max_iterations, tolerance, first_problem):
+def _iterative_kernel(ya, yb, xa, xb, seed_state, max_iterations, tolerance, first_problem,
+                      start):
     """ya, yb: (P, N, D); xa, xb: (P, D), problems first_problem .. first_problem + P - 1 of the
     image (the generator of problem p is seeded from (seed, p), so a block of rows solved alone
     gets the numbers the whole image would). Returns weights (P, N) and iteration counts (P,)."""
@@ -277,7 +338,7 @@ def _iterative_kernel(ya, yb, xa, xb, seed_state, max_iterations, tolerance, fir
         for p in range(c * _CHUNK, min(P, (c + 1) * _CHUNK)):
             state = _mix64(seed_state + np.uint64(first_problem + p))
             iters[p] = _iterative_one(ya[p], yb[p], xa[p], xb[p], w, order, state,
-                                      max_iterations, tolerance)
+                                      max_iterations, tolerance, start)
             for j in range(n):
                 out[p, j] = w[j]
     return out, iters
@@ -935,7 +996,8 @@ def _check_shapes(xa, xb, ya, yb):
 
 def _check_choices(**named) -> None:
     choices = {"solver": SOLVERS, "weights": WEIGHTS, "channels": CHANNELS,
-               "guide_variance_blur": GUIDE_VARIANCE_BLURS, "colour_distance": COLOUR_DISTANCES}
+               "guide_variance_blur": GUIDE_VARIANCE_BLURS, "colour_distance": COLOUR_DISTANCES,
+               "start": STARTS}
     for name, value in named.items():
         if value not in choices[name]:
             raise ValueError(f"unknown ensemble {name} '{value}'; choose one of {choices[name]}")
@@ -965,7 +1027,7 @@ def _stacked_points(ya, yb, xa, xb):
 
 
 def _solve_block(xa, xb, ya, yb, *, solver, seed, max_iterations, tolerance, weights, channels,
-                 first_row):
+                 first_row, start="random"):
     """Weights of the rows first_row .. first_row + T - 1 of an image: float64 xa, xb (T, W, C),
     ya, yb (N, T, W, C), all finite. Returns (N, T, W, C) float64 weights and (T, W, C) info
     (see :func:`solve_weights`); a block gets exactly the weights of the whole image's solve."""
@@ -987,7 +1049,8 @@ def _solve_block(xa, xb, ya, yb, *, solver, seed, max_iterations, tolerance, wei
         if int(max_iterations) < 1:
             raise ValueError(f"max_iterations must be >= 1, got {max_iterations}")
         w, info = _iterative_kernel(ya_d, yb_d, xa_d, xb_d, _seed_state(seed), int(max_iterations),
-                                    float(tolerance), first_row * wd * per_problem)
+                                    float(tolerance), first_row * wd * per_problem,
+                                    STARTS.index(start))
     elif solver == "exact" and channels == "single":
         w, info = _shared_exact_kernel(ya_d, yb_d, xa_d, xb_d)
     elif solver == "exact":
@@ -1005,7 +1068,7 @@ def _solve_block(xa, xb, ya, yb, *, solver, seed, max_iterations, tolerance, wei
 
 def solve_weights(color_a, color_b, denoised_a, denoised_b, solver="iterative", seed=0,
                   max_iterations=1024, tolerance=1e-9, return_info=False, *,
-                  weights="simplex", channels="rgb"):
+                  weights="simplex", channels="rgb", start="random"):
     """Per-pixel, per-channel ensemble weights minimising Eq. 13 (with <M> from Eq. 11-12).
 
     Parameters
@@ -1031,6 +1094,11 @@ def solve_weights(color_a, color_b, denoised_a, denoised_b, solver="iterative", 
     channels : ``"rgb"`` (one weight vector per pixel-channel, the paper's choice) or
         ``"single"`` (one per pixel shared by the C channels, minimising the sum over the
         channels of Eq. 13, Sec. 5.2.3; the weights are repeated along C).
+    start : the iterative solver's starting weights: ``"random"`` (the paper's, Sec. 4.1.2),
+        ``"vertex"`` (the best single base denoiser) or ``"pair"`` (the best two-denoiser
+        ensemble of Eq. 29 over all pairs, O(N^2) per problem; it is the optimum whenever the
+        optimum has two non-zero weights, so the solver stops after one cycle). The iterations
+        are the paper's either way; see ``benchmarks/bench_solvers.py``.
 
     All arithmetic is float64 (the solvers' geometry needs it: Eq. 29's c1 and the hull tests
     subtract nearly equal radiance values).
@@ -1045,13 +1113,13 @@ def solve_weights(color_a, color_b, denoised_a, denoised_b, solver="iterative", 
     ValueError on shape mismatch, unknown solver/weights/channels, or NaN/Inf in any input
     (the message gives the number of bad pixels).
     """
-    _check_choices(solver=solver, weights=weights, channels=channels)
+    _check_choices(solver=solver, weights=weights, channels=channels, start=start)
     xa, xb, ya, yb = (np.asarray(a, np.float64) for a in (color_a, color_b, denoised_a, denoised_b))
     _check_shapes(xa, xb, ya, yb)
     _check_finite({"color_a": xa, "color_b": xb, "denoised_a": ya, "denoised_b": yb})
     result, info = _solve_block(xa, xb, ya, yb, solver=solver, seed=seed,
                                 max_iterations=max_iterations, tolerance=tolerance,
-                                weights=weights, channels=channels, first_row=0)
+                                weights=weights, channels=channels, first_row=0, start=start)
     if return_info:
         return result, info
     return result
@@ -1063,10 +1131,11 @@ def combine_with(weights, denoised) -> np.ndarray:
                      np.asarray(denoised, np.float64))
 
 
-def _onto_constraint(weights, *, nonnegative, check):
+def _onto_constraint(weights, *, nonnegative, check, fallback=None):
     """In place: filtered (N, H, W, C) weights back onto the simplex (clip at 0, divide by the
     sum; with ``check`` first assert that the sum stayed within rounding of 1) or, for
-    unconstrained weights, onto sum one (add (1 - sum) / N)."""
+    unconstrained weights, onto sum one (add (1 - sum) / N). A pixel-channel whose clipped
+    weights are all 0 (possible after the per-map outlier removal) takes ``fallback``'s."""
     n = weights.shape[0]
     total = weights.sum(axis=0)
     if not nonnegative:
@@ -1076,7 +1145,12 @@ def _onto_constraint(weights, *, nonnegative, check):
         assert np.all(np.abs(total - 1.0) < _SIMPLEX_TOL[weights.dtype]), \
             "filtered weights left the simplex"
     np.maximum(weights, 0.0, out=weights)
-    weights /= weights.sum(axis=0)
+    total = weights.sum(axis=0)
+    empty = ~(total > 0)
+    if empty.any():
+        weights[:, empty] = fallback[:, empty]
+        total[empty] = 1.0
+    weights /= total
 
 
 def _filter_raw_weights(values, guide, guide_variance, albedo, normal, *, radius, sigma_spatial,
@@ -1091,8 +1165,9 @@ def _filter_raw_weights(values, guide, guide_variance, albedo, normal, *, radius
                                          radius, colour_distance=colour_distance, dtype=dtype)
     _onto_constraint(out, nonnegative=nonnegative, check=True)
     if outlier_removal:
-        out = remove_outliers(out, radius=OUTLIER_RADIUS, threshold=OUTLIER_THRESHOLD)
-        _onto_constraint(out, nonnegative=nonnegative, check=False)
+        cleaned = remove_outliers(out, radius=OUTLIER_RADIUS, threshold=OUTLIER_THRESHOLD)
+        _onto_constraint(cleaned, nonnegative=nonnegative, check=False, fallback=out)
+        out = cleaned
     return out
 
 
@@ -1155,7 +1230,8 @@ def combine(buffers: RenderBuffers, inputs: list[Denoised], *,
             sigma_albedo: float = 0.25, sigma_normal: float = 0.15,
             guide_variance_blur: Literal["none", "gaussian9"] = "none",
             outlier_removal: bool = False,
-            colour_distance: Literal["mean", "sum"] = "mean") -> Denoised:
+            colour_distance: Literal["mean", "sum"] = "mean",
+            start: Literal["random", "vertex", "pair"] = "random") -> Denoised:
     """Ensemble of the ``inputs`` (Sec. 4): solve raw weights from the half buffers, filter
     them (unless ``filter=False``, an ablation), and combine (Eq. 35).
 
@@ -1165,7 +1241,8 @@ def combine(buffers: RenderBuffers, inputs: list[Denoised], *,
     ``solver="qp"`` solves the same problems with a general QP solver (slow; Fig. 6);
     ``filter=False`` keeps the raw weights. See :func:`solve_weights`. The authors' public
     code's passes around the filter (see :func:`filter_weights`): ``guide_variance_blur``,
-    ``outlier_removal``, ``colour_distance``.
+    ``outlier_removal``, ``colour_distance``. ``start``: the iterative solver's start (see
+    :func:`solve_weights`; the paper's random one by default).
 
     Memory: the rows are solved in blocks of about :data:`BLOCK_PIXELS` pixels (float64 copies
     of one block only), straight into the float32 raw weight maps, the guide z and Var[z]; the
@@ -1181,7 +1258,7 @@ def combine(buffers: RenderBuffers, inputs: list[Denoised], *,
     """
     if not inputs:
         raise ValueError("the ensemble needs at least one input")
-    _check_choices(solver=solver, weights=weights, channels=channels,
+    _check_choices(solver=solver, weights=weights, channels=channels, start=start,
                    guide_variance_blur=guide_variance_blur, colour_distance=colour_distance)
     xa, xb = np.asarray(buffers.color_a), np.asarray(buffers.color_b)
     for i, d in enumerate(inputs):
@@ -1204,7 +1281,7 @@ def combine(buffers: RenderBuffers, inputs: list[Denoised], *,
         w, _ = _solve_block(np.asarray(xa[rows], np.float64), np.asarray(xb[rows], np.float64),
                             ya, yb, solver=solver, seed=seed, max_iterations=max_iterations,
                             tolerance=tolerance, weights=weights, channels=channels,
-                            first_row=y0)
+                            first_row=y0, start=start)
         raw[:, rows] = w
         if filter:
             guide[rows] = combine_with(w, _rows_of(inputs, "full", rows))

@@ -244,6 +244,32 @@ def test_iterative_reaches_the_optimum_on_99_percent(problems):
     assert share >= 0.99, share
 
 
+@pytest.mark.parametrize("start", ["vertex", "pair"])
+def test_iterative_deterministic_starts(start):
+    """start="vertex" begins at the best single denoiser, "pair" at the best two-denoiser
+    ensemble (Eq. 29 over all pairs). Both reach the optimum like the paper's random start;
+    "pair" *is* the optimum where the exact solution has two non-zero weights (b outside the
+    hull, nearest point inside an edge), so one cycle of N steps moves nothing and it stops,
+    with the exact weights."""
+    xa, xb, ya, yb = random_plane_problems(seed=5, n=5, m=3000)
+    w, iterations = E.solve_weights(xa, xb, ya, yb, start=start, return_info=True)
+    assert_simplex(w)
+    gap = gap_above_optimum(w, xa, xb, ya, yb)
+    assert gap.min() >= -1e-12 and np.mean(gap <= 1e-6) >= 0.99
+    exact = E.solve_weights(xa, xb, ya, yb, solver="exact")
+    two = (exact > 1e-9).sum(axis=0) == 2
+    assert two.mean() > 0.2
+    if start == "pair":
+        assert np.mean(iterations[two] == 5) > 0.99
+        np.testing.assert_allclose(w[:, two], exact[:, two], atol=1e-7)
+    else:   # the best vertex is the optimum only where one weight is 1
+        assert np.mean(iterations[two] == 5) < 0.5
+    random = E.solve_weights(xa, xb, ya, yb)
+    assert not np.array_equal(random, w)
+    with pytest.raises(ValueError, match="start 'best'"):
+        E.solve_weights(xa, xb, ya, yb, start="best")
+
+
 def test_iterative_stopping_rule_on_its_trajectory():
     """The solver stops after the first whole cycle of N iterations in which no single update
     changed any weight by more than ``tolerance``, or at ``max_iterations``.

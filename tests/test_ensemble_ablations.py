@@ -446,3 +446,49 @@ def test_unknown_options_name_the_choices():
     for key, bad in (("weights", "nonneg"), ("channels", "grey"), ("solver", "osqp")):
         with pytest.raises(ValueError, match=f"{key} '{bad}'"):
             E.solve_weights(xa, xb, ya, yb, **{key: bad})
+
+
+@pytest.mark.parametrize("params", [dict(guide_variance_blur="gaussian9"),
+                                    dict(outlier_removal=True), dict(colour_distance="sum"),
+                                    dict(guide_variance_blur="gaussian9", outlier_removal=True,
+                                         colour_distance="sum")])
+def test_postprocessing_keeps_the_constraint(params, make_render_buffers):
+    """The public code's passes: finite weights on the simplex (and summing to one when
+    unconstrained) on the firefly case, and the filter without them is what they change."""
+    rng = np.random.default_rng(21)
+    H, W, n = 12, 13, 3
+    truth = rng.uniform(0.1, 1.0, (H, W, 3))
+    buffers = make_render_buffers(truth, half_std=0.1, seed=rng)
+    buffers.color_a[2, 2] = 1e6
+    ys = [np.clip(truth + rng.normal(0, 0.05, (n, H, W, 3)), 0, None) for _ in range(3)]
+    inputs = [Denoised(full=ys[0][i].astype(np.float32), a=ys[1][i].astype(np.float32),
+                       b=ys[2][i].astype(np.float32)) for i in range(n)]
+    for weights in E.WEIGHTS:
+        out = E.combine(buffers, inputs, weights=weights, **params)
+        filt = np.stack([out.extras[f"weights_filtered_{i}"] for i in range(n)]).astype(np.float64)
+        assert np.isfinite(filt).all() and np.isfinite(out.full).all()
+        assert_sum_one(filt, atol=1e-5 * max(1.0, np.abs(filt).max()))
+        if weights == "simplex":
+            assert filt.min() >= 0.0
+        plain = E.combine(buffers, inputs, weights=weights)
+        assert not np.array_equal(plain.full, out.full)
+
+
+def test_outlier_removal_that_empties_a_pixel_keeps_the_filtered_weights():
+    """Raw weights the filter leaves as they are (sigma_s tiny): at the centre [1, 0, 0]; around
+    it map 0 is 0 (std 0: the 1 is an outlier, replaced by 0) and maps 1, 2 alternate 0 / 1
+    (std 0.5: their 0s stay). All three weights would be 0; the filtered ones are kept."""
+    H = W = 9
+    w = np.zeros((3, H, W, 3))
+    checker = (np.add.outer(np.arange(H), np.arange(W)) % 2).astype(float)[..., None]
+    w[1], w[2] = checker, 1.0 - checker
+    w[:, 4, 4] = np.array([1.0, 0.0, 0.0])[:, None]
+    y = np.ones((3, H, W, 3))
+    flat = np.full((H, W, 3), 0.5)
+    kwargs = dict(sigma_spatial=0.01, radius=1)
+    plain = E.filter_weights(w, y, y, y, flat, flat, **kwargs)
+    cleaned = E.filter_weights(w, y, y, y, flat, flat, outlier_removal=True, **kwargs)
+    np.testing.assert_allclose(plain, w, atol=1e-12)
+    np.testing.assert_array_equal(cleaned[:, 4, 4], plain[:, 4, 4])
+    assert np.isfinite(cleaned).all()
+    np.testing.assert_allclose(cleaned.sum(axis=0), 1.0, atol=1e-12)
