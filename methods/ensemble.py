@@ -94,6 +94,27 @@ Weight filter (Sec. 4.2): raw combined images z, z^A, z^B, Var[z] ~ (z^A - z^B)^
 cross-bilateral filter (Eq. 32-34) of all N x C weight maps with one kernel per pixel
 guided by z/Var[z], albedo and normal (``mcbench.bilateral``). A convex combination of
 simplex vectors stays on the simplex.
+
+Precision and memory (issue 14): the solvers' geometry is float64 throughout (Eq. 29's c1
+and the hull tests subtract nearly equal radiance values). :func:`combine` solves blocks of
+rows (:data:`BLOCK_PIXELS`; float64 copies of one block's inputs only) straight into the float32
+raw weight maps it returns, and the guide z, Var[z] (float64: the filter's colour term needs
+it, see ``mcbench.bilateral``); the weight filter otherwise runs in float32 (relative rounding
+1e-7, far below what a weight map shows; the blend equals the float64 code's to ~1e-15 relMSE,
+tests/test_ensemble.py); the blend (Eq. 35) accumulates in float64. The iterative solver's
+generator is keyed by the problem's index in the image, so blocks change nothing.
+
+The public code's post-processing (LuisaGroup/Ensemble-Denoising, ``filter.h``/``main.cpp``;
+``../shared/study/public-code-facts.md`` items 1-3), each a documented switch of
+:func:`combine` and :func:`filter_weights`:
+``guide_variance_blur="gaussian9"``: Var[z] blurred with a 9 x 9 Gaussian (OpenCV's sigma-0
+rule, sigma = 1.7, borders reflected) before the filter; ``outlier_removal=True``: after the
+filter, each weight map's values further than 2.5 standard deviations from the mean of the
+other pixels of their 7 x 7 window are replaced by that mean
+(:func:`mcbench.bilateral.remove_outliers`), then the weights are projected back onto the
+simplex (onto sum one when unconstrained; a pixel-channel left with all weights 0 keeps its
+filtered ones); ``colour_distance="sum"``: Eq. 33 summed over the channels instead of averaged.
+POSTPROCESS_MEASUREMENT
 """
 
 from __future__ import annotations
@@ -1245,9 +1266,9 @@ def combine(buffers: RenderBuffers, inputs: list[Denoised], *,
     :func:`solve_weights`; the paper's random one by default).
 
     Memory: the rows are solved in blocks of about :data:`BLOCK_PIXELS` pixels (float64 copies
-    of one block only), straight into the float32 raw weight maps, the guide z and Var[z]; the
-    weight filter works in float32 (its rounding, 1e-7 relative, is far below what a weight map
-    can show) and the blend accumulates in float64.
+    of one block only), straight into the float32 raw weight maps and the float64 guide z and
+    Var[z]; the weight filter works in float32 except for its colour term (float64) and the
+    blend accumulates in float64.
 
     Returns Denoised(full, a, b, extras) with float32 images; ``extras`` holds
     ``weights_raw_{i}`` and ``weights_filtered_{i}`` (H, W, 3) per input i (with
@@ -1272,8 +1293,9 @@ def combine(buffers: RenderBuffers, inputs: list[Denoised], *,
     n = len(inputs)
     h, wd, c = xa.shape
     raw = np.empty((n, h, wd, c), np.float32)
-    guide = np.empty((h, wd, c), np.float32)
-    guide_variance = np.empty((h, wd, c), np.float32)
+    # z and Var[z] in float64, laid out planar (C, H, W) as the filter reads them (no copy)
+    guide = np.moveaxis(np.empty((c, h, wd)), 0, 2)
+    guide_variance = np.moveaxis(np.empty((c, h, wd)), 0, 2)
     step = max(1, BLOCK_PIXELS // max(wd, 1))
     for y0 in range(0, h, step):
         rows = slice(y0, min(h, y0 + step))

@@ -202,3 +202,19 @@ def test_remove_outliers_matches_direct_loop():
     assert 0 < replaced < 0.2                 # plain noise stays mostly as it is
     single = bilateral.remove_outliers(maps[0, :1, :1])      # a 1 x 1 map has no neighbours
     np.testing.assert_array_equal(single, maps[0, :1, :1])
+
+
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+def test_zero_variance_guard_sees_float64_guides(dtype):
+    """Var = 0 and guides that differ by 1e-12 (rounding noise of a weighted sum, invisible in
+    float32): the neighbour is excluded in either working precision, as in float64; equal guides
+    keep it."""
+    values = np.array([[0.0, 1.0]])
+    zero_var = np.zeros((1, 2, 3))
+    apart = np.full((1, 2, 3), 0.5)
+    apart[0, 1] += 1e-12
+    out = cross_bilateral_filter(values, apart, zero_var, [], [], 1.0, 2.0, 1, dtype=dtype)
+    assert out[0, 0, 0] == 0.0 and out[0, 0, 1] == 1.0
+    equal = cross_bilateral_filter(values, np.full((1, 2, 3), 0.5), zero_var, [], [], 1.0, 2.0, 1,
+                                   dtype=dtype)
+    assert float(equal[0, 0, 0]) == pytest.approx(math.exp(-0.5) / (1 + math.exp(-0.5)), rel=1e-6)
