@@ -611,13 +611,13 @@ def test_combine_matches_the_output_before_the_rewrite(n, solver, make_render_bu
                                                        monkeypatch):
     """tests/data/ensemble_blend_before.npz holds combine()'s full, A and B blends on this
     deterministic case as computed by the float64, whole-image code before issue 14 (commit
-    9ec8741). The float32 filter and the block-wise solve (blocks of 5 rows here, so blocks
+    9ec8741, the paper's filter alone: E.PAPER_FILTER). The float32 filter and the block-wise solve (blocks of 5 rows here, so blocks
     and filter bands both cut the 32 x 36 image) must stay within 1e-6 relMSE of it."""
     monkeypatch.setattr(E, "BLOCK_PIXELS", 5 * 36)
     before = np.load(BEFORE)
     buffers, inputs, _ = synthetic_scene(make_render_buffers, np.random.default_rng(100 + n),
                                          H=32, W=36, n=n)
-    out = E.combine(buffers, inputs, solver=solver)
+    out = E.combine(buffers, inputs, solver=solver, **E.PAPER_FILTER)
     for which in ("full", "a", "b"):
         expected = before[f"{solver}_n{n}_{which}"].astype(np.float64)
         got = out.image(which).astype(np.float64)

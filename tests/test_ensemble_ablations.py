@@ -391,7 +391,7 @@ def test_unconstrained_filter_keeps_negative_weights(make_render_buffers):
     filt = E.filter_weights(raw, y_full, y_a, y_b, buffers.albedo, buffers.normal,
                             nonnegative=False)
     np.testing.assert_allclose(filt.sum(axis=0), 1.0, atol=1e-12 * np.abs(raw).max())
-    out = E.combine(buffers, inputs, weights="unconstrained")
+    out = E.combine(buffers, inputs, weights="unconstrained", **E.PAPER_FILTER)
     filt32 = E.filter_weights(raw, y_full, y_a, y_b, buffers.albedo, buffers.normal,
                               nonnegative=False, dtype=np.float32)   # combine's precision
     for i in range(n):
@@ -401,11 +401,12 @@ def test_unconstrained_filter_keeps_negative_weights(make_render_buffers):
     assert (filt.min(axis=0) < -0.1).mean() > 0.5
 
 
-def test_defaults_leave_combine_unchanged(make_render_buffers):
-    """The defaults (iterative solver, simplex, per-channel weights, filter, no post-processing
-    of the public code) give exactly the output of the explicit defaults and of the
-    solve -> filter (float32, as combine) -> blend path of solve_weights(..., solver="iterative"),
-    bit for bit."""
+def test_defaults_are_the_measured_filter(make_render_buffers):
+    """The defaults (iterative solver, simplex, per-channel weights, filter with the public
+    code's guide-variance blur and outlier removal, the measured best: methods/ensemble.py
+    docstring) give exactly the output of the explicit defaults and of the solve -> filter
+    (float32, as combine) -> blend path, bit for bit; the paper's filter alone
+    (E.PAPER_FILTER) is the same path without the two passes."""
     rng = np.random.default_rng(12)
     H, W, n = 14, 15, 3
     truth = rng.uniform(0.2, 1.0, (H, W, 3))
@@ -418,26 +419,30 @@ def test_defaults_leave_combine_unchanged(make_render_buffers):
     explicit = E.combine(buffers, inputs, solver="iterative", seed=0, max_iterations=1024,
                          tolerance=1e-9, filter=True, weights="simplex", channels="rgb",
                          radius=7, sigma_spatial=3.0, sigma_color=2.0, sigma_albedo=0.25,
-                         sigma_normal=0.15)
+                         sigma_normal=0.15, guide_variance_blur="gaussian9",
+                         outlier_removal=True, colour_distance="mean", start="random")
+    paper = E.combine(buffers, inputs, **E.PAPER_FILTER)
     y_full, y_a, y_b = (np.stack([np.asarray(getattr(d, k), np.float64) for d in inputs])
                         for k in ("full", "a", "b"))
     raw = E.solve_weights(buffers.color_a, buffers.color_b, y_a, y_b, solver="iterative")
-    # combine filters in float32 (mcbench.bilateral) and blends with E.blend
-    filt = E.filter_weights(raw, y_full, y_a, y_b, buffers.albedo, buffers.normal,
-                            dtype=np.float32)
-    for got in (default, explicit, E.combine(buffers, inputs, guide_variance_blur="none",
-                                             outlier_removal=False, colour_distance="mean")):
+    for got, passes in ((default, dict(guide_variance_blur="gaussian9", outlier_removal=True)),
+                        (explicit, dict(guide_variance_blur="gaussian9", outlier_removal=True)),
+                        (paper, E.PAPER_FILTER)):
+        filt = E.filter_weights(raw, y_full, y_a, y_b, buffers.albedo, buffers.normal,
+                                dtype=np.float32, **passes)
         for which in ("full", "a", "b"):
             assert np.array_equal(got.image(which), E.blend(filt, inputs, which).astype(np.float32))
         for i in range(n):
             assert np.array_equal(got.extras[f"weights_raw_{i}"], raw[i].astype(np.float32))
             assert np.array_equal(got.extras[f"weights_filtered_{i}"], filt[i])
-    np.testing.assert_allclose(default.full, E.combine_with(filt, y_full), rtol=1e-6, atol=1e-7)
+    np.testing.assert_allclose(paper.full, E.combine_with(
+        E.filter_weights(raw, y_full, y_a, y_b, buffers.albedo, buffers.normal), y_full),
+        rtol=1e-6, atol=1e-7)
     # the options do change the result (the comparison above has power)
     for change in (dict(weights="unconstrained"), dict(channels="single"), dict(filter=False),
-                   dict(guide_variance_blur="gaussian9"), dict(outlier_removal=True),
-                   dict(colour_distance="sum")):
-        assert not np.array_equal(E.combine(buffers, inputs, **change).full, default.full)
+                   dict(guide_variance_blur="none"), dict(outlier_removal=False),
+                   dict(colour_distance="sum"), dict(start="pair")):
+        assert not np.array_equal(E.combine(buffers, inputs, **change).full, default.full), change
 
 
 def test_unknown_options_name_the_choices():
@@ -448,8 +453,9 @@ def test_unknown_options_name_the_choices():
             E.solve_weights(xa, xb, ya, yb, **{key: bad})
 
 
-@pytest.mark.parametrize("params", [dict(guide_variance_blur="gaussian9"),
-                                    dict(outlier_removal=True), dict(colour_distance="sum"),
+@pytest.mark.parametrize("params", [dict(E.PAPER_FILTER, guide_variance_blur="gaussian9"),
+                                    dict(E.PAPER_FILTER, outlier_removal=True),
+                                    dict(E.PAPER_FILTER, colour_distance="sum"),
                                     dict(guide_variance_blur="gaussian9", outlier_removal=True,
                                          colour_distance="sum")])
 def test_postprocessing_keeps_the_constraint(params, make_render_buffers):
@@ -470,7 +476,7 @@ def test_postprocessing_keeps_the_constraint(params, make_render_buffers):
         assert_sum_one(filt, atol=1e-5 * max(1.0, np.abs(filt).max()))
         if weights == "simplex":
             assert filt.min() >= 0.0
-        plain = E.combine(buffers, inputs, weights=weights)
+        plain = E.combine(buffers, inputs, weights=weights, **E.PAPER_FILTER)
         assert not np.array_equal(plain.full, out.full)
 
 
