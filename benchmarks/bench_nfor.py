@@ -1,11 +1,16 @@
-"""Time NFOR (methods/nfor.py) per image at 128², 256², 512² on synthetic inputs.
+"""Time NFOR (methods/nfor.py) per image at 128², 256², 512² on synthetic inputs, against the
+implementation before the speed-ups (``benchmarks/baseline.py``) in the same run.
 
-Inputs: the piecewise-smooth synthetic scene of tests/test_nfor.py with Gaussian noise
-(sigma 0.1 per half buffer). A 32² run first compiles / loads the numba kernels, so the
-timings exclude JIT. Prints seconds per image, the ratio to 128², and the ratio expected
-from the pixel count (the algorithm is linear in pixels for fixed window sizes).
+Inputs: the piecewise-smooth synthetic scene of tests/test_nfor.py (two albedo regions, a disk
+with another normal and depth) with Gaussian noise of sigma 0.1 per half buffer
+(tests/conftest.py's ``build_render_buffers``). A 24² run of each implementation first
+compiles / loads the numba kernels, so the timings exclude JIT. Prints per size the wall and
+CPU seconds of both, the speed-ups and the relMSE of today's outputs against the baseline's
+and against the baseline with today's one behaviour change (``baseline_fix``: feature
+differences within 1e-9 relative of zero count as 0, see methods/nfor.py).
+The DAG runs methods at one thread: ``NUMBA_NUM_THREADS=1``.
 
-    .venv/bin/python benchmarks/bench_nfor.py [--sizes 128 256 512] [--repeats 1]
+    NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/bench_nfor.py [--sizes 128 512] [--repeats 1] [--no-baseline]
 """
 
 from __future__ import annotations
@@ -17,29 +22,45 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests"))
+sys.path.insert(0, str(ROOT / "benchmarks"))
 
-from test_nfor import make_buffers, synthetic_scene  # noqa: E402
+from baseline import load_baseline, print_comparison, time_denoisers  # noqa: E402
+from conftest import build_render_buffers  # noqa: E402
+from test_nfor import synthetic_scene  # noqa: E402
 
 from methods import nfor  # noqa: E402
-from timing import timed  # noqa: E402
 
 
-def main() -> None:
+SNAP_OLD = "        xrow[3 + f] = features[qy, qx, f] - features[y, x, f]\n"
+SNAP_NEW = ("        diff = features[qy, qx, f] - features[y, x, f]\n"
+            "        if abs(diff) <= 1e-9 * max(abs(features[qy, qx, f]), abs(features[y, x, f])):\n"
+            "            diff = 0.0\n"
+            "        xrow[3 + f] = diff\n")
+
+
+def synthetic_buffers(size: int):
+    truth, albedo, normal, depth = synthetic_scene(size, size)
+    return build_render_buffers(truth, albedo=albedo, normal=normal, depth=depth, half_std=0.1, spp=16)
+
+
+def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sizes", type=int, nargs="+", default=[128, 256, 512])
     parser.add_argument("--repeats", type=int, default=1)
-    args = parser.parse_args()
+    parser.add_argument("--no-baseline", action="store_true", help="time today's implementation only")
+    args = parser.parse_args(argv)
 
-    nfor.denoise(make_buffers(*synthetic_scene(32, 32), sigma_half=0.1))  # numba warm-up
-    base = None
-    print(f"{'size':>6} {'pixels':>8} {'seconds':>9} {'ratio':>7} {'pixel ratio':>11}")
+    denoisers = {"new": nfor.denoise}
+    if not args.no_baseline:
+        denoisers["baseline"] = load_baseline("methods/nfor.py").denoise
+        # the baseline with today's one behaviour change (feature differences within 1e-9
+        # relative of zero count as 0), untimed: today's outputs equal it to rounding
+        denoisers["baseline_fix"] = load_baseline("methods/nfor.py", patches={SNAP_OLD: SNAP_NEW},
+                                                  suffix="_fix").denoise
+    for denoise in denoisers.values():
+        denoise(synthetic_buffers(24))    # numba compilation / cache load
     for size in args.sizes:
-        buffers = make_buffers(*synthetic_scene(size, size), sigma_half=0.1)
-        best, _ = timed(lambda: nfor.denoise(buffers), args.repeats)
-        if base is None:
-            base = (best, size * size)
-        print(f"{size:>6} {size * size:>8} {best:>9.2f} {best / base[0]:>7.2f} "
-              f"{size * size / base[1]:>11.1f}", flush=True)
+        print_comparison(size, time_denoisers(denoisers, synthetic_buffers(size), args.repeats))
 
 
 if __name__ == "__main__":

@@ -1,13 +1,16 @@
-"""Timing benchmark of RDFC (methods/rdfc.py) on synthetic buffers. A script, not a test:
+"""Timing benchmark of RDFC (methods/rdfc.py) on synthetic buffers, against the implementation
+before the speed-ups (``benchmarks/baseline.py``) in the same run. A script, not a test:
 
-    python benchmarks/bench_rdfc.py [--sizes 128 256 512] [--repeats 1]
+    NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/bench_rdfc.py [--sizes 128 256 512] [--repeats 1] [--no-baseline]
 
 Synthetic data: smooth colour with a piecewise-constant albedo (two regions), Gaussian
 half-buffer noise of known variance, noise-free normal/depth. Every timing is taken after a
 warm-up call (numba compilation) on a 32^2 image. Reported per size: total seconds per image
 (full + both half buffers, i.e. one ``denoise`` call), the stages (feature prefiltering; one
 candidate-filter kernel call, 3 candidates, r = 10; one select-and-blend), and the ratio of
-the total to the 128^2 total next to the pixel-count ratio.
+the total to the 128^2 total next to the pixel-count ratio; then (unless ``--no-baseline``) the
+wall and CPU seconds of today's and the baseline's ``denoise``, the speed-ups and the relMSE of
+today's outputs against the baseline's. The DAG runs methods at one thread: NUMBA_NUM_THREADS=1.
 """
 
 from __future__ import annotations
@@ -19,9 +22,11 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from mcbench.buffers import RenderBuffers  # noqa: E402
 from methods import rdfc  # noqa: E402
+from baseline import load_baseline, print_comparison, time_denoisers  # noqa: E402
 from timing import timed  # noqa: E402
 
 
@@ -51,9 +56,14 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sizes", type=int, nargs="+", default=[128, 256, 512])
     parser.add_argument("--repeats", type=int, default=1)
+    parser.add_argument("--no-baseline", action="store_true", help="time today's implementation only")
     args = parser.parse_args(argv)
 
     rdfc.denoise(synthetic(32))   # warm-up (numba compile / cache load)
+    denoisers = {"new": rdfc.denoise}
+    if not args.no_baseline:
+        denoisers["baseline"] = load_baseline("methods/rdfc.py").denoise
+        denoisers["baseline"](synthetic(32))
     base = None
     print(f"{'size':>6} {'total_s':>8} {'prefilt_s':>9} {'kernel_s':>8} {'select_s':>8} "
           f"{'x128_time':>9} {'x128_pixels':>11}")
@@ -71,6 +81,9 @@ def main(argv=None):
             base = (t_total, size * size)
         print(f"{size:>4}^2 {t_total:8.3f} {t_pre:9.3f} {t_kernel:8.3f} {t_sel:8.3f} "
               f"{t_total / base[0]:9.2f} {size * size / base[1]:11.2f}", flush=True)
+    if len(denoisers) > 1:
+        for size in args.sizes:
+            print_comparison(size, time_denoisers(denoisers, synthetic(size), args.repeats))
 
 
 if __name__ == "__main__":

@@ -90,152 +90,257 @@ CANDIDATE_NAMES = ("FIRST", "SECOND", "THIRD")
 PREFILTER = dict(radius=5, patch_radius=3, k=0.5)
 SELECTION_FILTER = dict(radius=3, patch_radius=1, k=1.0)
 FEATURES = ("albedo", "normal", "depth")
-TILE = 128
+TILE = None
+BAND_ROWS = 8
 
 
 # ----------------------------------------------------------------------------- kernels
 
-@cached_njit(parallel=True)
-def _pair_maps(g, gv, dy, dx, kc, alpha, eps, m, valid, grad):
-    """For offset o = (dy, dx): m(x) = mean_i Delta_i(x, x+o), valid(x), and per channel
-    grad_i(x) = 2 (g_i(x) - g_i(x+o)) / den_i (derivative of Delta_i wrt g_i(x))."""
-    h, w, nc = g.shape
-    for y in prange(h):
-        yq = y + dy
-        for x in range(w):
-            xq = x + dx
-            if yq < 0 or yq >= h or xq < 0 or xq >= w:
-                m[y, x] = 0.0
-                valid[y, x] = 0.0
-                for c in range(nc):
-                    grad[y, x, c] = 0.0
+@cached_njit(error_model="numpy")
+def _colour_distance_maps(g, gv, y0, rows, dy, dx, kc, alpha, eps, patch_radii, m, hs, out, o):
+    """Patch colour distances d_c^2(p, p + o) of the rows [y0, y0 + rows) for o = (dy, dx),
+    one map per patch radius in ``patch_radii``: out[j, o, r, x] = mean over the in-image patch
+    pixels n (with n + o in the image) of mean_i Delta_i(n, n + o) (module docstring, RKZ12).
+
+    g, gv: (C, H, W) planes. m: scratch (rows + 2 max f, W); hs: scratch (rows + 2 max f, W).
+    Entries whose p + o leaves the image are left unset (callers skip them).
+    """
+    nc, h, w = g.shape
+    fmax = 0
+    for j in range(patch_radii.shape[0]):
+        fmax = max(fmax, patch_radii[j])
+    ra = max(y0 - fmax, 0)
+    rb = min(y0 + rows + fmax, h)
+    k2 = kc * kc
+    x0 = max(0, -dx)
+    x1 = min(w, w - dx)
+    inv_nc = 1.0 / nc
+    for yy in range(ra, rb):
+        mrow = m[yy - ra]
+        mrow[:] = 0.0
+        yq = yy + dy
+        if yq < 0 or yq >= h or x0 >= x1:
+            continue
+        # views over x in [x0, x1) and x + dx, indexed from 0 (so the loop vectorises)
+        mv = mrow[x0:x1]
+        for c in range(nc):
+            gp, gq = g[c, yy, x0:x1], g[c, yq, x0 + dx:x1 + dx]
+            vp_row, vq_row = gv[c, yy, x0:x1], gv[c, yq, x0 + dx:x1 + dx]
+            for i in range(x1 - x0):
+                vp = vp_row[i]
+                vq = vq_row[i]
+                diff = gp[i] - gq[i]
+                mv[i] += (diff * diff - alpha * (vp + min(vp, vq))) / (eps + k2 * (vp + vq))
+        for i in range(x1 - x0):
+            mv[i] *= inv_nc
+    for j in range(patch_radii.shape[0]):
+        f = patch_radii[j]
+        for yy in range(ra, rb):
+            mrow = m[yy - ra]
+            hrow = hs[yy - ra]
+            hrow[:] = 0.0
+            for n in range(-f, f + 1):          # in-image horizontal patch sums, n ascending
+                lo = min(max(0, -n), w)
+                hi = max(min(w, w - n), lo)
+                hv, mv = hrow[lo:hi], mrow[lo + n:hi + n]
+                for i in range(hi - lo):
+                    hv[i] += mv[i]
+        for r in range(rows):
+            y = y0 + r
+            if y + dy < 0 or y + dy >= h:
                 continue
-            s = 0.0
-            for c in range(nc):
-                vp = gv[y, x, c]
-                vq = gv[yq, xq, c]
-                den = eps + kc * kc * (vp + vq)
-                diff = g[y, x, c] - g[yq, xq, c]
-                s += (diff * diff - alpha * (vp + min(vp, vq))) / den
-                grad[y, x, c] = 2.0 * diff / den
-            m[y, x] = s / nc
-            valid[y, x] = 1.0
+            ya = max(y - f, 0)
+            yb = min(y + f, h - 1)
+            # in-image patch rows whose shifted row is inside too (the valid pairs), per axis
+            cy = min(yb, h - 1 - dy) - max(ya, -dy) + 1
+            orow = out[j, o, r]
+            orow[:] = 0.0
+            for yy in range(ya, yb + 1):
+                hrow = hs[yy - ra]
+                for x in range(w):
+                    orow[x] += hrow[x]
+            for x in range(x0, x1):
+                cx = min(min(x + f, w - 1), w - 1 - dx) - max(max(x - f, 0), -dx) + 1
+                orow[x] /= cy * cx
 
 
-@cached_njit(parallel=True)
-def _integral(a, out):
-    """out[y+1, x+1] = sum of a[:y+1, :x+1] (float64)."""
-    h, w = a.shape
-    for y in prange(h):
-        acc = 0.0
-        for x in range(w):
-            acc += a[y, x]
-            out[y + 1, x + 1] = acc
-    for x in prange(w):
-        for y in range(h):
-            out[y + 1, x + 1] += out[y, x + 1]
+@cached_njit(parallel=True, error_model="numpy")
+def _candidates_kernel(y_img, v_img, g, gv, feat, fvar, inv_norm, fstart, radius, patch_radii,
+                       k_colors, self_guided, alpha, eps, band):
+    """Joint-weight filters of y_img for every candidate; see :func:`candidate_filters`.
 
-
-@cached_njit()
-def _box(ii, y0, x0, y1, x1):
-    return ii[y1 + 1, x1 + 1] - ii[y0, x1 + 1] - ii[y1 + 1, x0] + ii[y0, x0]
-
-
-@cached_njit(parallel=True)
-def _candidates_kernel(y_img, v_img, g, gv, feat, fvar, fnorm, fstart, radius, patch_radii,
-                       k_colors, self_guided, alpha, eps):
-    """Joint-weight filters of y_img for every candidate; see :func:`candidate_filters`."""
-    h, w, nc = y_img.shape
+    Every image argument is a (channels, H, W) float64 plane stack: y_img, v_img, g, gv (3),
+    feat (sum C_j), fvar and inv_norm = 1 / (k_f^2 max(tau, Var_j, |Grad_j|^2)) (J). Per band
+    of ``band`` rows, one window offset at a time: the patch colour distances of the band (one
+    map per distinct finite-k_c patch radius), then per band row the feature distances, weights,
+    sums and derivative terms of all pixels as loops over x (they vectorise), accumulated in
+    the band's (K, 3, rows, W) sums. Returns (filtered, derivative, output variance), each
+    (K, H, W, 3).
+    """
+    nc, h, w = y_img.shape
     ncand = patch_radii.shape[0]
     nfeat = fstart.shape[0] - 1
-    wsum = np.zeros((ncand, h, w))
-    wself = np.zeros((ncand, h, w))
-    wy = np.zeros((ncand, h, w, nc))
-    w2v = np.zeros((ncand, h, w, nc))
-    sdw = np.zeros((ncand, h, w, nc))
-    sdwy = np.zeros((ncand, h, w, nc))
-    m = np.zeros((h, w))
-    valid = np.zeros((h, w))
-    grad = np.zeros((h, w, nc))
-    im = np.zeros((h + 1, w + 1))
-    iv = np.zeros((h + 1, w + 1))
-    need_colour = False
-    for k in range(ncand):
-        if np.isfinite(k_colors[k]):
-            need_colour = True
+    # distinct patch radii of the candidates with a finite k_c, and each candidate's map
+    cmap = np.full(ncand, -1, dtype=np.int64)
+    radii = np.zeros(ncand, dtype=np.int64)
+    nmaps = 0
     kc0 = 0.0
     for k in range(ncand):
         if np.isfinite(k_colors[k]):
             kc0 = k_colors[k]
-    for dy in range(-radius, radius + 1):
-        for dx in range(-radius, radius + 1):
-            if need_colour:
-                _pair_maps(g, gv, dy, dx, kc0, alpha, eps, m, valid, grad)
-                _integral(m, im)
-                _integral(valid, iv)
-            for y in prange(h):
-                yq = y + dy
-                if yq < 0 or yq >= h:
-                    continue
-                for x in range(w):
-                    xq = x + dx
-                    if xq < 0 or xq >= w:
-                        continue
-                    # feature weight (pixel-wise, max over features)
-                    dfeat = 0.0
-                    for j in range(nfeat):
-                        dist = 0.0
-                        for c in range(fstart[j], fstart[j + 1]):
-                            diff = feat[y, x, c] - feat[yq, xq, c]
-                            dist += diff * diff
-                        dist /= max(fstart[j + 1] - fstart[j], 1)
-                        vp = fvar[y, x, j]
-                        phi = (dist - (vp + min(vp, fvar[yq, xq, j]))) / fnorm[y, x, j]
-                        if phi > dfeat:
-                            dfeat = phi
-                    wf = np.exp(-dfeat)
-                    for k in range(ncand):
-                        wc = 1.0
-                        d2 = 0.0
-                        cnt = 1.0
-                        pr = patch_radii[k]
-                        if np.isfinite(k_colors[k]):
-                            y0 = max(y - pr, 0)
-                            y1 = min(y + pr, h - 1)
-                            x0 = max(x - pr, 0)
-                            x1 = min(x + pr, w - 1)
-                            cnt = max(_box(iv, y0, x0, y1, x1), 1.0)
-                            d2 = _box(im, y0, x0, y1, x1) / cnt
-                            wc = np.exp(-max(d2, 0.0))
-                        wt = min(wc, wf)
-                        wsum[k, y, x] += wt
-                        if dy == 0 and dx == 0:
-                            wself[k, y, x] = wt
-                        for c in range(nc):
-                            wy[k, y, x, c] += wt * y_img[yq, xq, c]
-                            w2v[k, y, x, c] += wt * wt * v_img[yq, xq, c]
-                        if self_guided and np.isfinite(k_colors[k]) and wc < wf and d2 > 0.0:
-                            back = (abs(dy) <= pr and abs(dx) <= pr and y - dy >= 0 and y - dy < h
-                                    and x - dx >= 0 and x - dx < w)
-                            for c in range(nc):
-                                dd2 = grad[y, x, c]
-                                if back:
-                                    dd2 -= grad[y - dy, x - dx, c]
-                                dwt = -wc * dd2 / (nc * cnt)
-                                sdw[k, y, x, c] += dwt
-                                sdwy[k, y, x, c] += dwt * y_img[yq, xq, c]
+            for j in range(nmaps):
+                if radii[j] == patch_radii[k]:
+                    cmap[k] = j
+            if cmap[k] < 0:
+                radii[nmaps] = patch_radii[k]
+                cmap[k] = nmaps
+                nmaps += 1
+    radii = radii[:nmaps]
+    fmax = 0
+    for j in range(nmaps):
+        fmax = max(fmax, radii[j])
+    k2 = kc0 * kc0
+    inv_count = np.zeros(max(nfeat, 1))
+    for j in range(nfeat):
+        inv_count[j] = 1.0 / max(fstart[j + 1] - fstart[j], 1)
     out = np.zeros((ncand, h, w, nc))
     deriv = np.zeros((ncand, h, w, nc))
     outvar = np.zeros((ncand, h, w, nc))
-    for k in range(ncand):
-        for y in prange(h):
-            for x in range(w):
-                cs = max(wsum[k, y, x], 1e-300)
-                for c in range(nc):
-                    f = wy[k, y, x, c] / cs
-                    out[k, y, x, c] = f
-                    outvar[k, y, x, c] = w2v[k, y, x, c] / (cs * cs)
-                    deriv[k, y, x, c] = (wself[k, y, x] + sdwy[k, y, x, c] - f * sdw[k, y, x, c]) / cs
+    nbands = (h + band - 1) // band
+    for bi in prange(nbands):
+        y0 = bi * band
+        rows = min(h, y0 + band) - y0
+        dmaps = np.zeros((max(nmaps, 1), 1, rows, w))
+        m = np.zeros((rows + 2 * fmax, w))
+        hs = np.zeros((rows + 2 * fmax, w))
+        wsum = np.zeros((ncand, rows, w))
+        wself = np.zeros((ncand, rows, w))
+        wy = np.zeros((ncand, nc, rows, w))
+        w2v = np.zeros((ncand, nc, rows, w))
+        sdw = np.zeros((ncand, nc, rows, w))
+        sdwy = np.zeros((ncand, nc, rows, w))
+        dfeat = np.zeros(w)
+        fd = np.zeros(w)
+        wf = np.zeros(w)
+        wt = np.zeros(w)
+        wins = np.zeros(w)
+        scale = np.zeros(w)
+        grad = np.zeros((nc, w))
+        back = np.zeros((nc, w))
+        for dy in range(-radius, radius + 1):
+            for dx in range(-radius, radius + 1):
+                x0 = max(0, -dx)
+                x1 = min(w, w - dx)
+                n = x1 - x0
+                if n <= 0:
+                    continue
+                if nmaps > 0:
+                    _colour_distance_maps(g, gv, y0, rows, dy, dx, kc0, alpha, eps, radii, m, hs, dmaps, 0)
+                for r in range(rows):
+                    y = y0 + r
+                    yq = y + dy
+                    if yq < 0 or yq >= h:
+                        continue
+                    # feature weight w_f = exp(-max(0, max_j Phi_j^2)) of every pixel of the row
+                    dfv = dfeat[:n]
+                    dfv[:] = 0.0
+                    for j in range(nfeat):
+                        fdv = fd[:n]
+                        fdv[:] = 0.0
+                        for c in range(fstart[j], fstart[j + 1]):
+                            fpv, fqv = feat[c, y, x0:x1], feat[c, yq, x0 + dx:x1 + dx]
+                            for i in range(n):
+                                diff = fpv[i] - fqv[i]
+                                fdv[i] += diff * diff
+                        vpv, vqv = fvar[j, y, x0:x1], fvar[j, yq, x0 + dx:x1 + dx]
+                        inv, ic = inv_norm[j, y, x0:x1], inv_count[j]
+                        for i in range(n):
+                            vp = vpv[i]
+                            dfv[i] = max(dfv[i], (fdv[i] * ic - (vp + min(vp, vqv[i]))) * inv[i])
+                    wfv = wf[:n]
+                    for i in range(n):
+                        wfv[i] = np.exp(-dfv[i])
+                    # derivative of d_c^2 wrt the colour at p: the n = 0 patch term (pair p, q)
+                    # and, if p - o is inside, the n = p - q term (pair p - o, p)
+                    yb = y - dy
+                    back_row = 0 <= yb < h
+                    if self_guided and nmaps > 0:
+                        xb0 = max(x0, dx)           # x - dx inside the image
+                        xb1 = max(min(x1, w + dx), xb0)
+                        for c in range(nc):
+                            gpv, gqv = g[c, y, x0:x1], g[c, yq, x0 + dx:x1 + dx]
+                            vpv, vqv = gv[c, y, x0:x1], gv[c, yq, x0 + dx:x1 + dx]
+                            gr = grad[c, :n]
+                            for i in range(n):
+                                gr[i] = 2.0 * (gpv[i] - gqv[i]) / (eps + k2 * (vpv[i] + vqv[i]))
+                            bk = back[c, :n]
+                            bk[:] = 0.0
+                            if back_row and xb1 > xb0:
+                                nb = xb1 - xb0
+                                bkv = back[c, xb0 - x0:xb1 - x0]
+                                gbv, gcv = g[c, yb, xb0 - dx:xb1 - dx], g[c, y, xb0:xb1]
+                                vbv, vcv = gv[c, yb, xb0 - dx:xb1 - dx], gv[c, y, xb0:xb1]
+                                for i in range(nb):
+                                    bkv[i] = 2.0 * (gbv[i] - gcv[i]) / (eps + k2 * (vbv[i] + vcv[i]))
+                    for k in range(ncand):
+                        wtv = wt[:n]
+                        wv = wins[:n]
+                        if cmap[k] >= 0:
+                            # w = min(w_c, w_f) = exp(-max(d_c^2, d_f)); the colour term wins where d_c^2 > d_f
+                            d2v = dmaps[cmap[k], 0, r, x0:x1]
+                            for i in range(n):
+                                wv[i] = 1.0 if d2v[i] > dfv[i] else 0.0
+                                wtv[i] = np.exp(-max(d2v[i], dfv[i]))
+                        else:
+                            wtv[:] = wfv
+                            wv[:] = 0.0
+                        ws = wsum[k, r, x0:x1]
+                        for i in range(n):
+                            ws[i] += wtv[i]
+                        if dy == 0 and dx == 0:
+                            wself[k, r, x0:x1] = wtv
+                        for c in range(nc):
+                            yqv, vqv = y_img[c, yq, x0 + dx:x1 + dx], v_img[c, yq, x0 + dx:x1 + dx]
+                            wyv, w2vv = wy[k, c, r, x0:x1], w2v[k, c, r, x0:x1]
+                            for i in range(n):
+                                wyv[i] += wtv[i] * yqv[i]
+                                w2vv[i] += wtv[i] * wtv[i] * vqv[i]
+                        if self_guided and cmap[k] >= 0:
+                            pr = patch_radii[k]
+                            use_back = back_row and abs(dy) <= pr and abs(dx) <= pr
+                            ya = max(y - pr, 0)
+                            yb_ = min(y + pr, h - 1)
+                            cy = min(yb_, h - 1 - dy) - max(ya, -dy) + 1
+                            sv = scale[:n]
+                            for i in range(n):
+                                x = x0 + i
+                                cx = min(min(x + pr, w - 1), w - 1 - dx) - max(max(x - pr, 0), -dx) + 1
+                                # dw/dy_p = -w (d d_c^2 / dy_p) / (channels x valid patch pairs)
+                                sv[i] = -wtv[i] * wv[i] / (nc * cy * cx)
+                            for c in range(nc):
+                                gr, bk = grad[c, :n], back[c, :n]
+                                yqv = y_img[c, yq, x0 + dx:x1 + dx]
+                                sdwv, sdwyv = sdw[k, c, r, x0:x1], sdwy[k, c, r, x0:x1]
+                                if use_back:
+                                    for i in range(n):
+                                        dwt = sv[i] * (gr[i] - bk[i])
+                                        sdwv[i] += dwt
+                                        sdwyv[i] += dwt * yqv[i]
+                                else:
+                                    for i in range(n):
+                                        dwt = sv[i] * gr[i]
+                                        sdwv[i] += dwt
+                                        sdwyv[i] += dwt * yqv[i]
+        for k in range(ncand):
+            for r in range(rows):
+                y = y0 + r
+                for x in range(w):
+                    cs = max(wsum[k, r, x], 1e-300)
+                    for c in range(nc):
+                        f = wy[k, c, r, x] / cs
+                        out[k, y, x, c] = f
+                        outvar[k, y, x, c] = w2v[k, c, r, x] / (cs * cs)
+                        deriv[k, y, x, c] = (wself[k, r, x] + sdwy[k, c, r, x] - f * sdw[k, c, r, x]) / cs
     return out, deriv, outvar
 
 
@@ -312,11 +417,13 @@ def candidate_filters(color, variance, features, feature_variances, guide=None, 
         feat, fvar, fnorm = np.zeros((h, w, 1)), np.zeros((h, w, 0)), np.ones((h, w, 0))
     patch_radii = np.asarray(patch_radii, dtype=np.int64)
     args = (np.asarray(fstart, dtype=np.int64), int(radius), patch_radii,
-            np.asarray(k_colors, dtype=np.float64), bool(self_guided), float(alpha), float(epsilon))
+            np.asarray(k_colors, dtype=np.float64), bool(self_guided), float(alpha), float(epsilon), BAND_ROWS)
     tile = int(tile) if tile else max(h, w)
     halo = int(radius) + int(patch_radii.max(initial=0))
+    planes = lambda a: np.ascontiguousarray(np.moveaxis(a, 2, 0))
+    images = (y, v, g, gv, feat, fvar, 1.0 / fnorm)
     if tile >= h and tile >= w:
-        return _candidates_kernel(y, v, g, gv, feat, fvar, fnorm, *args)
+        return _candidates_kernel(*(planes(a) for a in images), *args)
     # Tiles with a halo of r + max f pixels give bit-identical interiors (every pixel, patch and
     # back-term a kept pixel touches lies inside its halo) and keep the working set in cache.
     outs = [np.zeros((len(patch_radii), h, w, 3)) for _ in range(3)]
@@ -326,8 +433,7 @@ def candidate_filters(color, variance, features, feature_variances, guide=None, 
             ya, xa = max(y0 - halo, 0), max(x0 - halo, 0)
             yb, xb = min(y1 + halo, h), min(x1 + halo, w)
             crop = (slice(ya, yb), slice(xa, xb))
-            res = _candidates_kernel(*(np.ascontiguousarray(a[crop]) for a in (y, v, g, gv, feat, fvar, fnorm)),
-                                     *args)
+            res = _candidates_kernel(*(planes(a[crop]) for a in images), *args)
             for full, part in zip(outs, res):
                 full[:, y0:y1, x0:x1] = part[:, y0 - ya:y1 - ya, x0 - xa:x1 - xa]
     return tuple(outs)
