@@ -164,3 +164,19 @@ def test_stage_lines_on_large_images_only_and_outputs_unchanged(make_render_buff
         assert re.fullmatch(rf"nfor \(20x16\): {re.escape(stage)} done, elapsed \d+\.\d s", line), line
     for name in ("full", "a", "b"):
         np.testing.assert_array_equal(getattr(loud, name), getattr(quiet, name))
+
+
+def test_regression_ignores_rounding_noise_in_constant_features():
+    """A feature constant up to float64 rounding (1e-15 relative, as an NL-means prefilter of a
+    constant region leaves it) regresses like the exactly constant feature: differences within
+    nfor.FEATURE_RESOLUTION of zero count as 0 (before, the noise was a fitted regressor)."""
+    rng = np.random.default_rng(4)
+    h, w = 16, 15
+    color = rng.random((h, w, 3))
+    guide, variance = color + 0.05 * rng.random((h, w, 3)), np.full((h, w, 3), 0.01)
+    feat = np.stack([rng.random((h, w)), np.full((h, w), 0.8)], axis=2)
+    noisy = feat.copy()
+    noisy[..., 1] *= 1 + 1e-15 * rng.standard_normal((h, w))
+    exact = nfor.collaborative_regression(color, guide, variance, feat, radius=3, patch_radius=1, k=0.7)
+    rounded = nfor.collaborative_regression(color, guide, variance, noisy, radius=3, patch_radius=1, k=0.7)
+    np.testing.assert_allclose(rounded, exact, rtol=1e-12, atol=1e-12)

@@ -183,3 +183,77 @@ def test_stage_lines_on_large_images_only_and_outputs_unchanged(make_render_buff
         assert re.fullmatch(rf"rdfc \(14x12\): {stage} done, elapsed \d+\.\d s", line), line
     for name in ("full", "a", "b"):
         np.testing.assert_array_equal(getattr(outputs[1], name), getattr(outputs[0], name))
+
+
+def brute_force_candidates(y, v, features, feature_variances, guide, guide_variance, radius, patch_radii,
+                           k_colors, k_f=rdfc.K_FEATURE, tau=rdfc.TAU, alpha=rdfc.ALPHA, eps=rdfc.EPSILON):
+    """Per-pixel loops over the module docstring's equations: F_k(p) = sum_q w y_q / sum_q w and
+    sum w^2 V / (sum w)^2, w = min(w_c, w_f), patch distances over the in-image pairs."""
+    h, w, _ = y.shape
+    norms = [rdfc.feature_normaliser(f, fv, k_f, tau) for f, fv in zip(features, feature_variances)]
+
+    def delta(n, m, kc):
+        vp, vq = guide_variance[n], guide_variance[m]
+        return np.mean(((guide[n] - guide[m]) ** 2 - alpha * (vp + np.minimum(vp, vq))) / (eps + kc * kc * (vp + vq)))
+
+    filtered = np.zeros((len(patch_radii), h, w, 3))
+    variance = np.zeros_like(filtered)
+    for k, (f, kc) in enumerate(zip(patch_radii, k_colors)):
+        for py in range(h):
+            for px in range(w):
+                num, num_var, den = np.zeros(3), np.zeros(3), 0.0
+                for qy in range(max(0, py - radius), min(h, py + radius + 1)):
+                    for qx in range(max(0, px - radius), min(w, px + radius + 1)):
+                        dfeat = 0.0
+                        for feat, fvar, norm in zip(features, feature_variances, norms):
+                            dist = np.mean((feat[py, px] - feat[qy, qx]) ** 2)
+                            vp = fvar[py, px]
+                            dfeat = max(dfeat, (dist - (vp + min(vp, fvar[qy, qx]))) / norm[py, px])
+                        weight = np.exp(-dfeat)
+                        if np.isfinite(kc):
+                            terms = [delta((ny, nx), (ny + qy - py, nx + qx - px), kc)
+                                     for ny in range(max(0, py - f), min(h, py + f + 1))
+                                     for nx in range(max(0, px - f), min(w, px + f + 1))
+                                     if 0 <= ny + qy - py < h and 0 <= nx + qx - px < w]
+                            weight = min(weight, np.exp(-max(0.0, np.mean(terms))))
+                        num += weight * y[qy, qx]
+                        num_var += weight ** 2 * v[qy, qx]
+                        den += weight
+                filtered[k, py, px] = num / den
+                variance[k, py, px] = num_var / den ** 2
+    return filtered, variance
+
+
+@pytest.mark.parametrize("guided", [False, True])
+def test_kernel_matches_brute_force_equations(guided):
+    """The compiled candidate filters against per-pixel loops on small random inputs (noisy
+    features with variance, a zero-variance corner), FIRST/SECOND/THIRD-like candidates;
+    the self-guided derivative against central differences of the brute force at pixel p."""
+    rng = np.random.default_rng(11)
+    h, w, radius, patch_radii, k_colors = 9, 8, 2, (1, 2, 0), (0.45, 0.45, np.inf)
+    y = rng.random((h, w, 3))
+    v = rng.random((h, w, 3)) * 0.02
+    v[:2, :3] = 0.0
+    features = [rng.random((h, w, 3)) * 0.3, rng.random((h, w))]
+    feature_variances = [rng.random((h, w)) * 0.01, np.zeros((h, w))]
+    guide, guide_variance = (y + 0.05 * rng.random(y.shape), v * 0.5) if guided else (y, v)
+    kwargs = dict(guide=guide, guide_variance=guide_variance) if guided else {}
+    filtered, derivative, out_var = rdfc.candidate_filters(y, v, features, feature_variances, radius=radius,
+                                                           patch_radii=patch_radii, k_colors=k_colors, **kwargs)
+    expected, expected_var = brute_force_candidates(y, v, [f if f.ndim == 3 else f[..., None] for f in features],
+                                                    feature_variances, guide, guide_variance, radius, patch_radii,
+                                                    k_colors)
+    np.testing.assert_allclose(filtered, expected, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(out_var, expected_var, rtol=1e-10, atol=1e-14)
+    step = 1e-6
+    for py, px, c in ((4, 4, 0), (0, 0, 1), (8, 7, 2), (1, 1, 2)):
+        plus, minus = y.copy(), y.copy()
+        plus[py, px, c] += step
+        minus[py, px, c] -= step
+        g_plus, g_minus = (guide, guide) if guided else (plus, minus)
+        f_plus = brute_force_candidates(plus, v, [features[0], features[1][..., None]], feature_variances, g_plus,
+                                        guide_variance, radius, patch_radii, k_colors)[0]
+        f_minus = brute_force_candidates(minus, v, [features[0], features[1][..., None]], feature_variances,
+                                         g_minus, guide_variance, radius, patch_radii, k_colors)[0]
+        numeric = (f_plus[:, py, px, c] - f_minus[:, py, px, c]) / (2 * step)
+        np.testing.assert_allclose(derivative[:, py, px, c], numeric, rtol=1e-5, atol=1e-7)
