@@ -354,24 +354,68 @@ def gaussian_blur(image, *, kernel_size: int = 9) -> np.ndarray:
         widths[axis] = (r, r)
         padded = np.pad(a, widths, mode="reflect" if length > 1 else "edge")
         out = np.zeros_like(a)
+        window = [slice(None)] * a.ndim
         for k, tap in enumerate(taps):
-            out += tap * np.take(padded, np.arange(k, k + length), axis=axis)
+            window[axis] = slice(k, k + length)
+            out += tap * padded[tuple(window)]
         a = out
     return a
 
 
-def _window_sums(a, radius):
-    """Sums of a (H, W, C) over the (2 radius + 1)^2 window around each pixel clipped at the
-    image borders (integral image, float64)."""
-    h, w = a.shape[:2]
-    integral = np.zeros((h + 1, w + 1) + a.shape[2:])
-    integral[1:, 1:] = a.cumsum(axis=0).cumsum(axis=1)
-    y = np.arange(h)
-    x = np.arange(w)
-    y0, y1 = np.maximum(y - radius, 0), np.minimum(y + radius + 1, h)
-    x0, x1 = np.maximum(x - radius, 0), np.minimum(x + radius + 1, w)
-    return (integral[y1][:, x1] - integral[y0][:, x1] - integral[y1][:, x0]
-            + integral[y0][:, x0])
+@cached_njit(parallel=True, error_model="numpy")
+def _outlier_kernel(maps, radius, threshold):
+    """maps (G, H, W, C); per (map, channel) in parallel: the clipped window's sums of the values
+    and their squares as running column sums (add the row entering the window, subtract the one
+    leaving it) and a running sum along the row, in float64. Returns the cleaned maps."""
+    G, H, W, C = maps.shape
+    out = np.empty_like(maps)
+    for item in prange(G * C):
+        g = item // C
+        c = item % C
+        col = np.zeros(W)
+        col2 = np.zeros(W)
+        top = 0                   # rows [top, bottom) are in the column sums
+        bottom = 0
+        for y in range(H):
+            lo = max(0, y - radius)
+            hi = min(H, y + radius + 1)
+            while bottom < hi:
+                for x in range(W):
+                    v = float(maps[g, bottom, x, c])
+                    col[x] += v
+                    col2[x] += v * v
+                bottom += 1
+            while top < lo:
+                for x in range(W):
+                    v = float(maps[g, top, x, c])
+                    col[x] -= v
+                    col2[x] -= v * v
+                top += 1
+            rows = hi - lo
+            s = 0.0
+            s2 = 0.0
+            left = 0
+            right = 0
+            for x in range(W):
+                xl = max(0, x - radius)
+                xr = min(W, x + radius + 1)
+                while right < xr:
+                    s += col[right]
+                    s2 += col2[right]
+                    right += 1
+                while left < xl:
+                    s -= col[left]
+                    s2 -= col2[left]
+                    left += 1
+                v = float(maps[g, y, x, c])
+                others = rows * (xr - xl) - 1
+                out[g, y, x, c] = maps[g, y, x, c]
+                if others > 0:
+                    mean = (s - v) / others
+                    var = max((s2 - v * v) / others - mean * mean, 0.0)
+                    if abs(v - mean) > threshold * np.sqrt(var):
+                        out[g, y, x, c] = mean
+    return out
 
 
 def remove_outliers(maps, *, radius: int = 3, threshold: float = 2.5) -> np.ndarray:
@@ -382,20 +426,16 @@ def remove_outliers(maps, *, radius: int = 3, threshold: float = 2.5) -> np.ndar
     clipped at the image borders like the bilateral filter's); a value with |v - m| > threshold s
     is replaced by m. (The public code instead replaces the whole pixel, all channels, by a
     7 x 7 Gaussian blur of the map when any channel is an outlier, and reflects at the borders.)
+    Window statistics in float64 (running sums), O(1) per value.
 
-    maps : (G, H, W, C) or (H, W, C). Returns an array of the same shape and dtype; the caller
-    re-projects weights onto their constraint (the replacement is per map)."""
+    maps : (G, H, W, C) or (H, W, C), float32 or float64. Returns a new array of the same shape
+    and dtype; the caller re-projects weights onto their constraint (the replacement is per
+    map)."""
     a = np.asarray(maps)
-    stacked = a if a.ndim == 4 else a[None]
-    out = np.array(stacked, copy=True)
-    for g in range(stacked.shape[0]):
-        v = np.asarray(stacked[g], np.float64)
-        others = _window_sums(np.ones(v.shape[:2] + (1,)), radius) - 1.0
-        total = _window_sums(v, radius) - v
-        squares = _window_sums(v * v, radius) - v * v
-        count = np.maximum(others, 1.0)
-        mean = total / count
-        std = np.sqrt(np.maximum(squares / count - mean * mean, 0.0))
-        outlier = (np.abs(v - mean) > threshold * std) & (others > 0)
-        out[g][outlier] = mean[outlier]
+    if a.dtype not in (np.float32, np.float64):
+        a = a.astype(np.float64)
+    stacked = np.ascontiguousarray(a if a.ndim == 4 else a[None])
+    if stacked.ndim != 4:
+        raise ValueError(f"maps must be (G, H, W, C) or (H, W, C), got shape {np.shape(maps)}")
+    out = _outlier_kernel(stacked, int(radius), float(threshold))
     return out if a.ndim == 4 else out[0]
