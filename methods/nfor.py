@@ -49,11 +49,33 @@ Constants we had to choose (one-line reasons):
   singular; the intercept column always has a pivot of 1, so the fit falls back to the weighted
   mean at worst. Float64 Cholesky keeps ~7 significant digits at this pivot.
 * ``CHUNK_ROWS = 8``: rows per parallel work item of the regression (weights of one chunk are
-  361 x 8 x W float64, ~12 MB at W = 512); affects speed only.
+  8 x W x 361 float64, pixel-major, ~12 MB at W = 512); affects speed only.
+* ``FEATURE_RESOLUTION = 1e-9``: a feature difference f(q) - f(p) within 1e-9 of max(|f(q)|,
+  |f(p)|) counts as 0. The prefiltered features are float64 means of float32 data, so real
+  differences are >= ~6e-8 relative and rounding noise is ~1e-16; without it a feature that is
+  constant up to rounding (a flat albedo region after NL-means) became a unit-scaled regressor
+  of pure noise, and 1e-15 perturbations changed the output by ~1e-3 relMSE (the speed-up's
+  one behaviour change: on the synthetic benchmark case outputs move by ~1e-5 relMSE full and
+  ~1e-4 A/B against the implementation before it, and equal that implementation with this rule
+  added to the last float32 bit).
 * Feature variance of a half buffer: the raw per-pixel (f_A - f_B)^2 / 2, not smoothed, because
   the paper derives it from the half-buffer difference and NL-means averages it over 7x7 patches.
 * Distances are averaged over colour channels (Rousselle et al. 2012 Eq. 5, as
   :mod:`mcbench.nlmeans`), and patches replicate image edges like :mod:`mcbench.nlmeans`.
+
+Implementation and speed. NL-means filters are :func:`mcbench.nlmeans.nl_means_filter`
+(compiled). The regression computes, per chunk of rows, the NL-means weights of every window
+offset (:func:`mcbench.nlmeans.nl_means_distance_rows`), stores them pixel-major, then per pixel
+gathers the neighbours with w > 0 into columns (design row and colour), forms the normal
+equations as dot products over the neighbours (float64, reassociated so they vectorise; the
+normal equations and the Cholesky solve stay float64 because the pivot test at 1e-9 needs
+~7 digits after the column scaling), solves, and evaluates the fit at every neighbour. All
+kernels use float64: the weights' distances subtract variance terms of similar size, and
+float32 buys little where the time is in exp, divisions and the dot products.
+Measured with ``NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/bench_nfor.py --sizes 128 512``
+(2-core AMD EPYC VM shared with other jobs, load 6-7; CPU seconds, the steadier figure):
+128^2 1.64 s (before: 5.06 s, 3.1x), 512^2 26.8 s (before: 116.1 s, 4.3x). About 70 % of the
+time is the five regressions, 30 % the NL-means filters.
 
 Departures from the paper: NL-means weights over colour channels are averaged (Tungsten takes
 the per-channel minimum weight); we have 7 features (no direct-visibility feature: the renders

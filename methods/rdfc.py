@@ -51,8 +51,13 @@ Constants (published ones first, then ours with the reason):
 * Error/selection map filter: NL-means r = 3, f = 1, k = 1.0, guided by the noisy colour
   (pass 1) or the other buffer's first-pass output (pass 2): small window keeps selection
   local, k = 1 is the usual NL-means strength.
-* Kernel tile size 128 px (+ halo r + max f): keeps the per-offset maps and accumulators in
-  cache; results are identical to the untiled kernel (tested).
+* Kernel bands of ``BAND_ROWS = 8`` rows: per band, one window offset at a time, the patch
+  colour distances (direct sums over the in-image patch pairs) and every per-pixel term as
+  loops over x that vectorise, into the band's sums; affects speed only. ``tile`` (default
+  None) still splits the image into tiles with a halo, with identical interiors (tested).
+* Speed, ``NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/bench_rdfc.py --sizes 128 512``
+  (2-core AMD EPYC VM shared with other jobs; CPU seconds): see that benchmark's docstring.
+  All arithmetic is float64 (the SURE derivative subtracts terms of similar size).
 * Argmin ties resolve to the lowest index (FIRST): on noise-free input FIRST reproduces it.
 * Propagated output variance ``sum w^2 V / (sum w)^2`` ignores weight/colour correlation;
   the blend's variance is approximated by ``sum_k s_k Var_k``; used only as a guide variance.
