@@ -5,7 +5,8 @@ A script, not a timed test:
 
 Every figure is one whole process (``benchmarks/ensemble_job.py``: Python start, imports, EXR
 reads of the render and the N inputs, solve + weight filter + blend, EXR write), as the DAG runs
-an ensemble job, with its wall time and peak RSS (``os.wait4`` of the child). Printed:
+an ensemble job, with its wall time, CPU seconds (user + system: what a loaded machine inflates
+least) and peak RSS (``os.wait4`` of the child). Printed:
 
 1. 1024^2, N = 2, 4, 8, ``solver=iterative`` and ``exact``: wall, peak RSS and the phases, beside
    the authors' C++ program on the same kind of inputs (``../shared/study/public-code-facts.md``:
@@ -130,7 +131,8 @@ def run_job(render: Path, inputs: list[Path], output: Path, **params) -> dict:
     if child.returncode:
         raise RuntimeError(f"{' '.join(command)} failed:\n{stderr[-3000:]}")
     phases = json.loads(stdout.strip().splitlines()[-1])
-    return dict(phases, wall_s=wall, rss_mib=usage.ru_maxrss / 1024.0)
+    return dict(phases, wall_s=wall, cpu_s=usage.ru_utime + usage.ru_stime,
+                rss_mib=usage.ru_maxrss / 1024.0)
 
 
 def fitted_exponent(xs, ys) -> float:
@@ -232,17 +234,19 @@ def main(argv=None):
 
     print(f"\n1. whole process at {main_size}^2 (C++ reference: public-code-facts.md, 1024^2; target "
           f"wall <= {WALL_TARGET}x, RSS <= {RSS_TARGET}x)")
-    print(f"{'N':>2} {'solver':>9} {'wall_s':>7} {'import':>7} {'read':>6} {'combine':>8} {'write':>6} "
-          f"{'RSS_MiB':>8} {'C++_s':>6} {'x_C++':>6} {'C++MiB':>7} {'xRSS':>5}")
+    print(f"{'N':>2} {'solver':>9} {'wall_s':>7} {'cpu_s':>6} {'import':>7} {'read':>6} {'jit':>5} "
+          f"{'combine':>8} {'write':>6} {'RSS_MiB':>8} {'C++_s':>6} {'x_C++':>6} {'C++MiB':>7} {'xRSS':>5}")
     for n in ns:
         for solver in ("iterative", "exact"):
             r = job(main_size, n, solver)
             cpp_s, cpp_mib = CPP_REFERENCE[n]
-            print(f"{n:>2} {solver:>9} {r['wall_s']:7.2f} {r['import_s']:7.2f} {r['read_s']:6.2f} "
+            print(f"{n:>2} {solver:>9} {r['wall_s']:7.2f} {r['cpu_s']:6.2f} {r['import_s']:7.2f} "
+                  f"{r['read_s']:6.2f} {r['jit_s']:5.2f} "
                   f"{r['combine_s']:8.2f} {r['write_s']:6.2f} {r['rss_mib']:8.0f} {cpp_s:6.1f} "
                   f"{r['wall_s'] / cpp_s:6.2f} {cpp_mib:7.0f} {r['rss_mib'] / cpp_mib:5.2f}", flush=True)
 
-    print("\n2. scaling of the combine phase (fitted exponent b of time ~ x^b)")
+    print("\n2. scaling of the combine phase (after the numba cache is loaded; fitted exponent b of "
+          "time ~ x^b)")
     for solver in ("iterative", "exact"):
         times = [job(s, 4, solver)["combine_s"] for s in sizes]
         print(f"   {solver:>9} vs pixels {[f'{s}^2' for s in sizes]}: "
