@@ -8,8 +8,9 @@ How comparisons are found in the method table
 ---------------------------------------------
 * A **full ensemble** is a method of module ``ensemble`` whose params set none of ``weights``,
   ``channels``, ``solver``, ``filter`` to a value other than the default (:data:`ENSEMBLE_DEFAULTS`:
-  simplex, rgb, iterative, True). Other params (``seed``, tolerances, post-processing switches)
-  do not make an ablation.
+  simplex, rgb, iterative, True). Changing another option of :data:`ENSEMBLE_DEFAULTS` (the
+  public code's post-processing, the solver's start) makes an "ensemble variant", in no table and
+  not in the pool; ``seed`` and tolerances change nothing here.
 * Its **one-hot variants**: methods of module ``one_hot`` with the same *set* of inputs and
   ``prefilter`` sbf, nfor or post. Its **naive average**: module ``naive_average``, same set.
 * Its **ablations**: module ``ensemble``, same set of inputs, exactly one of the four params
@@ -47,7 +48,12 @@ __all__ = ["ENSEMBLE_DEFAULTS", "ABLATIONS", "ONE_HOT_VARIANTS", "PAPER_AVG", "C
            "beats_markdown", "ablation_cases", "ablation_table", "ablation_markdown", "comparison_ranking",
            "write_onehot_tables", "write_ablation_table", "write_comparison_ranking"]
 
-ENSEMBLE_DEFAULTS = {"weights": "simplex", "channels": "rgb", "solver": "iterative", "filter": True}
+# methods/ensemble.py's defaults of the options that change what is solved or filtered (a test
+# checks them against its signature): changing one of the first four is an ablation, any other
+# (the public code's post-processing, the solver's start) makes an "ensemble variant"
+ENSEMBLE_DEFAULTS = {"weights": "simplex", "channels": "rgb", "solver": "iterative", "filter": True,
+                     "guide_variance_blur": "gaussian9", "outlier_removal": True, "colour_distance": "mean",
+                     "start": "random"}
 ONE_HOT_VARIANTS = ("sbf", "nfor", "post")
 TABLE_VARIANTS = {1: ("sbf", "nfor"), 2: ("post",)}
 # (param, value) -> ablation kind; the section of the paper that makes the claim.

@@ -262,3 +262,14 @@ def test_rule_script_runs_each_step_without_snakemake(tmp_path):
     fake.rule = "no_such_rule"
     with pytest.raises(ValueError, match="no step for rule 'no_such_rule'"):
         runpy.run_path(str(ROOT / "workflow/scripts/comparison_tables.py"), init_globals={"snakemake": fake})
+
+
+def test_ensemble_defaults_are_the_ensembles_own():
+    """ENSEMBLE_DEFAULTS repeats methods/ensemble.py's defaults (core may not import methods)."""
+    import inspect
+
+    from mcbench.comparisons import ENSEMBLE_DEFAULTS
+    from methods import load_method
+
+    signature = inspect.signature(load_method("ensemble").combine)
+    assert {key: signature.parameters[key].default for key in ENSEMBLE_DEFAULTS} == ENSEMBLE_DEFAULTS
