@@ -16,10 +16,11 @@ def render_layers(make_render_buffers):
     return layers
 
 
-def test_round_trip_preserves_layers_and_metadata(tmp_path, render_layers):
+@pytest.mark.parametrize("compression", ["none", "zip"])
+def test_round_trip_preserves_layers_and_metadata(tmp_path, render_layers, compression):
     path = tmp_path / "r.exr"
     layers = render_layers
-    write_layers(path, layers, metadata={"spp": 16, "scene": "box"})
+    write_layers(path, layers, metadata={"spp": 16, "scene": "box"}, compression=compression)
     back = read_layers(path)
     assert set(back) == set(layers)
     for name in layers:
@@ -34,9 +35,10 @@ def test_missing_file_names_the_path(tmp_path):
         read_layers(tmp_path / "nope.exr")
 
 
-def test_corrupt_file_names_the_path(tmp_path, render_layers):
+@pytest.mark.parametrize("compression", ["none", "zip"])
+def test_corrupt_file_names_the_path(tmp_path, render_layers, compression):
     path = tmp_path / "corrupt.exr"
-    write_layers(path, render_layers)
+    write_layers(path, render_layers, compression=compression)
     data = path.read_bytes()
     path.write_bytes(data[: len(data) // 3])  # truncated mid-file
     with pytest.raises(ExrError, match="corrupt.exr"):
