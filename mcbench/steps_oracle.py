@@ -46,6 +46,17 @@ DUAL_BUFFER = (("dual_one_hot", "one_hot", {"prefilter": "none"}, "one-hot"),
 PANELS = "abcdefghi"
 
 
+def usable_downscale(resolution, scene_resolution, downscale: int) -> int:
+    """``downscale``, or the largest smaller factor that divides the harness's resolution and
+    leaves at least 11 pixels a side (1 at worst): small test configs (e.g. 16 x 16) keep an
+    oracle study at their own resolution instead of refusing to plan."""
+    width, height = (int(v) for v in (resolution if resolution is not None else scene_resolution))
+    factor = max(int(downscale), 1)
+    while factor > 1 and (width % factor or height % factor or min(width, height) // factor < 11):
+        factor -= 1
+    return factor
+
+
 def oracle_size(resolution, scene_resolution, downscale: int) -> tuple[int, int]:
     """``(width, height)`` of the oracle renders: the harness's resolution (config ``resolution``
     or the scene's ``RESOLUTION``) divided by ``downscale``; BenchError naming the key otherwise."""

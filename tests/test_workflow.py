@@ -41,7 +41,8 @@ def test_tables_exist_and_ensemble_beats_noisy(smoke_run):
     workdir, config = smoke_run
     for metric in ("relmse", "smape", "dssim", "flip"):
         table = pd.read_csv(workdir / f"results/tables/ranking_{metric}.csv")
-        assert set(table["candidate"]) == {"noisy", "oidn", "jbf", "kpcn", "ensemble", "ensemble_exact"}
+        # the exact-solver ensemble is an ablation (comparison tables), not in the ranking pool
+        assert set(table["candidate"]) == {"noisy", "oidn", "jbf", "kpcn", "ensemble"}
         assert list(table.columns) == ["candidate", "4", "64", "Avg."]
         assert (workdir / f"results/tables/ranking_{metric}.md").read_text().startswith("# Ranking")
     metrics = pd.read_csv(workdir / "results/metrics.csv")
@@ -250,7 +251,7 @@ def test_train_rule_trains_missing_weights_and_the_main_job_never_retrains(tmp_p
     for crop in (workdir / "results/training").glob("*.exr"):
         os.utime(crop, (time.time() + 60, time.time() + 60))
     text = "".join(snakemake(workdir, "-n").stdout.splitlines(keepends=True))
-    assert "train_network" not in text and "run_method" in text
+    assert "train_network" not in text and "run_learned_denoisers" in text
     snakemake(workdir, "results/outputs/cornell_box/spp4/wskpn.exr")
     timing = json.loads((workdir / "results/outputs/cornell_box/spp4/wskpn.json").read_text())
     assert timing["method"] == "wskpn" and timing["seconds"] > 0
@@ -258,13 +259,13 @@ def test_train_rule_trains_missing_weights_and_the_main_job_never_retrains(tmp_p
     # and an explicit train_<name> with the weights present has nothing to do.
     shutil.rmtree(workdir / "results/training")
     text = snakemake(workdir, "-n").stdout
-    assert "training_example" not in text and "train_network" not in text and "run_method" in text
+    assert "training_example" not in text and "train_network" not in text and "run_learned_denoisers" in text
     assert "train_network" not in snakemake(workdir, "-n", "train_wskpn").stdout
     # New weights rerun the method (their digest is a parameter), still without training.
     torch.save(blob | {"state_dict": {k: v + 0.01 if v.is_floating_point() else v
                                       for k, v in blob["state_dict"].items()}}, weights / "wskpn.pt")
     text = snakemake(workdir, "-n", "results/outputs/cornell_box/spp4/wskpn.exr").stdout
-    assert "run_method" in text and "train_network" not in text
+    assert "run_learned_denoisers" in text and "train_network" not in text
     # Without weights the main job stops, naming the folder (it never plans training itself);
     # train_<name> plans the training again.
     (weights / "wskpn.pt").unlink()
@@ -397,4 +398,5 @@ def test_parsing_the_dag_imports_no_torch_and_no_unnamed_method(tmp_path):
                             capture_output=True, text=True, cwd=tmp_path, timeout=300)
     line = [l for l in result.stdout.splitlines() if l.startswith("MODULES")]
     assert line, result.stdout[-2000:] + result.stderr[-2000:]
-    assert line[0] == "MODULES ['methods.kpcn', 'methods.oidn']"
+    # oidn, kpcn: the config's; jbf, rdfc: the oracle study's default bases (schema oracle.denoisers)
+    assert line[0] == "MODULES ['methods.jbf', 'methods.kpcn', 'methods.oidn', 'methods.rdfc']"

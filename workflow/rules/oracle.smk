@@ -3,7 +3,7 @@
 # denoisers' true MSE matrices against the harness's reference, the weights solved from them
 # next to the dual-buffer estimate's.
 
-from mcbench.steps_oracle import oracle_size  # noqa: E402
+from mcbench.steps_oracle import oracle_size, usable_downscale  # noqa: E402
 
 ORACLE = config["oracle"]
 # the scene: oracle.scene, or the config's first scene when null (the default)
@@ -11,7 +11,9 @@ ORACLE_SCENE = ORACLE["scene"] or SCENES[0]
 if ORACLE_SCENE not in SCENES:
     raise BenchError(f"oracle.scene: '{ORACLE_SCENE}' is not one of the config's scenes "
                      f"({', '.join(SCENES)}); its reference is rendered only for those")
-oracle_size(config["resolution"], load_scene(ORACLE_SCENE).RESOLUTION, ORACLE["downscale"])
+# oracle.downscale, reduced where the harness's resolution is too small for it (usable_downscale)
+ORACLE_DOWNSCALE = usable_downscale(config["resolution"], load_scene(ORACLE_SCENE).RESOLUTION, ORACLE["downscale"])
+oracle_size(config["resolution"], load_scene(ORACLE_SCENE).RESOLUTION, ORACLE_DOWNSCALE)
 for _index, _name in enumerate(ORACLE["denoisers"]):
     load_method(_name, kind="denoiser", config_key=f"oracle.denoisers[{_index}]")
 
@@ -39,7 +41,7 @@ rule oracle_study:
         denoisers=list(ORACLE["denoisers"]),
         repetitions=ORACLE["repetitions"],
         spp=ORACLE["spp"],
-        downscale=ORACLE["downscale"],
+        downscale=ORACLE_DOWNSCALE,
         resolution=config["resolution"],
         variant=config["variant"],
         seed=config["seed"],
