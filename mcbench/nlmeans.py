@@ -48,6 +48,18 @@ __all__ = ["nl_means_filter", "nl_means_filter_reference", "nl_means_weight_maps
 BAND_ROWS = 16   # rows per band of the compiled filter; affects speed only
 
 
+
+def _guide_and_variance(guide, guide_variance) -> tuple[np.ndarray, np.ndarray]:
+    """The guide and its variance as (H, W, C) float64 (variance clamped at 0); a (H, W) guide
+    gets one channel. ValueError when their shapes differ."""
+    guide = np.asarray(guide, dtype=np.float64)
+    variance = np.maximum(np.asarray(guide_variance, dtype=np.float64), 0.0)
+    if guide.ndim == 2:
+        guide, variance = guide[..., None], variance[..., None]
+    if guide.shape != variance.shape:
+        raise ValueError(f"guide {guide.shape} and guide_variance {variance.shape} differ in shape")
+    return guide, variance
+
 def _shifted(array: np.ndarray, dy: int, dx: int) -> tuple[np.ndarray, np.ndarray]:
     """``array`` sampled at (y + dy, x + dx) with edge replication, and the validity mask."""
     h, w = array.shape[:2]
@@ -64,12 +76,7 @@ def nl_means_weight_maps(guide: np.ndarray, guide_variance: np.ndarray, radius: 
 
     guide, guide_variance: (H, W, C) float arrays; the variance is per pixel and channel.
     """
-    guide = np.asarray(guide, dtype=np.float64)
-    variance = np.maximum(np.asarray(guide_variance, dtype=np.float64), 0.0)
-    if guide.ndim == 2:
-        guide, variance = guide[..., None], variance[..., None]
-    if guide.shape != variance.shape:
-        raise ValueError(f"guide {guide.shape} and guide_variance {variance.shape} differ in shape")
+    guide, variance = _guide_and_variance(guide, guide_variance)
     size = 2 * patch_radius + 1
     for dy in range(-radius, radius + 1):
         for dx in range(-radius, radius + 1):
@@ -250,12 +257,7 @@ def nl_means_filter(values: np.ndarray, guide: np.ndarray, guide_variance: np.nd
     squeeze = values.ndim == 2
     if squeeze:
         values = values[..., None]
-    guide = np.asarray(guide, dtype=np.float64)
-    variance = np.maximum(np.asarray(guide_variance, dtype=np.float64), 0.0)
-    if guide.ndim == 2:
-        guide, variance = guide[..., None], variance[..., None]
-    if guide.shape != variance.shape:
-        raise ValueError(f"guide {guide.shape} and guide_variance {variance.shape} differ in shape")
+    guide, variance = _guide_and_variance(guide, guide_variance)
     if values.shape[:2] != guide.shape[:2]:
         raise ValueError(f"values {values.shape[:2]} and guide {guide.shape[:2]} differ in size")
     out = _nl_means_kernel(_planes(values), _planes(guide), _planes(variance), int(radius),

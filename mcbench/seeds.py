@@ -98,6 +98,14 @@ SPP_STEP = 2048                 # above it, multiples of this up to SPP_STEP * 1
 
 # --------------------------------------------------------------------------- test renders
 
+
+def _check_half_and_bin(half, bin) -> None:
+    """ValueError unless ``half`` is 0 (A) or 1 (B) and ``bin`` is 0 or 1."""
+    if half not in (0, 1):
+        raise ValueError(f"half must be 0 (A) or 1 (B), got {half!r}")
+    if bin not in (0, 1):
+        raise ValueError(f"bin must be 0 or 1, got {bin!r}")
+
 def spp_code(spp: int) -> int:
     """11-bit code of a noisy spp level: ``spp/2 - 1`` for even spp <= 2048, else
     ``1023 + spp/2048`` for multiples of 2048 up to 2**21 (codes 1025..2047)."""
@@ -172,10 +180,7 @@ def training_render_seed(scene_seed: int, kind: str, spp: int | None = None,
         spp = int(spp)
         if spp < 2 or spp & (spp - 1) or spp > 1 << 15:
             raise BenchError(f"training spp levels must be powers of two 2..32768, got {spp}")
-        if half not in (0, 1):
-            raise ValueError(f"half must be 0 (A) or 1 (B), got {half!r}")
-        if bin not in (0, 1):
-            raise ValueError(f"bin must be 0 or 1, got {bin!r}")
+        _check_half_and_bin(half, bin)
         if not 0 <= pass_index < 1 << 6:
             raise BenchError(f"noisy pass index {pass_index} out of range 0..63 (lower the spp "
                              f"or the resolution)")
@@ -246,10 +251,7 @@ def oracle_render_seed(repetition: int, half: int, *, bin: int = 0, pass_index: 
     if not 0 <= repetition < MAX_ORACLE_REPETITIONS:
         raise BenchError(f"config key 'oracle.repetitions': repetition {repetition} out of range "
                          f"0..{MAX_ORACLE_REPETITIONS - 1} (the held-out one included)")
-    if half not in (0, 1):
-        raise ValueError(f"half must be 0 (A) or 1 (B), got {half!r}")
-    if bin not in (0, 1):
-        raise ValueError(f"bin must be 0 or 1, got {bin!r}")
+    _check_half_and_bin(half, bin)
     if not 0 <= pass_index < 1 << 15:
         raise BenchError(f"oracle pass index {pass_index} out of range 0..32767 (lower "
                          f"oracle.spp or the resolution)")
