@@ -35,6 +35,7 @@ include: "workflow/rules/oracle.smk"
 
 
 rule all:
+    localrule: True
     input:
         rules.gather_metrics.output,
         rules.gather_timings.output,

@@ -14,6 +14,7 @@ from mcbench import BenchError  # noqa: E402
 from mcbench.comparisons import comparison_role  # noqa: E402
 from mcbench.config import config_digest, resolve_config  # noqa: E402
 from mcbench.metrics import METRICS  # noqa: E402
+from mcbench.resources import JobCost, estimate_job, job_request, load_job_costs  # noqa: E402
 from mcbench.seeds import training_seeds  # noqa: E402
 from mcbench.weights import COMMITTED_WEIGHTS, is_learned_method  # noqa: E402
 from methods import NOISY, NOISY_LABEL, load_method, method_table  # noqa: E402
@@ -275,3 +276,66 @@ for _name in TRAINING_OVERRIDES:
 
 def training_crop_files():
     return expand(rules.training_example.output, seed=TRAINING_SEEDS)
+
+
+# Cluster resources (mcbench.resources): every rule's jobs declare mem_mb and runtime (minutes)
+# from the costs fitted to measured benchmark records (workflow/resources/job_costs.yaml, by
+# `python benchmarks/job_costs.py`), scaled with the job's pixels, methods and samples; a local
+# run ignores them unless --resources limits them. A retry (--retries) asks for `attempt` times
+# as much. Rules that render with Mitsuba can use a GPU (variant auto or cuda_ad_rgb) and ask for
+# config `gpus` of them (0 by default; profiles/slurm-gpu sets 1); the networks' training and
+# inference run on the CPU (mcbench.nn selects no device), so their rules ask for none.
+
+JOB_COSTS = load_job_costs()
+GPU_RULES = {"render_noisy", "render_reference_chunk", "training_example", "oracle_study"}
+# Rules that only read finished results and write tables, figures or pages, and the target rules,
+# say `localrule: True`: on a cluster the submitting Snakemake runs them itself (never queued).
+
+
+def scene_pixels(scene):
+    """Pixels of a scene's images: config resolution, else the scene's own RESOLUTION."""
+    width, height = config["resolution"] or load_scene(scene).RESOLUTION
+    return int(width) * int(height)
+
+
+def case_entries(wildcards=None):
+    """A case's images: every candidate plus the noisy input."""
+    return len(CANDIDATES) + 1
+
+
+def _job_size(rule, wildcards):
+    """``(pixels, entries, spp)`` of one job of ``rule`` (mcbench.resources' cost model)."""
+    scene = getattr(wildcards, "scene", None)
+    pixels = scene_pixels(scene) if scene else 0
+    if rule == "render_noisy":
+        return pixels, 1, int(wildcards.spp)
+    if rule == "render_reference_chunk":
+        return pixels, 1, reference_chunk_spp(wildcards)
+    if rule in ("run_learned_denoisers", "run_combiners"):
+        return pixels, len(BATCHES[rule[len("run_"):]]), 0
+    if rule in ("case_metrics", "viewer_case"):
+        return pixels, case_entries(), 0
+    if rule == "viewer":
+        return max(scene_pixels(s) for s in SCENES), len(SCENES) * len(SPPS) * case_entries(), 0
+    return pixels, 1, 0
+
+
+def job_resources(rule):
+    """The ``resources:`` of ``rule``'s jobs: mem_mb and runtime from its fitted cost (a method's
+    own, e.g. run_method/nfor, where measured; the floors for a rule without records), times the
+    attempt; ``gpu`` for the rules that can use one."""
+    def request(wildcards, attempt):
+        method = getattr(wildcards, "method", None)
+        per_method = f"{rule}/{METHODS[method]['module']}" if method in METHODS else None
+        cost = JOB_COSTS.get(per_method) or JOB_COSTS.get(rule, JobCost())
+        pixels, entries, spp = _job_size(rule, wildcards)
+        return {key: value * attempt for key, value in
+                job_request(*estimate_job(cost, pixels=pixels, entries=entries, spp=spp)).items()}
+
+    resources = {"mem_mb": lambda wildcards, attempt: request(wildcards, attempt)["mem_mb"],
+                 "runtime": lambda wildcards, attempt: request(wildcards, attempt)["runtime"]}
+    if rule in GPU_RULES and config["gpus"] and config["variant"] in ("auto", "cuda_ad_rgb"):
+        resources["gpu"] = config["gpus"]
+        if config["gpu_model"]:
+            resources["gpu_model"] = config["gpu_model"]
+    return resources

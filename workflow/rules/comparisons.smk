@@ -7,6 +7,7 @@ COMPARISON_METHODS = {name: {key: spec[key] for key in ("module", "kind", "input
 
 
 rule comparison_onehot:
+    localrule: True
     input:
         metrics=rules.gather_metrics.output[0],
     output:
@@ -29,6 +30,9 @@ rule comparison_onehot:
     params:
         methods=COMPARISON_METHODS,
         labels=LABELS,
+    threads: 1
+    resources:
+        **job_resources("comparison_onehot"),
     conda:
         "../envs/mcbench.yaml"
     log:
@@ -38,6 +42,7 @@ rule comparison_onehot:
 
 
 rule comparison_ablations:
+    localrule: True
     input:
         metrics=rules.gather_metrics.output[0],
         timings=rules.gather_timings.output[0],
@@ -53,6 +58,9 @@ rule comparison_ablations:
     params:
         methods=COMPARISON_METHODS,
         labels=LABELS,
+    threads: 1
+    resources:
+        **job_resources("comparison_ablations"),
     conda:
         "../envs/mcbench.yaml"
     log:
@@ -62,6 +70,7 @@ rule comparison_ablations:
 
 
 rule comparison_ranking:
+    localrule: True
     input:
         metrics=rules.gather_metrics.output[0],
     output:
@@ -76,6 +85,9 @@ rule comparison_ranking:
     params:
         methods=COMPARISON_METHODS,
         labels=LABELS,
+    threads: 1
+    resources:
+        **job_resources("comparison_ranking"),
     conda:
         "../envs/mcbench.yaml"
     log:

@@ -6,6 +6,7 @@ SPEED_METRIC = "relmse" if "relmse" in METRIC_NAMES else METRIC_NAMES[0]
 
 
 rule error_curves:
+    localrule: True
     input:
         metrics=rules.gather_metrics.output[0],
     output:
@@ -19,6 +20,9 @@ rule error_curves:
     params:
         labels=LABELS,
         candidates=[NOISY] + RANKED,
+    threads: 1
+    resources:
+        **job_resources("error_curves"),
     conda:
         "../envs/mcbench.yaml"
     log:
@@ -28,6 +32,7 @@ rule error_curves:
 
 
 rule speed_error:
+    localrule: True
     input:
         metrics=rules.gather_metrics.output[0],
         timings=rules.gather_timings.output[0],
@@ -43,6 +48,9 @@ rule speed_error:
         labels=LABELS,
         inputs={name: list(spec["inputs"]) for name, spec in METHODS.items()},
         metric=SPEED_METRIC,
+    threads: 1
+    resources:
+        **job_resources("speed_error"),
     conda:
         "../envs/mcbench.yaml"
     log:

@@ -24,6 +24,8 @@ rule run_method:
         weights_dir=WEIGHTS_DIR,
         weights_digest=weights_digest,
     threads: 1
+    resources:
+        **job_resources("run_method"),
     conda:
         "../envs/mcbench.yaml"
     log:
@@ -48,6 +50,8 @@ if BATCHES["learned_denoisers"]:
             weights_dir=WEIGHTS_DIR,
             weights_digests=batch_weights_digests("learned_denoisers"),
         threads: 1
+        resources:
+            **job_resources("run_learned_denoisers"),
         conda:
             "../envs/mcbench.yaml"
         log:
@@ -73,6 +77,8 @@ if BATCHES["combiners"]:
             weights_dir=WEIGHTS_DIR,
             weights_digests=batch_weights_digests("combiners"),
         threads: 1
+        resources:
+            **job_resources("run_combiners"),
         conda:
             "../envs/mcbench.yaml"
         log:

@@ -13,6 +13,9 @@ rule case_metrics:
     params:
         candidates=CANDIDATES,
         metrics=METRIC_NAMES,
+    threads: 1
+    resources:
+        **job_resources("case_metrics"),
     conda:
         "../envs/mcbench.yaml"
     log:
@@ -26,6 +29,7 @@ rule case_metrics:
 # One table of every error; every case must hold every candidate and metric with a finite value
 # (mcbench.ranking.check_complete), or the run stops naming the case file.
 rule gather_metrics:
+    localrule: True
     input:
         all_case_metrics,
     output:
@@ -40,6 +44,9 @@ rule gather_metrics:
         candidates=[NOISY] + CANDIDATES,
         metrics=METRIC_NAMES,
         cases=[{"scene": scene, "spp": spp} for scene in SCENES for spp in SPPS],
+    threads: 1
+    resources:
+        **job_resources("gather_metrics"),
     conda:
         "../envs/mcbench.yaml"
     log:
@@ -49,6 +56,7 @@ rule gather_metrics:
 
 
 rule gather_timings:
+    localrule: True
     input:
         all_timing_records,
     output:
@@ -59,6 +67,9 @@ rule gather_timings:
             subcategory="Timings",
             labels={"table": "timings.csv", "rows": "scene, spp, method"},
         ),
+    threads: 1
+    resources:
+        **job_resources("gather_timings"),
     conda:
         "../envs/mcbench.yaml"
     log:

@@ -47,6 +47,8 @@ rule oracle_study:
         seed=config["seed"],
         weights_dir=WEIGHTS_DIR,
     threads: 1
+    resources:
+        **job_resources("oracle_study"),
     conda:
         "../envs/mcbench.yaml"
     log:

@@ -9,6 +9,8 @@ rule render_noisy:
         variant=config["variant"],
         seed=config["seed"],
     threads: config["render_threads"]
+    resources:
+        **job_resources("render_noisy"),
     conda:
         "../envs/mcbench.yaml"
     log:
@@ -28,6 +30,8 @@ rule render_reference_chunk:
         variant=config["variant"],
         seed=config["seed"],
     threads: config["render_threads"]
+    resources:
+        **job_resources("render_reference_chunk"),
     conda:
         "../envs/mcbench.yaml"
     log:
@@ -46,6 +50,9 @@ rule merge_reference:
         ),
     output:
         f"{RESULTS}/references/{{scene}}.exr",
+    threads: 1
+    resources:
+        **job_resources("merge_reference"),
     conda:
         "../envs/mcbench.yaml"
     log:

@@ -2,6 +2,7 @@
 
 
 rule ranking_table:
+    localrule: True
     input:
         rules.gather_metrics.output[0],
     output:
@@ -17,6 +18,9 @@ rule ranking_table:
     params:
         candidates=[NOISY] + RANKED,
         labels=LABELS,
+    threads: 1
+    resources:
+        **job_resources("ranking_table"),
     conda:
         "../envs/mcbench.yaml"
     log:
@@ -26,6 +30,7 @@ rule ranking_table:
 
 
 rule scene_table:
+    localrule: True
     input:
         unpack(render_cost_records),
         metrics=rules.gather_metrics.output[0],
@@ -43,6 +48,9 @@ rule scene_table:
     params:
         references=reference_paths(),
         reference_spp=REFERENCE_SPP,
+    threads: 1
+    resources:
+        **job_resources("scene_table"),
     conda:
         "../envs/mcbench.yaml"
     log:
@@ -52,6 +60,7 @@ rule scene_table:
 
 
 rule gallery:
+    localrule: True
     input:
         list(reference_paths().values()),
     output:
@@ -64,6 +73,9 @@ rule gallery:
         ),
     params:
         references=reference_paths(),
+    threads: 1
+    resources:
+        **job_resources("gallery"),
     conda:
         "../envs/mcbench.yaml"
     log:

@@ -14,6 +14,8 @@ rule training_example:
         settings={key: value for key, value in TRAINING.items() if key != "fibre_count"},
         variant=config["variant"],
     threads: config["render_threads"]
+    resources:
+        **job_resources("training_example"),
     conda:
         "../envs/mcbench.yaml"
     log:
@@ -33,6 +35,8 @@ rule training_correlated:
     params:
         weights=lambda wildcards: weights_digest_of(wildcards.base),
     threads: 1
+    resources:
+        **job_resources("training_correlated"),
     conda:
         "../envs/mcbench.yaml"
     log:
@@ -44,6 +48,7 @@ rule training_correlated:
 
 
 rule training_data:
+    localrule: True
     input:
         training_crop_files(),
     default_target: False
@@ -62,6 +67,8 @@ rule train_network:
     wildcard_constraints:
         network="|".join(NETWORKS),
     threads: config["render_threads"]
+    resources:
+        **job_resources("train_network"),
     conda:
         "../envs/mcbench.yaml"
     log:
@@ -77,6 +84,7 @@ for _network in NETWORKS:
     rule:
         name:
             f"train_{_network}"
+        localrule: True
         input:
             missing_weights(_network),
         default_target: False

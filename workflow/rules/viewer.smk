@@ -19,6 +19,9 @@ rule viewer_case:
     params:
         candidates=CANDIDATES,
         weight_inputs={name: spec["inputs"] for name, spec in METHODS.items() if spec["inputs"]},
+    threads: 1
+    resources:
+        **job_resources("viewer_case"),
     conda:
         "../envs/mcbench.yaml"
     log:
@@ -49,6 +52,9 @@ rule viewer:
         labels=LABELS,
         metrics=METRIC_NAMES,
         static_dir=lambda wildcards, input: str(Path(input.page[0]).parent),
+    threads: 1
+    resources:
+        **job_resources("viewer"),
     conda:
         "../envs/mcbench.yaml"
     log:
