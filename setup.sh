@@ -33,6 +33,18 @@ if ! command -v chromium >/dev/null 2>&1 || ! command -v chromedriver >/dev/null
     fi
 fi
 
+# Debian's SLURM and MUNGE for the cluster test (tests/test_slurm.py starts a single-node SLURM,
+# tests/slurm_local.py). Without them that test is skipped (a failure under .ci/run).
+if ! command -v slurmctld >/dev/null 2>&1 || ! command -v munged >/dev/null 2>&1; then
+    if [ "$(id -u)" = "0" ] && command -v apt-get >/dev/null 2>&1; then
+        echo "setup: installing Debian's slurm-wlm and munge for the SLURM test"
+        (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq slurm-wlm munge >/dev/null) \
+            || echo "setup: notice: could not install slurm-wlm/munge; the SLURM test will be skipped"
+    else
+        echo "setup: notice: slurmctld or munged not found and not root; the SLURM test will be skipped"
+    fi
+fi
+
 PYTHON="${PYTHON:-python3.11}"
 command -v "$PYTHON" >/dev/null 2>&1 || PYTHON=python3
 if [ ! -x .venv/bin/python ]; then
