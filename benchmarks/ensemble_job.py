@@ -2,8 +2,9 @@
 
     python benchmarks/ensemble_job.py RENDER.exr OUT.exr INPUT1.exr ... [--param key=value ...]
 
-Like :func:`mcbench.steps.run_method` for a combiner: read the render (``RenderBuffers.load``) and
-each input (``Denoised.load(..., extras=True)``), ``methods.ensemble.combine``, write the output
+Like :func:`mcbench.steps.run_methods` for a batch of ensembles: read the render's
+``RENDER_LAYERS`` (``RenderBuffers.load``) and each input (``Denoised.load``; the ensemble
+reads no extras), ``methods.ensemble.combine``, write the output
 EXR (``write_layers``). Prints one JSON line: seconds spent importing, reading, loading the
 numba cache (a combine of an 8 x 8 crop, ``jit_s``), combining and writing (wall,
 ``time.perf_counter``). The parent measures the whole process (wall time and
@@ -49,8 +50,8 @@ def main(argv):
         argv, params = argv[:at], [p for p in argv[at + 1:] if p != "--param"]
     render, output, *inputs = argv
     imported = time.perf_counter()
-    buffers = RenderBuffers.load(render)
-    denoised = [Denoised.load(path, extras=True) for path in inputs]
+    buffers = RenderBuffers.load(render, layers=ensemble.RENDER_LAYERS)     # as run_methods reads it
+    denoised = [Denoised.load(path) for path in inputs]                       # combine() reads no extras
     read = time.perf_counter()
     ensemble.combine(RenderBuffers(layers={k: v[:8, :8] for k, v in buffers.layers.items()},
                                    spp=buffers.spp),

@@ -95,7 +95,9 @@ def read_layers(path: str | os.PathLike, names: list[str] | None = None,
         missing = [n for n in wanted if n not in available]
         if missing:
             raise ExrError(f"{path}: missing layer(s) {missing}; file has {sorted(available)}")
-        return {n: np.array(available[n], dtype=dtype) for n in wanted}
+        # asarray: a float32 layer is the decoder's own array (no copy; the layers not wanted
+        # are freed with the file), so reading peaks at one copy of the file's pixels, not two
+        return {n: np.asarray(available[n], dtype=dtype) for n in wanted}
 
 
 def read_metadata(path: str | os.PathLike) -> dict[str, str]:

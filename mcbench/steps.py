@@ -59,7 +59,9 @@ def run_methods(entries: list[dict], render_path: str, *, scene: str = "", spp: 
     """
     from methods import load_method
 
-    buffers = RenderBuffers.load(render_path)
+    modules = {entry["module"]: load_method(entry["module"], config_key=f"method '{entry['name']}'")
+               for entry in entries}
+    buffers = RenderBuffers.load(render_path, layers=render_layers(modules.values()))
     loaded: dict[str, Denoised] = {}
 
     def input_of(path: str) -> Denoised:
@@ -74,7 +76,7 @@ def run_methods(entries: list[dict], render_path: str, *, scene: str = "", spp: 
     height, width = buffers.shape
     for entry in entries:
         method, module_name, params = entry["name"], entry["module"], dict(entry.get("params") or {})
-        module = load_method(module_name, config_key=f"method '{method}'")
+        module = modules[module_name]
         inputs = [input_of(path) for path in entry.get("input_paths", ())]
         # untimed run on a corner crop: compiles / loads the method's JIT kernels (numba's cache
         # load alone took 0.6 s of a 0.06 s ensemble at 128x128) and first-call set-up
@@ -94,6 +96,18 @@ def run_methods(entries: list[dict], render_path: str, *, scene: str = "", spp: 
 
 
 WARM_UP_SIZE = 32  # pixels per side of the untimed warm-up crop of run_methods
+
+
+def render_layers(modules) -> tuple[str, ...] | None:
+    """The render layers a job of these method modules reads: the union of their
+    ``RENDER_LAYERS`` (methods/__init__.py), or None (every layer) when one does not declare it."""
+    names: dict[str, None] = {}
+    for module in modules:
+        declared = getattr(module, "RENDER_LAYERS", None)
+        if declared is None:
+            return None
+        names.update(dict.fromkeys(declared))
+    return tuple(names)
 
 
 def _apply(module, buffers: RenderBuffers, inputs: list[Denoised], params: dict) -> Denoised:

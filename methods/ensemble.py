@@ -153,6 +153,8 @@ from mcbench.buffers import Denoised, RenderBuffers
 
 KIND = "combiner"
 LABEL = "Ensemble"
+# what combine() reads of the render: the noisy halves (Eq. 11-14) and the filter's features
+RENDER_LAYERS = ("color_a", "color_b", "albedo", "normal")
 
 SOLVERS = ("iterative", "exact", "qp")
 MAX_EXACT_N = 20

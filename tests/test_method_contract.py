@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mcbench.buffers import SUB_OUTPUTS, Denoised
+from mcbench.buffers import SUB_OUTPUTS, Denoised, RenderBuffers
 from methods import available_methods, load_method
 
 HEIGHT, WIDTH = 12, 10
@@ -154,6 +154,21 @@ def test_loads_and_keeps_the_contract(name, make_render_buffers):
     # the output depends on the input (a method returning a constant would pass the above)
     other = make_render_buffers(height=HEIGHT, width=WIDTH, seed=2, bins=True)
     assert not np.array_equal(run(module, other, synthetic_inputs(other)).full, first.full)
+
+
+@pytest.mark.parametrize("name", [n for n in available_methods() if hasattr(load_method(n), "RENDER_LAYERS")])
+def test_declared_render_layers_are_all_the_method_reads(name, make_render_buffers):
+    """A method declaring RENDER_LAYERS gets only those (and colour) from a job
+    (mcbench.steps.render_layers): on such a render it must give exactly its full-render result."""
+    module = load_method(name)
+    buffers = make_render_buffers(height=HEIGHT, width=WIDTH, seed=1, bins=True)
+    inputs = synthetic_inputs(buffers)
+    kept = {key: buffers.layers[key] for key in ("color", *module.RENDER_LAYERS)}
+    assert len(kept) < len(buffers.layers)
+    narrowed = RenderBuffers(layers=kept, spp=buffers.spp, source=buffers.source)
+    full, narrow = run(module, buffers, inputs), run(module, narrowed, inputs)
+    for which in ("full", "a", "b"):
+        assert np.array_equal(getattr(full, which), getattr(narrow, which)), which
 
 
 @pytest.mark.parametrize(("name", "case"), case_params())
