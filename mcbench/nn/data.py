@@ -7,6 +7,14 @@ high-spp mean). Every (crop, level, buffer) is one training input: the half buff
 independent renders at N/2 spp of the same crop, so one level gives inputs at N and N/2 spp,
 exactly what the denoisers see at test time (full image and halves).
 
+Storage: a :class:`CropSet` keeps every image plane it uses (one channel of one layer of one
+file) once, in one preallocated ``(P, H, W)`` float32 array, and an item is a table of plane
+numbers: its input channels per level and buffer, and its target. A combiner's items (one per
+crop and base) share their crop's render planes and differ only in the base's; a subset or a
+split shares the planes of the set it comes from. Batches gather their patches from the planes,
+so the memory is that of the distinct planes (a dense ``(items, L, 3, C, H, W)`` copy, which
+:attr:`CropSet.inputs` builds for inspection, is never made in training).
+
 Split: training scenes with ``seed % VALIDATION_MODULUS == VALIDATION_REMAINDER`` (every 8th)
 are the validation set; all crops of a scene go to the same side.
 
@@ -20,7 +28,7 @@ render layers by name (e.g. ``albedo_variance``), ``correlated`` (the base's res
 concatenated) and ``correlated_sub`` (the base's result on each).
 
 Batches: step ``s`` of a run seeded ``seed`` draws from ``numpy.random.default_rng([seed, s])``
-crop, level, buffer, patch position and one of the 8 rotations/flips of the square patch, so a
+item, level, buffer, patch position and one of the 8 rotations/flips of the square patch, so a
 resumed run sees exactly the batches an uninterrupted one would. Normals and depth are not
 rotated with the image (world-space normals bear no fixed relation to screen axes anyway).
 """
@@ -28,6 +36,7 @@ rotated with the image (world-space normals bear no fixed relation to screen axe
 from __future__ import annotations
 
 import re
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -40,6 +49,7 @@ from mcbench.exr import check_finite, read_layers, read_metadata
 # Raw buffers a network receives: name -> channels (layout of the (13, H, W) input arrays).
 BUFFER_KEYS = {"color": 3, "variance": 3, "albedo": 3, "normal": 3, "depth": 1}
 HALVES = ("", "_a", "_b")   # full, A, B
+HALF_OF = {"": "full", "_a": "a", "_b": "b"}
 VALIDATION_MODULUS = 8
 VALIDATION_REMAINDER = 7
 _EXAMPLE = re.compile(r"example_(\d+)_(\d+)\.exr$")
@@ -52,29 +62,54 @@ def is_validation_seed(seed: int) -> bool:
 
 @dataclass
 class CropSet:
-    """Crops as arrays.
+    """Training items as plane numbers into shared image planes.
 
-    inputs  (n, L, 3, C, H, W) float32 -- per crop, level and buffer (full, A, B) the raw
-            buffers in ``keys`` order (C = sum of their channels; 13 for :data:`BUFFER_KEYS`)
-    targets (n, 3, H, W) float32 -- high-spp reference radiance
-    spp     (L, 3) float -- samples behind each level's full, A and B buffer
-    seeds   (n,) int -- training scene seed of each crop
-    info    render settings of the crops (resolution, target spp, crop size, crops per scene,
-            variant), from their metadata
+    planes       (P, H, W) float32 -- every image plane the items use (one channel of one layer
+                 of a crop file or of a base's result file), each stored once
+    index        (n, L, 3, C) int -- per item, level and buffer (full, A, B) the planes of its
+                 input channels in ``keys`` order (C = sum of their channels; 13 for
+                 :data:`BUFFER_KEYS`)
+    target_index (n, 3) int -- the planes of each item's high-spp reference radiance
+    pairs        (n, 2) int -- each item's (crop, base): the crop's position in the files read and
+                 the base's in ``info["bases"]`` (-1: no base, a denoiser's data)
+    spp          (L, 3) float -- samples behind each level's full, A and B buffer
+    seeds        (n,) int -- training scene seed of each item
+    info         render settings of the crops (resolution, target spp, crop size, crops per
+                 scene, variant), from their metadata
     """
 
-    inputs: np.ndarray
-    targets: np.ndarray
+    planes: np.ndarray
+    index: np.ndarray
+    target_index: np.ndarray
+    pairs: np.ndarray
     spp: np.ndarray
     seeds: np.ndarray
     info: dict = field(default_factory=dict)
     keys: dict = field(default_factory=lambda: dict(BUFFER_KEYS))   # input name -> channels
 
     def __len__(self) -> int:
-        return len(self.targets)
+        return len(self.index)
+
+    @property
+    def shape(self) -> tuple[int, int, int, int, int, int]:
+        """(items, levels, buffers, channels, height, width) of the dense layout :attr:`inputs`."""
+        return (*self.index.shape, *self.planes.shape[1:])
+
+    @property
+    def inputs(self) -> np.ndarray:
+        """Dense copy (n, L, 3, C, H, W) float32 of every item's inputs -- for inspection and tests:
+        it holds each shared plane once per item (training gathers from :attr:`planes`)."""
+        return self.planes[self.index]
+
+    @property
+    def targets(self) -> np.ndarray:
+        """Dense copy (n, 3, H, W) float32 of every item's target radiance."""
+        return self.planes[self.target_index]
 
     def subset(self, mask: np.ndarray) -> "CropSet":
-        return CropSet(self.inputs[mask], self.targets[mask], self.spp, self.seeds[mask], self.info, self.keys)
+        """The items selected by ``mask`` (boolean (n,) or item numbers); shares the planes."""
+        return CropSet(self.planes, self.index[mask], self.target_index[mask], self.pairs[mask], self.spp,
+                       self.seeds[mask], self.info, self.keys)
 
     def split(self) -> tuple["CropSet", "CropSet"]:
         """(training, validation) by scene seed."""
@@ -86,39 +121,8 @@ class CropSet:
         """Build from ``(layers, metadata)`` pairs as :func:`mcbench.training_data.training_example` returns."""
         if not crops:
             raise BenchError(f"{source}: no training crops")
-        levels = None
-        inputs, targets, seeds = [], [], []
-        for layers, meta in crops:
-            crop_levels = [int(v) for v in str(meta["spp_levels"]).split(",")]
-            if levels is None:
-                levels = crop_levels
-            elif crop_levels != levels:
-                raise BenchError(f"{source}: crops have different spp levels ({levels} vs {crop_levels}); "
-                                 f"render the training data with one setting")
-            per_level = []
-            for level in levels:
-                per_buffer = []
-                for half in HALVES:
-                    channels = []
-                    for key in BUFFER_KEYS:
-                        name = f"{key}{half}_spp{level}"
-                        if name not in layers:
-                            raise BenchError(f"{source}: training crop lacks layer '{name}'")
-                        array = layers[name]
-                        channels.append(array[None] if array.ndim == 2 else np.moveaxis(array, 2, 0))
-                    per_buffer.append(np.concatenate(channels, axis=0))
-                per_level.append(np.stack(per_buffer))
-            inputs.append(np.stack(per_level))
-            targets.append(np.moveaxis(layers["target"], 2, 0))
-            seeds.append(int(meta["seed"]))
-        spp = np.array([[level, level / 2, level / 2] for level in levels], dtype=np.float64)
-        first = crops[0][1]
-        info = {"spp_levels": levels, "crop_size": int(targets[0].shape[-1]),
-                "crops_per_scene": max(seeds.count(s) for s in seeds),
-                **{key: str(first[key]) for key in ("resolution", "target_spp", "variant", "mitsuba")
-                   if key in first}}
-        return cls(np.ascontiguousarray(np.stack(inputs), dtype=np.float32),
-                   np.ascontiguousarray(np.stack(targets), dtype=np.float32), spp, np.array(seeds), info)
+        return assemble_items(((layers, meta, source, {}) for layers, meta in crops), crop_count=len(crops),
+                              bases=[], keys=BUFFER_KEYS)
 
 
 def crop_paths(folder: str | Path) -> list[Path]:
@@ -131,17 +135,7 @@ def load_crops(paths: list[str | Path]) -> CropSet:
     """Read training crop EXRs (errors name the file: missing, corrupt, NaN/Inf, wrong layers)."""
     if not paths:
         raise BenchError("no training crops given: run `snakemake --cores 2 training_data` first")
-    crops = []
-    for path in paths:
-        meta = read_metadata(path)
-        if "spp_levels" not in meta or "seed" not in meta:
-            raise BenchError(f"{path}: not a training crop (no spp_levels/seed metadata)")
-        levels = [int(v) for v in meta["spp_levels"].split(",")]
-        names = [f"{key}{half}_spp{level}" for level in levels for half in HALVES for key in BUFFER_KEYS]
-        layers = read_layers(path, names + ["target"])
-        check_finite(path, layers)
-        crops.append((layers, meta))
-    return CropSet.from_layers(crops, source=str(Path(paths[0]).parent))
+    return assemble_items(read_crop_files(list(paths), {}), crop_count=len(paths), bases=[], keys=BUFFER_KEYS)
 
 
 def to_buffers(inputs: np.ndarray | torch.Tensor, keys: dict | None = None) -> dict[str, torch.Tensor]:
@@ -166,7 +160,7 @@ def dihedral(array: np.ndarray, transform: int) -> np.ndarray:
 def sample_batch(crops: CropSet, seed: int, step: int, batch_size: int, patch: int
                  ) -> tuple[dict[str, torch.Tensor], torch.Tensor]:
     """Batch ``step`` of a run seeded ``seed``: raw buffers (dict of (B, C, P, P)) and targets (B, 3, P, P)."""
-    n, levels, buffers, channels, height, width = crops.inputs.shape
+    n, levels, buffers, channels, height, width = crops.shape
     if patch > min(height, width):
         raise BenchError(f"training patch {patch} is larger than the {width}x{height} crops")
     rng = np.random.default_rng([int(seed), int(step)])
@@ -176,30 +170,172 @@ def sample_batch(crops: CropSet, seed: int, step: int, batch_size: int, patch: i
         c, l, b = rng.integers(n), rng.integers(levels), rng.integers(buffers)
         y, x = rng.integers(height - patch + 1), rng.integers(width - patch + 1)
         transform = int(rng.integers(8))
-        inputs[i] = dihedral(crops.inputs[c, l, b, :, y:y + patch, x:x + patch], transform)
-        targets[i] = dihedral(crops.targets[c, :, y:y + patch, x:x + patch], transform)
+        inputs[i] = dihedral(crops.planes[crops.index[c, l, b], y:y + patch, x:x + patch], transform)
+        targets[i] = dihedral(crops.planes[crops.target_index[c], y:y + patch, x:x + patch], transform)
     return to_buffers(inputs, crops.keys), torch.from_numpy(targets)
 
 
 def validation_batches(crops: CropSet, batch_size: int = 16, buffer: int = 0):
-    """Every (crop, level) of ``crops`` for one buffer (0 full, 1 A, 2 B), in a fixed order.
+    """Every (item, level) of ``crops`` for one buffer (0 full, 1 A, 2 B), in a fixed order.
 
     Yields ``(buffers, targets, seeds, spp)`` with the scene seed and spp of each item.
     """
-    n, levels = crops.inputs.shape[:2]
-    items = [(c, l) for c in range(n) for l in range(levels)]
+    n, levels = crops.shape[:2]
+    items = np.array([(c, l) for c in range(n) for l in range(levels)], dtype=np.int64).reshape(-1, 2)
     for start in range(0, len(items), batch_size):
-        chunk = items[start:start + batch_size]
-        inputs = np.stack([crops.inputs[c, l, buffer] for c, l in chunk])
-        targets = np.stack([crops.targets[c] for c, _ in chunk])
-        yield (to_buffers(inputs, crops.keys), torch.from_numpy(targets), np.array([crops.seeds[c] for c, _ in chunk]),
-               np.array([crops.spp[l, buffer] for _, l in chunk]))
+        item, level = items[start:start + batch_size].T
+        inputs = crops.planes[crops.index[item, level, buffer]]       # (B, C, H, W)
+        targets = crops.planes[crops.target_index[item]]              # (B, 3, H, W)
+        yield to_buffers(inputs, crops.keys), torch.from_numpy(targets), crops.seeds[item], crops.spp[level, buffer]
+
+
+# --------------------------------------------------------------------------- loading
+
+def input_layers(key: str, half: str, level: int) -> tuple[str, list[str]]:
+    """Where input ``key`` of one (level, buffer ``half`` in :data:`HALVES`) comes from:
+    ``("crop" | "correlated", layer names)``, the layers' channels concatenated in that order."""
+    from mcbench.buffers import SUB_BUFFERS
+
+    if key == "correlated":
+        return "correlated", [f"correlated{half}_spp{level}"]
+    if key == "correlated_sub":
+        return "correlated", [f"correlated{half}_sub{j}_spp{level}" for j in (0, 1)]
+    if key in ("color_sub", "variance_sub"):
+        quantity = key[:-len("_sub")]
+        return "crop", [f"{quantity}{sub}_spp{level}" for sub in SUB_BUFFERS[HALF_OF[half]]]
+    return "crop", [f"{key}{half}_spp{level}"]
+
+
+def _channels_first(array: np.ndarray) -> np.ndarray:
+    return array[None] if array.ndim == 2 else np.moveaxis(array, 2, 0)
+
+
+class _PlaneStore:
+    """A preallocated (capacity, H, W) float32 array filled file by file with the channels of
+    named layers; every file of one kind must give each name the same channels and size."""
+
+    def __init__(self, capacity: int, height: int, width: int):
+        self.planes = np.empty((capacity, height, width), dtype=np.float32)
+        self.count = 0
+        self.channels: dict[str, int] = {}
+
+    def add(self, layers: dict[str, np.ndarray], names: list[str], source: str) -> dict[str, np.ndarray]:
+        """Store layers ``names`` of one file; returns {name: its plane numbers}."""
+        numbers = {}
+        for name in names:
+            array = _channels_first(layers[name])
+            depth = self.channels.setdefault(name, array.shape[0])
+            if array.shape != (depth, *self.planes.shape[1:]):
+                raise BenchError(f"{source}: layer '{name}' is {array.shape[0]} channel(s) of "
+                                 f"{array.shape[2]}x{array.shape[1]} pixels, the first file's "
+                                 f"{depth} of {self.planes.shape[2]}x{self.planes.shape[1]}")
+            if self.count + depth > len(self.planes):
+                raise BenchError(f"{source}: more layers than the first file of its kind")
+            self.planes[self.count:self.count + depth] = array
+            numbers[name] = np.arange(self.count, self.count + depth)
+            self.count += depth
+        return numbers
+
+
+def _spp_levels(meta: dict, source: str) -> list[int]:
+    return [int(v) for v in str(meta.get("spp_levels", "")).split(",") if v]
+
+
+def _layout(keys: dict, levels: list[int]) -> list[list[list[tuple[str, str, list[str]]]]]:
+    """[level][buffer] -> [(key, file kind, layer names)] for every input key, in ``keys`` order."""
+    return [[[(key, *input_layers(key, half, level)) for key in keys] for half in HALVES] for level in levels]
+
+
+def _names_of(layout, kind: str) -> list[str]:
+    """Distinct layer names of file kind ``kind`` in ``layout``, in first-use order."""
+    names = [name for level in layout for buffer in level for _, k, names in buffer if k == kind for name in names]
+    return list(dict.fromkeys(names))
+
+
+def _check_layers(layers: dict, layout, kind: str, source: str) -> list[str]:
+    """The layer names of kind ``kind`` that ``layout`` needs, checked present (errors name the
+    input key) and finite."""
+    for level in layout:
+        for buffer in level:
+            for key, k, names in buffer:
+                missing = [name for name in names if k == kind and name not in layers]
+                if missing:
+                    raise BenchError(f"{source}: lacks layer(s) {missing} needed for input '{key}'")
+    names = _names_of(layout, kind) + (["target"] if kind == "crop" else [])
+    if "target" in names and "target" not in layers:
+        raise BenchError(f"{source}: training crop lacks layer 'target'")
+    check_finite(source, {name: layers[name] for name in names})
+    return names
+
+
+def read_crop_files(crop_files: list[str | Path], correlated_files: dict[str, list[str | Path]]
+                    ) -> Iterator[tuple[dict, dict, str, dict[str, tuple[dict, dict, str]]]]:
+    """Per crop file, read one at a time: ``(layers, metadata, path, {base: (layers, metadata,
+    path)})`` of it and of each base's result on it (``correlated_files[base][i]`` for
+    ``crop_files[i]``)."""
+    for i, crop_path in enumerate(crop_files):
+        meta = read_metadata(crop_path)
+        if "spp_levels" not in meta or "seed" not in meta:
+            raise BenchError(f"{crop_path}: not a training crop (no spp_levels/seed metadata)")
+        correlated = {base: (read_layers(files[i]), read_metadata(files[i]), str(files[i]))
+                      for base, files in correlated_files.items()}
+        yield read_layers(crop_path), meta, str(crop_path), correlated
+
+
+def assemble_items(crops: Iterable[tuple[dict, dict, str, dict[str, tuple[dict, dict, str]]]], *,
+                   crop_count: int, bases: list[str], keys: dict[str, int]) -> CropSet:
+    """A :class:`CropSet` of ``crop_count`` crops given as :func:`read_crop_files` yields them:
+    one item per crop (no ``bases``) or per (base, crop), base by base, each crop's and each
+    base result's planes stored once. ``keys``: {input name: channels}."""
+    store, levels, layout, first = None, None, None, None
+    crop_planes, base_planes, seeds = [], {base: [] for base in bases}, []
+    for layers, meta, source, correlated in crops:
+        crop_levels = _spp_levels(meta, source)
+        if levels is None:
+            levels, layout, first = crop_levels, _layout(keys, crop_levels), meta
+            if _names_of(layout, "correlated") and not bases:
+                raise BenchError(f"{source}: inputs {list(keys)} need a base's results")
+        elif crop_levels != levels:
+            raise BenchError(f"{source}: crops have different spp levels ({levels} vs {crop_levels}); "
+                             f"render the training data with one setting")
+        crop_names = _check_layers(layers, layout, "crop", source)
+        base_names = {}
+        for base in bases:
+            base_layers, base_meta, base_source = correlated[base]
+            if _spp_levels(base_meta, base_source) != levels:
+                raise BenchError(f"{base_source}: spp levels {base_meta.get('spp_levels')} differ from the "
+                                 f"crops' {levels}")
+            base_names[base] = _check_layers(base_layers, layout, "correlated", base_source)
+        if store is None:
+            per_crop = sum(_channels_first(layers[n]).shape[0] for n in crop_names) + sum(
+                _channels_first(correlated[b][0][n]).shape[0] for b in bases for n in base_names[b])
+            store = _PlaneStore(crop_count * per_crop, *layers["target"].shape[:2])
+        crop_planes.append(store.add(layers, crop_names, source))
+        for base in bases:
+            base_planes[base].append(store.add(correlated[base][0], base_names[base], correlated[base][2]))
+        seeds.append(int(meta["seed"]))
+    if len(seeds) != crop_count or store.count != len(store.planes):
+        raise BenchError(f"{len(seeds)} training crops read of {crop_count}")
+
+    groups = list(enumerate(bases)) or [(-1, None)]
+    rows, pairs = [], []
+    for number, base in groups:
+        for crop, planes in enumerate(crop_planes):
+            source = {"crop": planes, "correlated": base_planes[base][crop] if base else {}}
+            rows.append([[np.concatenate([source[kind][name] for _, kind, names in buffer for name in names])
+                          for buffer in level] for level in layout] + [planes["target"]])
+            pairs.append((crop, number))
+    index = np.array([row[:-1] for row in rows], dtype=np.int64)
+    target_index = np.array([row[-1] for row in rows], dtype=np.int64)
+    spp = np.array([[level, level / 2, level / 2] for level in levels], dtype=np.float64)
+    info = {"spp_levels": levels, "crop_size": int(store.planes.shape[-1]),
+            "crops_per_scene": max(seeds.count(s) for s in seeds),
+            **{key: str(first[key]) for key in ("resolution", "target_spp", "variant", "mitsuba") if key in first}}
+    return CropSet(store.planes, index, target_index, np.array(pairs, dtype=np.int64).reshape(-1, 2), spp,
+                   np.array([seeds[crop] for crop, _ in pairs]), info, dict(keys))
 
 
 # --------------------------------------------------------------------------- combiners
-
-HALF_OF = {"": "full", "_a": "a", "_b": "b"}
-
 
 def crop_render_layers(layers: dict[str, np.ndarray], level: int) -> dict[str, np.ndarray]:
     """The render layers of one noisy level of a training crop (names without ``_spp<N>``): every
@@ -220,66 +356,23 @@ def correlated_layer_names(level: int, *, sub_buffers: bool) -> list[str]:
     return names
 
 
-def _channels_first(array: np.ndarray) -> np.ndarray:
-    return array[None] if array.ndim == 2 else np.moveaxis(array, 2, 0)
-
-
-def _combiner_input(key: str, half: str, level: int, crop: dict, correlated: dict, source: str) -> np.ndarray:
-    """One input key of a combiner for one (level, buffer) of a crop, channels first."""
-    from mcbench.buffers import SUB_BUFFERS
-
-    subs = SUB_BUFFERS[HALF_OF[half]]
-    if key == "correlated":
-        names, layers = [f"correlated{half}_spp{level}"], correlated
-    elif key == "correlated_sub":
-        names, layers = [f"correlated{half}_sub{j}_spp{level}" for j in (0, 1)], correlated
-    elif key in ("color_sub", "variance_sub"):
-        quantity = key[:-len("_sub")]
-        names, layers = [f"{quantity}{sub}_spp{level}" for sub in subs], crop
-    else:
-        names, layers = [f"{key}{half}_spp{level}"], crop
-    missing = [name for name in names if name not in layers]
-    if missing:
-        raise BenchError(f"{source}: lacks layer(s) {missing} needed for input '{key}'")
-    return np.concatenate([_channels_first(layers[name]) for name in names], axis=0)
-
-
 def load_combiner_crops(crop_files: list[str | Path], correlated_files: dict[str, list[str | Path]],
                         keys: dict[str, int]) -> CropSet:
     """Training items of a combiner: each crop once per base of ``correlated_files`` ({base:
-    files}, ``files[i]`` the base's results on ``crop_files[i]``), with the inputs ``keys`` ({name:
-    channels}: :data:`BUFFER_KEYS` first, then the combiner's ``TRAINING_KEYS``). Items of one
-    crop share its scene seed, so the train/validation split keeps every base of a scene on one
-    side. Errors name the file (missing, corrupt, NaN/Inf, missing layers, other levels)."""
+    files}, ``files[i]`` the base's results on ``crop_files[i]``), base by base, with the inputs
+    ``keys`` ({name: channels}: :data:`BUFFER_KEYS` first, then the combiner's ``TRAINING_KEYS``).
+    Items of one crop share its scene seed, so the train/validation split keeps every base of a
+    scene on one side, and its render planes (only the base's planes are per item). Errors name
+    the file (missing, corrupt, NaN/Inf, missing layers, other levels)."""
     if not crop_files:
         raise BenchError("no training crops given: run `snakemake --cores 2 training_data` first")
     if not correlated_files:
         raise BenchError("no base results given for the combiner's training")
     keys = {**BUFFER_KEYS, **{k: v for k, v in keys.items() if k not in BUFFER_KEYS}}
-    base_crops = load_crops(list(crop_files))
-    levels = list(base_crops.info["spp_levels"])
-    inputs, targets, seeds = [], [], []
     for base, files in correlated_files.items():
         if len(files) != len(crop_files):
             raise BenchError(f"{len(files)} result files of base '{base}' for {len(crop_files)} crops")
-        for crop_path, path, target, seed in zip(crop_files, files, base_crops.targets, base_crops.seeds):
-            meta = read_metadata(path)
-            if [int(v) for v in str(meta.get("spp_levels", "")).split(",") if v] != levels:
-                raise BenchError(f"{path}: spp levels {meta.get('spp_levels')} differ from the crops' {levels}")
-            correlated = read_layers(path)
-            check_finite(path, correlated)
-            crop = read_layers(crop_path)
-            per_level = []
-            for level in levels:
-                per_level.append(np.stack([
-                    np.concatenate([_combiner_input(key, half, level, crop, correlated,
-                                                    str(path) if key.startswith("correlated") else str(crop_path))
-                                    for key in keys], axis=0)
-                    for half in HALVES]))
-            inputs.append(np.stack(per_level))
-            targets.append(target)
-            seeds.append(seed)
-    info = {**base_crops.info, "bases": list(correlated_files), "folder": str(Path(crop_files[0]).parent)}
-    return CropSet(np.ascontiguousarray(np.stack(inputs), dtype=np.float32),
-                   np.ascontiguousarray(np.stack(targets), dtype=np.float32), base_crops.spp,
-                   np.array(seeds), info, keys)
+    crops = assemble_items(read_crop_files(list(crop_files), correlated_files), crop_count=len(crop_files),
+                           bases=list(correlated_files), keys=keys)
+    crops.info.update(bases=list(correlated_files), folder=str(Path(crop_files[0]).parent))
+    return crops

@@ -296,7 +296,7 @@ def train_network(module: ModuleType, data: list[str | Path] | CropSet, weights_
         "loss": settings["loss"],
         # one epoch = every (training crop, level, buffer) once, as a full crop
         "epochs": settings["steps"] * settings["batch_size"] * settings["patch"] ** 2
-                  / (train_set.inputs[:, :, :, 0].size),
+                  / math.prod(train_set.shape[:3] + train_set.shape[4:]),
         "validation": final,
         "history": history,
         "seconds": seconds,
