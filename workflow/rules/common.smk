@@ -303,38 +303,39 @@ def case_entries(wildcards=None):
     return len(CANDIDATES) + 1
 
 
-def _job_size(rule, wildcards):
-    """``(pixels, entries, spp)`` of one job of ``rule`` (mcbench.resources' cost model)."""
+def _job_size(rule_name, wildcards):
+    """``(pixels, entries, spp)`` of one job of rule ``rule_name`` (mcbench.resources' cost model)."""
     scene = getattr(wildcards, "scene", None)
     pixels = scene_pixels(scene) if scene else 0
-    if rule == "render_noisy":
+    if rule_name == "render_noisy":
         return pixels, 1, int(wildcards.spp)
-    if rule == "render_reference_chunk":
+    if rule_name == "render_reference_chunk":
         return pixels, 1, reference_chunk_spp(wildcards)
-    if rule in ("run_learned_denoisers", "run_combiners"):
-        return pixels, len(BATCHES[rule[len("run_"):]]), 0
-    if rule in ("case_metrics", "viewer_case"):
+    if rule_name in ("run_learned_denoisers", "run_combiners"):
+        return pixels, len(BATCHES[rule_name[len("run_"):]]), 0
+    if rule_name in ("case_metrics", "viewer_case"):
         return pixels, case_entries(), 0
-    if rule == "viewer":
+    if rule_name == "viewer":
         return max(scene_pixels(s) for s in SCENES), len(SCENES) * len(SPPS) * case_entries(), 0
     return pixels, 1, 0
 
 
-def job_resources(rule):
-    """The ``resources:`` of ``rule``'s jobs: mem_mb and runtime from its fitted cost (a method's
+def job_resources(rule_name):
+    """The ``resources:`` of the rule's jobs: mem_mb and runtime from its fitted cost (a method's
     own, e.g. run_method/nfor, where measured; the floors for a rule without records), times the
     attempt; ``gpu`` for the rules that can use one."""
+
     def request(wildcards, attempt):
         method = getattr(wildcards, "method", None)
-        per_method = f"{rule}/{METHODS[method]['module']}" if method in METHODS else None
-        cost = JOB_COSTS.get(per_method) or JOB_COSTS.get(rule, JobCost())
-        pixels, entries, spp = _job_size(rule, wildcards)
+        per_method = f"{rule_name}/{METHODS[method]['module']}" if method in METHODS else None
+        cost = JOB_COSTS.get(per_method) or JOB_COSTS.get(rule_name, JobCost())
+        pixels, entries, spp = _job_size(rule_name, wildcards)
         return {key: value * attempt for key, value in
                 job_request(*estimate_job(cost, pixels=pixels, entries=entries, spp=spp)).items()}
 
     resources = {"mem_mb": lambda wildcards, attempt: request(wildcards, attempt)["mem_mb"],
                  "runtime": lambda wildcards, attempt: request(wildcards, attempt)["runtime"]}
-    if rule in GPU_RULES and config["gpus"] and config["variant"] in ("auto", "cuda_ad_rgb"):
+    if rule_name in GPU_RULES and config["gpus"] and config["variant"] in ("auto", "cuda_ad_rgb"):
         resources["gpu"] = config["gpus"]
         if config["gpu_model"]:
             resources["gpu_model"] = config["gpu_model"]
