@@ -66,7 +66,8 @@ rule train_network:
         weights_dir=lambda wildcards, output: os.path.dirname(output.weights),
     wildcard_constraints:
         network="|".join(NETWORKS),
-    threads: config["render_threads"]
+    # the networks train with 2 torch threads (mcbench.nn.train's default "threads")
+    threads: 2
     resources:
         **job_resources("train_network"),
     conda:
