@@ -5,14 +5,16 @@ dense sampler, must equal the new ones bit for bit (the trained weights stay the
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
 import torch
 
 from mcbench import BenchError
 from mcbench.exr import write_layers
-from mcbench.nn.data import (BUFFER_KEYS, CropSet, dihedral, is_validation_seed, load_combiner_crops, load_crops,
-                             sample_batch, validation_batches)
+from mcbench.nn.data import (BUFFER_KEYS, CropSet, PlaneStore, dihedral, is_validation_seed, load_combiner_crops,
+                             load_crops, sample_batch, validation_batches)
 
 LEVELS = (4, 16)
 SIZE = 12
@@ -132,6 +134,7 @@ def test_denoiser_crops_give_the_dense_layouts_batches():
     assert_same_batches(crops, inputs, targets, seeds, spp, BUFFER_KEYS)
     # each plane once: 13 input channels per level and buffer plus the target, per crop
     assert crops.planes.shape == (8 * (len(LEVELS) * 3 * 13 + 3), SIZE, SIZE)
+    assert crops.planes.nbytes <= 1.01 * 4 * SIZE * SIZE * len(crops.planes)   # random bits: no gain, little loss
     train, validation = crops.split()
     assert train.planes is crops.planes and validation.planes is crops.planes      # no copy
     mask = np.array([is_validation_seed(s) for s in seeds])
@@ -179,7 +182,7 @@ def test_combiner_items_pair_each_crop_with_each_base_once_and_give_the_dense_ba
     # a crop's render planes are stored once (not once per base); the full image's subsets are A and B
     crop_planes = len(LEVELS) * (3 * (13 + 3 + 1) + 2 * 4 * 3) + 3
     base_planes = len(LEVELS) * 3 * 9
-    assert crops.planes.shape[0] == n * (crop_planes + 3 * base_planes)
+    assert len(crops.planes) == n * (crop_planes + 3 * base_planes)
     assert crops.planes.nbytes < inputs.nbytes / 2
     train, validation = crops.split()
     assert sorted(set(validation.seeds.tolist())) == [7] and sorted(set(train.seeds.tolist())) == [0, 9]
@@ -212,3 +215,30 @@ def test_combiner_and_crop_loading_errors_name_the_file_and_input(combiner_files
     load_crops([infinite])                          # a denoiser does not read that layer
     with pytest.raises(BenchError, match=r"example_4_0\.exr.*albedo_variance_b_spp4"):
         load_combiner_crops([infinite], {"kpcn": files["kpcn"][:1]}, COMBINER_KEYS)
+
+
+def test_plane_store_gives_back_every_float32_bit_pattern_and_checks_layouts(tmp_path):
+    """Compression is lossless: random finite float32 bit patterns (subnormals, -0, HDR extremes)
+    and smooth images (which compress) come back byte for byte; the planes live in an unnamed
+    file in the folder given (on its disk, nothing left there)."""
+    rng = np.random.default_rng(4)
+    bits = rng.integers(0, 2 ** 32, (SIZE, SIZE, 3), dtype=np.uint64).astype(np.uint32).view(np.float32)
+    bits = np.where(np.isfinite(bits), bits, np.float32(-0.0))
+    bits[0, 0] = [np.float32(1e-45), np.finfo(np.float32).max, -np.finfo(np.float32).tiny / 2]
+    smooth = np.add.outer(np.arange(SIZE), np.arange(SIZE)).astype(np.float32) / 7
+    store = PlaneStore(SIZE, SIZE, folder=tmp_path)
+    first = store.add({"x": bits, "depth": smooth}, ["x", "depth"], "a.exr")
+    second = store.add({"x": bits[::-1].copy(), "depth": smooth * 2}, ["x", "depth"], "b.exr")
+    assert first["x"].tolist() == [0, 1, 2] and first["depth"].tolist() == [3] and second["depth"].tolist() == [7]
+    assert store.take(first["x"]).tobytes() == np.moveaxis(bits, 2, 0).tobytes()
+    assert store.take(np.array([[7], [3]])).tobytes() == np.stack([smooth[None] * 2, smooth[None]]).tobytes()
+    assert store.take(second["x"][::-1])[2].tobytes() == bits[::-1, :, 0].tobytes()
+    assert store.nbytes < 2 * (3 * bits[..., 0].nbytes * 1.01 + smooth.nbytes / 2)
+    assert os.fstat(store.file.fileno()).st_size == store.nbytes
+    assert os.fstat(store.file.fileno()).st_dev == os.stat(tmp_path).st_dev and not list(tmp_path.iterdir())
+    held = store.nbytes
+    with pytest.raises(BenchError, match=r"c\.exr: layer 'depth' is 3 channel"):
+        store.add({"x": bits, "depth": bits}, ["x", "depth"], "c.exr")
+    assert len(store) == 8 and store.nbytes == held                          # nothing of c.exr kept
+    assert store.take(first["depth"]).tobytes() == smooth[None].tobytes()
+    assert PlaneStore(2, 2, folder=tmp_path / "missing").folder != str(tmp_path / "missing")   # falls back
