@@ -18,6 +18,10 @@ constant ones). From each it reads:
   ``spp``; reference chunks: the merged reference's ``spp / chunks``), and for batch, metric and
   viewer jobs the number of methods of the case (its timing records in ``results/outputs``).
 
+``train_network/<network>``: the seconds of the committed training record
+(``methods/weights/<network>.json``) and the peak RSS that ``benchmarks/training_memory.py``
+measured (``--training-rss network=MiB``).
+
 Prints per rule the records, the measured maximum wall seconds and RSS, the fitted
 :class:`mcbench.resources.JobCost` and the request it gives at the measured sizes; with
 ``--write`` stores the fit (atomically) with a header naming the command and the runs.
@@ -126,12 +130,33 @@ def job_rows(results: Path) -> list[dict]:
     return rows
 
 
+def training_rows(weights: Path, rss: dict[str, float]) -> list[dict]:
+    """``train_network/<network>`` rows: the training seconds of each committed training record
+    (``methods/weights/<network>.json``) with the peak RSS measured by
+    ``benchmarks/training_memory.py`` (``--training-rss network=MiB``; networks without one are
+    left out)."""
+    rows = []
+    for record in sorted(weights.glob("*.json")):
+        network = record.stem
+        if network not in rss:
+            continue
+        seconds = float(json.loads(record.read_text()).get("seconds", 0.0))
+        rows.append({"rule": f"train_network/{network}", "pixels": 0, "entries": 1, "spp": 0,
+                     "seconds": seconds, "rss_mb": rss[network], "run": str(record)})
+    return rows
+
+
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("results", nargs="+", type=Path)
     parser.add_argument("--write", type=Path, default=None, help="store the fit here (YAML)")
+    parser.add_argument("--weights", type=Path, default=Path(__file__).resolve().parents[1] / "methods" / "weights",
+                        help="folder of the committed training records (train_network's seconds)")
+    parser.add_argument("--training-rss", nargs="*", default=[], metavar="NETWORK=MIB",
+                        help="peak RSS of training each network (benchmarks/training_memory.py)")
     args = parser.parse_args(argv)
-    rows = [row for results in args.results for row in job_rows(results)]
+    rss = {item.split("=", 1)[0]: float(item.split("=", 1)[1]) for item in args.training_rss}
+    rows = [row for results in args.results for row in job_rows(results)] + training_rows(args.weights, rss)
     if not rows:
         raise SystemExit(f"no benchmark records under {', '.join(map(str, args.results))}")
     table = pd.DataFrame(rows)
@@ -152,7 +177,8 @@ def main(argv=None) -> None:
         write_job_costs({"rules": costs, "typical": typical}, args.write, header=(
             "Per-rule job costs (mcbench.resources: the model, the margins, the floors).\n"
             "Generated, do not edit: fitted to the benchmark: records of finished runs by\n"
-            f"  python benchmarks/job_costs.py {' '.join(map(str, args.results))} --write {args.write}\n"
+            f"  python benchmarks/job_costs.py {' '.join(map(str, args.results))} --write {args.write}"
+            + (f" --training-rss {' '.join(args.training_rss)}" if args.training_rss else "") + "\n"
             f"runs: {runs}\n"
             "rules: fitted to the largest job of each size (requests); typical: to the mean job\n"
             "(CPU-hour estimates). Rules without records (tables, figures, merges) take the floors."))

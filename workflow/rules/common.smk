@@ -322,13 +322,14 @@ def _job_size(rule_name, wildcards):
 
 def job_resources(rule_name):
     """The ``resources:`` of the rule's jobs: mem_mb and runtime from its fitted cost (a method's
-    own, e.g. run_method/nfor, where measured; the floors for a rule without records), times the
-    attempt; ``gpu`` for the rules that can use one."""
+    or a network's own, e.g. run_method/nfor or train_network/kpcn, where measured; the floors
+    for a rule without records), times the attempt; ``gpu`` for the rules that can use one."""
 
     def request(wildcards, attempt):
-        method = getattr(wildcards, "method", None)
-        per_method = f"{rule_name}/{METHODS[method]['module']}" if method in METHODS else None
-        cost = JOB_COSTS.get(per_method) or JOB_COSTS.get(rule_name, JobCost())
+        method, network = getattr(wildcards, "method", None), getattr(wildcards, "network", None)
+        own = (f"{rule_name}/{METHODS[method]['module']}" if method in METHODS else
+               f"{rule_name}/{network}" if network else None)
+        cost = JOB_COSTS.get(own) or JOB_COSTS.get(rule_name, JobCost())
         pixels, entries, spp = _job_size(rule_name, wildcards)
         return {key: value * attempt for key, value in
                 job_request(*estimate_job(cost, pixels=pixels, entries=entries, spp=spp)).items()}
