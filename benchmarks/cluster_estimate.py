@@ -9,8 +9,8 @@ viewer pages per case, the oracle study) and prices each with ``mcbench.resource
 ``benchmarks/job_costs.py`` to measured runs): CPU-hours from the typical (mean) job's fit, the
 requests (memory, run time) from the largest job's. CPU-seconds are a job's estimated wall seconds
 times its threads; render estimates are the wall seconds measured with the default config's
-``render_threads`` (2), not scaled down for more threads, so the CPU-hours of renders at 8
-threads are over-estimated by whatever their parallel efficiency loses. Training is not part of
+``render_threads`` (1), counted as one core each whatever a config's ``render_threads`` (a
+render's CPU-seconds do not shrink with more threads; its wall time would). Training is not part of
 the main job (committed weights) and is not counted. GPU-hours are not estimated: no GPU
 render was measured here; the renders' share of the CPU-hours is what a GPU would take over.
 """
@@ -30,7 +30,7 @@ from mcbench.weights import is_learned_method  # noqa: E402
 from methods import method_table  # noqa: E402
 from scenes import load_scene  # noqa: E402
 
-MEASURED_RENDER_THREADS = 2
+MEASURED_RENDER_THREADS = 1
 
 
 def planned_jobs(config: dict) -> list[dict]:
