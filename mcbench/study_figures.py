@@ -48,10 +48,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from mcbench.figures import _ordered, _pyplot, _style, error_curves, error_curves_figure, save_figure
+from mcbench.figures import _pyplot, _style, error_curves, error_curves_figure, save_figure
 
-__all__ = ["STUDY_FIGURES", "study_figure_paths", "score_curves", "average_scores", "candidate_sizes",
-           "score_size_points", "score_size_summary", "input_closure", "closure_seconds", "own_seconds",
+__all__ = ["STUDY_FIGURES", "study_figure_paths", "paper_recommended", "curve_candidates", "score_curves",
+           "average_scores", "candidate_sizes", "score_size_points", "score_size_summary", "input_closure", "closure_seconds", "own_seconds",
            "pareto_front", "speed_score_points", "read_render_seconds", "loglog_interp", "equal_time_table",
            "equal_time_curves", "study_error_curves_figure", "score_curves_figure", "score_size_figure",
            "speed_score_figure", "equal_time_figure", "write_study_figures"]
@@ -65,6 +65,25 @@ def study_figure_paths(figures_dir: str | Path, metric: str) -> dict[str, str]:
     ``{key: <figures_dir>/<key>_<metric>.png}`` for every key of :data:`STUDY_FIGURES`
     (the workflow's ``figures_dir`` is ``results/figures/study``)."""
     return {key: str(Path(figures_dir) / f"{key}_{metric}.png") for key in STUDY_FIGURES}
+
+
+def paper_recommended() -> list[str]:
+    """Harness names of the paper's recommended ensembles (Sec. 5.3.5-5.3.6; #27, #20, #10,
+    #18), a default for ``recommended`` until the study's own recommendations are computed."""
+    from mcbench.pool import PAPER_RECOMMENDATIONS, candidate_name
+
+    ids = [PAPER_RECOMMENDATIONS["overall"]["best"], PAPER_RECOMMENDATIONS["overall"]["second"],
+           *PAPER_RECOMMENDATIONS["size"].values(), *PAPER_RECOMMENDATIONS["band"].values()]
+    return [candidate_name(i) for i in dict.fromkeys(ids)]
+
+
+def curve_candidates(recommended: list[str]) -> list[str]:
+    """The candidates drawn as lines: the eight bases in the paper's order, then ``recommended``
+    (in its order, bases and repeats left out)."""
+    from mcbench.pool import BASES
+
+    bases = list(BASES.values())
+    return bases + [name for name in dict.fromkeys(recommended) if name not in bases]
 
 
 # --------------------------------------------------------------------------- scores
@@ -457,8 +476,8 @@ def score_curves_figure(curves: pd.DataFrame, averages: pd.Series, path: str | P
     (:func:`average_scores`) as horizontal bars, best on top, those of the left panel in their
     colours and the others grey."""
     plt = _pyplot()
-    names = _ordered(curves.columns, labels or {})
-    styles = _style(names, noisy)
+    names = list(curves.columns)
+    styles = _style([noisy] + [n for n in names if n != noisy], noisy)
     height = max(4.2, 0.16 * len(averages) + 1.0)
     figure, (left, right) = plt.subplots(1, 2, figsize=(11.5, height), gridspec_kw={"width_ratios": [1.5, 1]})
     for name in names:
@@ -531,22 +550,32 @@ def score_size_figure(points: pd.DataFrame, summary: pd.DataFrame, path: str | P
     save_figure(figure, path)
 
 
+def _short(label: str) -> str:
+    """A pool label's ID (``"#27"`` of ``"#27 KPCN+NFOR+OIDN+RDFC"``), other labels whole."""
+    head = label.split(" ", 1)[0]
+    return head if head.startswith("#") and head[1:].isdigit() else label
+
+
+# label offsets (points) cycled over annotated points in cost order, so neighbours differ
+_OFFSETS = ((5, 5), (5, -10), (-14, 8), (6, 14), (-16, -12))
+
+
 def speed_score_figure(points: pd.DataFrame, path: str | Path, *, metric: str, labels: dict[str, str] | None = None,
                        annotate: list[str] = ()) -> None:
     """Every candidate's total cost per case (log x, seconds) against its ``Avg.`` score
     (:func:`speed_score_points`), coloured by ensemble size; the Pareto front (max score, min
     cost) as a step line through ringed points. Only the front and ``annotate`` are labelled,
-    so 39 candidates stay legible. Upper left is better."""
+    by their pool ID beside the point and in full in the legend, so 39 candidates stay legible.
+    Upper left is better."""
     from matplotlib.ticker import FuncFormatter
 
     plt = _pyplot()
-    figure, axis = plt.subplots(figsize=(8.6, 5.4))
-    cmap = plt.get_cmap("viridis")
+    figure, axis = plt.subplots(figsize=(9.6, 5.4))
+    cmap = plt.get_cmap("tab10")
     sizes = sorted(set(int(s) for s in points["size"]))
-    top = max(sizes) if sizes else 1
-    for size in sizes:
+    for index, size in enumerate(sizes):
         rows = points[points["size"] == size]
-        axis.scatter(rows["total_seconds"], rows["score"], s=22, color=cmap(size / max(top, 1) * 0.9), zorder=3,
+        axis.scatter(rows["total_seconds"], rows["score"], s=22, color=cmap(index % cmap.N), zorder=3,
                      label=f"size {size}" if size else "other")
     front = points[points["pareto"]].sort_values("total_seconds")
     if len(front):
@@ -554,10 +583,18 @@ def speed_score_figure(points: pd.DataFrame, path: str | Path, *, metric: str, l
         ys = np.append(front["score"].to_numpy(np.float64), float(front["score"].iloc[-1]))
         axis.step(xs, ys, where="post", color="tab:red", linewidth=1.0, alpha=0.8, zorder=2, label="Pareto front")
         axis.scatter(front["total_seconds"], front["score"], s=60, facecolors="none", edgecolors="tab:red", zorder=4)
-    shown = list(dict.fromkeys(list(front.index) + [n for n in annotate if n in points.index]))
-    for rank, name in enumerate(sorted(shown, key=lambda n: points.loc[n, "total_seconds"])):
-        axis.annotate(_label(name, labels), (points.loc[name, "total_seconds"], points.loc[name, "score"]),
-                      fontsize=6.5, xytext=(5, 5 if rank % 2 == 0 else -10), textcoords="offset points", zorder=5)
+    shown = sorted(dict.fromkeys(list(front.index) + [n for n in annotate if n in points.index]),
+                   key=lambda n: points.loc[n, "total_seconds"])
+    for rank, name in enumerate(shown):
+        axis.annotate(_short(_label(name, labels)), (points.loc[name, "total_seconds"], points.loc[name, "score"]),
+                      fontsize=7, xytext=_OFFSETS[rank % len(_OFFSETS)], textcoords="offset points", zorder=5,
+                      color="tab:red" if points.loc[name, "pareto"] else "black")
+    handles, texts = axis.get_legend_handles_labels()
+    for name in shown:
+        full = _label(name, labels)
+        mark = "front" if points.loc[name, "pareto"] else "named"
+        handles.append(plt.Line2D([], [], linestyle="none"))
+        texts.append(f"{full} ({mark}; {points.loc[name, 'total_seconds']:.3g} s, {points.loc[name, 'score']:.1f})")
     axis.set_xscale("log")
     plain = FuncFormatter(lambda value, _: f"{value:g}")
     axis.xaxis.set_major_formatter(plain)
@@ -566,7 +603,8 @@ def speed_score_figure(points: pd.DataFrame, path: str | Path, *, metric: str, l
     axis.tick_params(which="both", labelsize=7)
     axis.grid(True, which="both", alpha=0.3)
     axis.margins(x=0.15, y=0.08)
-    axis.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), frameon=False)
+    axis.legend(handles, texts, fontsize=6.5, loc="upper left", bbox_to_anchor=(1.01, 1.0), frameon=False,
+                handlelength=1.2)
     figure.tight_layout()
     save_figure(figure, path)
 
@@ -578,8 +616,8 @@ def equal_time_figure(ratios: pd.DataFrame, path: str | Path, *, metric: str, la
     candidate beats spending its time on more samples). Points relying on extrapolation beyond
     the largest measured spp (``extrapolated``) are hollow and footnoted."""
     plt = _pyplot()
-    names = _ordered(ratios.columns, labels or {})
-    styles = _style(names, noisy)
+    names = list(ratios.columns)
+    styles = _style([noisy] + [n for n in names if n != noisy], noisy)
     figure, axis = plt.subplots(figsize=(8.6, 4.8))
     spps = ratios.index.to_numpy()
     any_beyond = False

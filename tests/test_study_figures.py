@@ -265,3 +265,11 @@ def test_write_study_figures_refuses_an_unknown_figure(tmp_path):
     with pytest.raises(ValueError, match="unknown study figure"):
         write_study_figures("m.csv", "t.csv", [], {"pie": str(tmp_path / "pie.png")}, metric="relmse",
                             candidates=METHODS, curves=METHODS)
+
+
+def test_paper_recommended_and_curve_candidates():
+    from mcbench.study_figures import curve_candidates, paper_recommended
+
+    assert paper_recommended() == ["ens27", "ens20", "ens10", "ens18"]
+    assert curve_candidates(["ens20", "kpcn", "ens20"]) == ["kpcn", "nfor_dc", "mcgan", "nfor", "kpcn_dc", "oidn",
+                                                           "optix_ae", "rdfc", "ens20"]
