@@ -359,7 +359,7 @@ def equal_time_table(metrics: pd.DataFrame, timings: pd.DataFrame, render_second
     ``metric`` at ``equal_spp``, interpolated in log-log against spp likewise (extrapolated by
     the last segment beyond the largest spp). ``ratio`` = ``error`` / ``noisy_error``: below 1
     the candidate beats spending its time on more samples. Errors are floored at ``tiny`` for
-    the logarithms. Render times that fall as spp grows are timing noise, raised to the running
+    the logarithms (the interpolated noisy error too). Render times that fall as spp grows are timing noise, raised to the running
     maximum; of equal render times the inverse takes the largest spp.
 
     Returns columns scene, spp, candidate, error, method_seconds, render_seconds,
@@ -377,6 +377,8 @@ def equal_time_table(metrics: pd.DataFrame, timings: pd.DataFrame, render_second
         renders = render_seconds[render_seconds["scene"] == scene]
         if renders.empty:
             raise ValueError(f"no render time for scene '{scene}'")
+        if not (np.isfinite(renders["seconds"].to_numpy(np.float64)).all() and (renders["seconds"] > 0).all()):
+            raise ValueError(f"render times of scene '{scene}' must be positive numbers")
         m_spp, m_sec = _monotone_times(renders["spp"].to_numpy(np.float64), renders["seconds"].to_numpy(np.float64))
         r_spp, r_sec = _invertible(m_spp, m_sec)
         noisy_rows = scene_rows[scene_rows["candidate"] == noisy].groupby("spp")["value"].mean().sort_index()
@@ -402,6 +404,7 @@ def equal_time_table(metrics: pd.DataFrame, timings: pd.DataFrame, render_second
                 equal_spp, beyond = loglog_interp(total, r_sec, r_spp,
                                                   slope=None if len(r_spp) > 1 else 1.0)
                 noisy_error, beyond_error = loglog_interp(equal_spp, n_spp, n_err)
+                noisy_error = np.maximum(noisy_error, tiny)
                 error = max(float(values[(spp, name)]), tiny)
                 out.append({"scene": scene, "spp": spp, "candidate": name, "error": error,
                             "method_seconds": cost, "render_seconds": render_time, "total_seconds": total,

@@ -273,3 +273,11 @@ def test_paper_recommended_and_curve_candidates():
     assert paper_recommended() == ["ens27", "ens20", "ens10", "ens18"]
     assert curve_candidates(["ens20", "kpcn", "ens20"]) == ["kpcn", "nfor_dc", "mcgan", "nfor", "kpcn_dc", "oidn",
                                                            "optix_ae", "rdfc", "ens20"]
+
+
+def test_equal_time_refuses_a_render_time_that_is_not_positive():
+    metrics, timings = synthetic_study()
+    times = render_times()
+    times.loc[0, "seconds"] = 0.0
+    with pytest.raises(ValueError, match="must be positive"):
+        equal_time_table(metrics, timings, times, metric="relmse", inputs=INPUTS)
