@@ -117,7 +117,8 @@ def save_figure(figure, path: str | Path, *, dpi: int = 110) -> None:
         plt.close(figure)
 
 
-def _pyplot():
+def pyplot_agg():
+    """matplotlib.pyplot with the non-interactive Agg backend (figures are only written to files)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -132,10 +133,10 @@ def _ordered(names, labels: dict[str, str]) -> list[str]:
     return [name for name in labels if name in names] + [name for name in names if name not in labels]
 
 
-def _style(candidates: list[str], noisy: str) -> dict[str, dict]:
+def candidate_styles(candidates: list[str], noisy: str) -> dict[str, dict]:
     """Line style per candidate: the noisy input dashed grey, the others the colours of
     matplotlib's tab10/tab20 cycle in order (same order, same colours in every figure)."""
-    plt = _pyplot()
+    plt = pyplot_agg()
     cmap = plt.get_cmap("tab10" if len(candidates) <= 10 else "tab20")
     styles, index = {}, 0
     for name in candidates:
@@ -155,10 +156,10 @@ def error_curves_figure(panels: dict[str, pd.DataFrame], path: str | Path, *, me
     labels. Values that are not positive cannot be drawn on a log axis and are left out of
     the curve (a gap), never replaced.
     """
-    plt = _pyplot()
+    plt = pyplot_agg()
     labels = labels or {}
     candidates = _ordered((name for frame in panels.values() for name in frame.columns), labels)
-    styles = _style(candidates, noisy)
+    styles = candidate_styles(candidates, noisy)
     columns = max(1, min(columns, len(panels)))
     rows = math.ceil(len(panels) / columns)
     legend_rows = math.ceil(len(candidates) / 6)
@@ -193,11 +194,11 @@ def speed_error_figure(points: pd.DataFrame, path: str | Path, *, metric: str,
     (log y), from :func:`speed_error_points`, each point labelled. Lower left is better."""
     from matplotlib.ticker import FuncFormatter
 
-    plt = _pyplot()
+    plt = pyplot_agg()
     labels = labels or {}
     # the colours of error_curves_figure (its first colour is the noisy input's grey, skipped)
     order = _ordered(points.index, labels)
-    styles = _style([noisy] + order, noisy)
+    styles = candidate_styles([noisy] + order, noisy)
     figure, axis = plt.subplots(figsize=(6.4, 4.6))
     by_time = sorted(order, key=lambda name: points.loc[name, "total_seconds"])
     for rank, name in enumerate(by_time):

@@ -48,7 +48,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from mcbench.figures import _pyplot, _style, error_curves, error_curves_figure, save_figure
+from mcbench.figures import pyplot_agg, candidate_styles, error_curves, error_curves_figure, save_figure
 
 __all__ = ["STUDY_FIGURES", "study_figure_paths", "paper_recommended", "curve_candidates", "score_curves",
            "average_scores", "candidate_sizes", "score_size_points", "score_size_summary", "input_closure", "closure_seconds", "own_seconds",
@@ -478,9 +478,9 @@ def score_curves_figure(curves: pd.DataFrame, averages: pd.Series, path: str | P
     ``curves`` (:func:`score_curves`), one line each; right, every candidate's ``Avg.``
     (:func:`average_scores`) as horizontal bars, best on top, those of the left panel in their
     colours and the others grey."""
-    plt = _pyplot()
+    plt = pyplot_agg()
     names = list(curves.columns)
-    styles = _style([noisy] + [n for n in names if n != noisy], noisy)
+    styles = candidate_styles([noisy] + [n for n in names if n != noisy], noisy)
     height = max(4.2, 0.16 * len(averages) + 1.0)
     figure, (left, right) = plt.subplots(1, 2, figsize=(11.5, height), gridspec_kw={"width_ratios": [1.5, 1]})
     for name in names:
@@ -521,7 +521,7 @@ def score_size_figure(points: pd.DataFrame, summary: pd.DataFrame, path: str | P
     size's candidates (:func:`score_size_summary`), the names of ``annotate`` written beside
     their points. ``ci``: optional per-candidate confidence intervals, a frame indexed by
     candidate with columns ``ci_low``, ``ci_high`` (scores), drawn as thin vertical bars."""
-    plt = _pyplot()
+    plt = pyplot_agg()
     figure, axis = plt.subplots(figsize=(7.2, 4.8))
     x = points["size"].to_numpy(np.float64) + _jitter(points)
     y = points["score"].to_numpy(np.float64)
@@ -572,7 +572,7 @@ def speed_score_figure(points: pd.DataFrame, path: str | Path, *, metric: str, l
     Upper left is better."""
     from matplotlib.ticker import FuncFormatter
 
-    plt = _pyplot()
+    plt = pyplot_agg()
     figure, axis = plt.subplots(figsize=(9.6, 5.4))
     cmap = plt.get_cmap("tab10")
     sizes = sorted(set(int(s) for s in points["size"]))
@@ -618,9 +618,9 @@ def equal_time_figure(ratios: pd.DataFrame, path: str | Path, *, metric: str, la
     scenes, :func:`equal_time_curves`) against spp, log-y with a line at 1 (below: the
     candidate beats spending its time on more samples). Points relying on extrapolation beyond
     the largest measured spp (``extrapolated``) are hollow and footnoted."""
-    plt = _pyplot()
+    plt = pyplot_agg()
     names = list(ratios.columns)
-    styles = _style([noisy] + [n for n in names if n != noisy], noisy)
+    styles = candidate_styles([noisy] + [n for n in names if n != noisy], noisy)
     figure, axis = plt.subplots(figsize=(8.6, 4.8))
     spps = ratios.index.to_numpy()
     any_beyond = False
