@@ -27,7 +27,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from mcbench.config import read_config_file  # noqa: E402
 from mcbench.resources import JobCost, estimate_job, job_request, load_job_costs  # noqa: E402
 from mcbench.weights import is_learned_method  # noqa: E402
-from methods import method_table  # noqa: E402
+from methods import config_method_table  # noqa: E402
 from scenes import load_scene  # noqa: E402
 
 MEASURED_RENDER_THREADS = 1
@@ -35,7 +35,7 @@ MEASURED_RENDER_THREADS = 1
 
 def planned_jobs(config: dict) -> list[dict]:
     """One dict per job: rule, pixels, entries, spp, threads."""
-    methods = method_table(config["denoisers"], config["combiners"], is_learned=is_learned_method)
+    methods = config_method_table(config, is_learned=is_learned_method)
     learned = [n for n, s in methods.items() if s["kind"] == "denoiser" and s["learned"]] if config["batch_methods"] else []
     combiners = [n for n, s in methods.items() if s["kind"] == "combiner"] if config["batch_methods"] else []
     singles = [n for n in methods if n not in set(learned) | set(combiners)]

@@ -41,9 +41,10 @@ from typing import Callable
 
 from mcbench import BenchError
 from mcbench.buffers import denoise_each_buffer  # re-exported: single-image methods call it
+from mcbench.pool import expand_methods
 
 __all__ = ["KINDS", "NOISY", "NOISY_LABEL", "UnknownMethodError", "available_methods", "load_method",
-           "denoise_each_buffer", "method_parameters", "check_params", "method_table"]
+           "denoise_each_buffer", "method_parameters", "check_params", "method_table", "config_method_table"]
 
 KINDS = {"denoiser": "denoise", "combiner": "combine"}
 
@@ -156,7 +157,8 @@ def _default_label(module: ModuleType, inputs: list[str], params: dict) -> str:
     return f"{module.LABEL} ({'; '.join(details)})" if details else module.LABEL
 
 
-def method_table(denoisers: list, combiners: list, *, is_learned: Callable[[ModuleType], bool]) -> dict:
+def method_table(denoisers: list, combiners: list, *, is_learned: Callable[[ModuleType], bool],
+                 keys: tuple[list[str], list[str]] | None = None) -> dict:
     """Ordered ``{candidate name: {kind, module, params, inputs, label, learned}}`` of a config.
 
     Everything that would otherwise fail hours later or silently change a table stops here, with
@@ -164,11 +166,18 @@ def method_table(denoisers: list, combiners: list, *, is_learned: Callable[[Modu
     does not allow, the reserved name ``noisy``, duplicate names, combiner inputs that are not an
     earlier entry, and duplicate table labels (default labels include inputs and params, so two
     variants of one method differ). Imports only the method modules the config names.
+
+    ``keys`` (one list for the denoisers, one for the combiners) names where each entry comes
+    from in error messages; default ``denoisers[i]``/``combiners[i]`` (entries merged from the
+    candidate pool have keys of their own, ``mcbench.pool.expand_methods``).
     """
     table = {}
-    entries = [("denoiser", f"denoisers[{i}]", {"name": e} if isinstance(e, str) else dict(e))
-               for i, e in enumerate(denoisers)]
-    entries += [("combiner", f"combiners[{i}]", dict(e)) for i, e in enumerate(combiners)]
+    if keys is None:
+        keys = ([f"denoisers[{i}]" for i in range(len(denoisers))], [f"combiners[{i}]" for i in range(len(combiners))])
+    if len(keys[0]) != len(denoisers) or len(keys[1]) != len(combiners):
+        raise ValueError("method_table: keys must name every denoiser and combiner entry")
+    entries = [("denoiser", key, {"name": e} if isinstance(e, str) else dict(e)) for key, e in zip(keys[0], denoisers)]
+    entries += [("combiner", key, dict(e)) for key, e in zip(keys[1], combiners)]
     for kind, key, entry in entries:
         name = entry["name"]
         if name == NOISY:
@@ -193,3 +202,12 @@ def method_table(denoisers: list, combiners: list, *, is_learned: Callable[[Modu
                              f"'{labels[spec['label']]}'; table rows must have distinct labels")
         labels[spec["label"]] = name
     return table
+
+
+def config_method_table(config: dict, *, is_learned: Callable[[ModuleType], bool]) -> dict:
+    """:func:`method_table` of a resolved config: its ``denoisers`` and ``combiners`` with the
+    candidate pool merged in when ``study.pool`` is set (:func:`mcbench.pool.expand_methods`),
+    errors naming the config key (or ``study.pool (#k name)``) of the entry at fault."""
+    denoisers, combiners = expand_methods(config)
+    return method_table([e for _, e in denoisers], [e for _, e in combiners], is_learned=is_learned,
+                        keys=([k for k, _ in denoisers], [k for k, _ in combiners]))

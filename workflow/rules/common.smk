@@ -13,11 +13,12 @@ sys.path.insert(0, str(Path(workflow.basedir)))  # methods/, scenes/, mcbench/ f
 from mcbench import BenchError  # noqa: E402
 from mcbench.comparisons import comparison_role  # noqa: E402
 from mcbench.config import config_digest, resolve_config  # noqa: E402
-from mcbench.metrics import METRICS  # noqa: E402
+from mcbench.metrics import ALL_METRICS  # noqa: E402
+from mcbench.pool import POOL  # noqa: E402
 from mcbench.resources import JobCost, estimate_job, job_request, load_job_costs  # noqa: E402
 from mcbench.seeds import training_seeds  # noqa: E402
 from mcbench.weights import COMMITTED_WEIGHTS, is_learned_method  # noqa: E402
-from methods import NOISY, NOISY_LABEL, load_method, method_table  # noqa: E402
+from methods import NOISY, NOISY_LABEL, config_method_table, load_method  # noqa: E402
 from scenes import available_scenes, load_scene  # noqa: E402
 
 
@@ -34,15 +35,28 @@ RESULTS = "results"
 # names another folder (relative to the working directory).
 WEIGHTS_DIR = config["weights_dir"] or str(COMMITTED_WEIGHTS)
 
-METHODS = method_table(config["denoisers"], config["combiners"], is_learned=is_learned_method)
+METHODS = config_method_table(config, is_learned=is_learned_method)
 for _index, _scene in enumerate(config["scenes"]):
     load_scene(_scene, config_key=f"scenes[{_index}]")
 SCENES = list(config["scenes"])
 SPPS = sorted(config["spp"])
 CANDIDATES = list(METHODS)
-# The ranking pool: every candidate but the comparison methods of Zheng et al. Sec. 5.2 (one-hot
-# selection, naive averages, ablations), which rank in their own tables (comparisons.smk).
-RANKED = [name for name in CANDIDATES if comparison_role(METHODS[name]) is None]
+# The ranking pool. With study.pool: exactly the 39 candidates of Zheng et al. Sec. 5.3.1 the
+# config runs (mcbench.pool), in ID order; otherwise every candidate but the comparison methods
+# of Sec. 5.2 (one-hot selection, naive averages, ablations; ranked in comparisons.smk). Every
+# other method is an extra, scored in a pool that adds it alone (rule extras_table).
+POOL_STUDY = config["study"]["pool"]
+if POOL_STUDY:
+    RANKED = [c.name for c in POOL if c.name in METHODS]
+else:
+    RANKED = [name for name in CANDIDATES if comparison_role(METHODS[name]) is None]
+EXTRAS = [name for name in CANDIDATES if name not in RANKED]
+POOL_NOTE = ("" if not POOL_STUDY else
+             "Rows: the 39 candidates of Zheng et al. 2021 Sec. 5.3.1 in ID order (40 entries with the noisy "
+             "input, as the paper's Table 3); ensembles marked (filled) or (forced) are our choice of the "
+             "members the paper does not name (mcbench.pool)." if len(RANKED) == len(POOL) else
+             f"Partial pool: {len(RANKED)} of the 39 candidates (study.ensembles), {len(RANKED) + 1} entries "
+             f"with the noisy input, so the scores are on another scale than the paper's 40-entry Table 3.")
 LABELS = {NOISY: NOISY_LABEL, **{name: spec["label"] for name, spec in METHODS.items()}}
 METRIC_NAMES = list(config["metrics"])
 REFERENCE_CHUNKS = config["reference"]["chunks"]
@@ -76,7 +90,7 @@ wildcard_constraints:
     spp=r"\d+",
     chunk=r"\d+",
     seed=r"\d+",
-    metric="|".join(METRICS),
+    metric="|".join(ALL_METRICS),
 
 
 # Which methods share a job (config batch_methods): the learned denoisers of a case in one job,
