@@ -222,6 +222,58 @@ def flip(image, reference) -> float:
     return _flip_evaluate(image, reference)[1]
 
 
+def relmse_corrected_map(image, reference, reference_variance) -> np.ndarray:
+    """Per-pixel reference-noise-corrected relative MSE, (H, W) float64 (mean over channels).
+
+    Terms of :func:`relmse_corrected` before the mean over pixels; see there. Negative where the
+    image is closer to the reference than the reference's own noise (an unbiased estimate of a
+    small non-negative number may be negative).
+    """
+    y, r = _pair(image, reference)
+    v = np.asarray(reference_variance, dtype=np.float64)
+    if v.shape != r.shape:
+        raise ValueError(f"reference variance shape {v.shape} differs from reference shape {r.shape}")
+    if not np.all(np.isfinite(v)):
+        raise ValueError("reference variance holds NaN or Inf values")
+    v = np.maximum(v, 0.0)
+    numerator = (y - r) ** 2 - v
+    denominator = np.maximum(r * r - v, 0.0) + RELMSE_EPSILON
+    return np.mean(numerator / denominator, axis=-1)
+
+
+def relmse_corrected(image, reference, reference_variance) -> float:
+    """Relative MSE corrected for the reference's own Monte Carlo noise.
+
+    ``reference_variance`` (H, W, 3): the per-pixel, per-channel variance of the reference's
+    mean (the ``variance`` layer the references store). With μ the true radiance, the reference
+    r = μ + e with E[e] = 0 and Var[e] = v, and the image y independent of r (the references use
+    seeds of their own, ``mcbench.seeds``):
+
+    * E[(y − r)² | y] = (y − μ)² + v, so (y − r)² − v is an unbiased estimate of the numerator
+      (y − μ)² that :func:`relmse` means;
+    * E[r²] = μ² + v, so r² − v is an unbiased estimate of μ² in the denominator μ² + 0.01.
+
+    Per pixel-channel: ((y − r)² − v) / (max(r² − v, 0) + 0.01), then the mean over pixels and
+    channels. The numerator is exactly unbiased; the denominator's correction removes the
+    first-order bias v / (μ² + 0.01) of the raw ratio. What remains comes from dividing two
+    estimates: with Var[r²] ≈ 4 μ² v it is about 4 · relMSE(y, μ) · v / μ² per pixel, the raw
+    bias times four times the candidate's own relMSE (a few per cent of it for a good
+    candidate; tested). The clamp at 0 only acts where the reference's noise exceeds its value,
+    where no metric can see the truth. The raw relMSE against a noisy
+    reference overstates every candidate's error by about mean(v / (μ² + 0.01)), the reference's
+    noise floor (``mcbench.reports.reference_relmse_floor``), which at high spp can exceed the
+    candidates' own errors and reorders them; the corrected one does not. Not clamped at 0: a
+    candidate better than the reference's noise floor may score slightly below 0 (clamping would
+    bias it upwards). tests/test_metrics.py checks the unbiasedness on synthetic data.
+    """
+    return float(np.mean(relmse_corrected_map(image, reference, reference_variance)))
+
+
 METRICS = {"relmse": relmse, "smape": smape, "dssim": dssim, "flip": flip}
-# How tables, captions and the viewer name each metric (keys: those of METRICS).
-METRIC_LABELS = {"relmse": "relMSE", "smape": "SMAPE", "dssim": "DSSIM", "flip": "HDR-FLIP"}
+# Metrics that also need the reference's per-pixel variance of the mean (image, reference, variance).
+REFERENCE_METRICS = {"relmse_corrected": relmse_corrected}
+# Every metric a config may name (the schema's enum; a test checks it).
+ALL_METRICS = (*METRICS, *REFERENCE_METRICS)
+# How tables, captions and the viewer name each metric (keys: those of ALL_METRICS).
+METRIC_LABELS = {"relmse": "relMSE", "smape": "SMAPE", "dssim": "DSSIM", "flip": "HDR-FLIP",
+                 "relmse_corrected": "relMSE (reference-noise corrected)"}

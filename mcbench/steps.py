@@ -18,7 +18,7 @@ from mcbench import BenchError
 from mcbench.buffers import Denoised, RenderBuffers
 from mcbench.exr import check_finite, read_layers, read_metadata, write_layers
 from mcbench.io import read_json, read_table, write_csv, write_json, write_text
-from mcbench.metrics import METRICS
+from mcbench.metrics import METRICS, REFERENCE_METRICS
 
 NOISY = "noisy"
 
@@ -143,8 +143,10 @@ def compute_case_metrics(scene: str, spp: int, reference_path: str, render_path:
     from mcbench.metrics import flip_with_map
 
     start = time.perf_counter()
-    reference = read_layers(reference_path, ["color"])
+    needs_variance = any(metric in REFERENCE_METRICS for metric in metrics)
+    reference = read_layers(reference_path, ["color", "variance"] if needs_variance else ["color"])
     check_finite(reference_path, reference)
+    reference_variance = reference.get("variance")
     reference = reference["color"]
     images = {NOISY: RenderBuffers.load(render_path).color}
     for candidate, path in candidate_paths.items():
@@ -159,7 +161,12 @@ def compute_case_metrics(scene: str, spp: int, reference_path: str, render_path:
         if flip_maps_path is not None:
             flip_maps[candidate], flip_value = flip_with_map(image, reference)
         for metric in metrics:
-            value = flip_value if metric == "flip" and flip_value is not None else METRICS[metric](image, reference)
+            if metric == "flip" and flip_value is not None:
+                value = flip_value
+            elif metric in REFERENCE_METRICS:
+                value = REFERENCE_METRICS[metric](image, reference, reference_variance)
+            else:
+                value = METRICS[metric](image, reference)
             rows.append({"scene": scene, "spp": spp, "candidate": candidate, "metric": metric, "value": value})
     frame = pd.DataFrame(rows)
     if flip_maps_path is not None:
@@ -207,13 +214,16 @@ def gather_timings(paths: list[str], output_path: str) -> pd.DataFrame:
 
 
 def write_rankings(metrics_csv: str, metric: str, csv_path: str, md_path: str, *,
-                   candidates: list[str], labels: dict[str, str], tex_path: str | None = None) -> pd.DataFrame:
+                   candidates: list[str], labels: dict[str, str], tex_path: str | None = None,
+                   order: list[str] | None = None, note: str = "") -> pd.DataFrame:
     """Score-and-rank table (Zheng et al. Table 3 layout) for one metric, as CSV and Markdown,
     and as a LaTeX booktabs table at ``tex_path`` when given (label ``tab:ranking-<metric>``).
 
     ``candidates`` (with the noisy input) is the ranking pool: rows of other candidates (the
-    comparison methods, ranked in their own tables) are left out; a metrics table missing a
-    pool candidate, or any incomplete case, stops here instead of being ranked."""
+    extra methods, ranked in their own tables) are left out; a metrics table missing a pool
+    candidate, or any incomplete case, stops here instead of being ranked. ``order``: the rows'
+    order (the pool's ID order; default best Avg. first). ``note``: a sentence for the Markdown
+    (e.g. that the pool is partial, so the scores are on another scale than the paper's)."""
     from mcbench.metrics import METRIC_LABELS
     from mcbench.ranking import check_complete, format_latex, format_markdown, ranking_table
 
@@ -222,7 +232,7 @@ def write_rankings(metrics_csv: str, metric: str, csv_path: str, md_path: str, *
     metrics = metrics[metrics["candidate"].isin(candidates)]
     check_complete(metrics[metrics["metric"] == metric], candidates=candidates, metric_names=[metric],
                    source=metrics_csv)
-    table = ranking_table(metrics, metric)
+    table = ranking_table(metrics, metric, order=order)
     write_csv(csv_path, table.reset_index(), float_format="%.4f")
     n_cases = metrics[metrics["metric"] == metric].groupby(["scene", "spp"]).ngroups
     n_entries = table.shape[0]
@@ -230,11 +240,39 @@ def write_rankings(metrics_csv: str, metric: str, csv_path: str, md_path: str, *
                f"{n_cases} test cases the {n_entries} entries (candidates and the noisy input) get "
                f"linearly spaced scores from {n_entries} (lowest error) to 1; columns are the mean over "
                f"scenes per spp, `Avg.` the mean over spp. Higher is better.")
-    write_text(md_path, f"# Ranking by {metric}\n\n{scoring}\n\n" + format_markdown(table, labels) + "\n")
+    shown_note = f"\n\n{note}" if note else ""
+    write_text(md_path, f"# Ranking by {metric}\n\n{scoring}{shown_note}\n\n" + format_markdown(table, labels) + "\n")
     if tex_path is not None:
         caption = (f"Ranking by {METRIC_LABELS.get(metric, metric)}. " + scoring.replace("`", "")
                    + " Best per column in bold.")
         write_text(tex_path, format_latex(table, labels, caption=caption, label=f"tab:ranking-{metric}"))
+    return table
+
+
+def write_extras_rankings(metrics_csv: str, metric: str, csv_path: str, md_path: str, *, pool: list[str],
+                          extras: list[str], labels: dict[str, str], tex_path: str | None = None) -> pd.DataFrame:
+    """The extra methods' scores (:func:`mcbench.ranking.extras_table`): each method outside the
+    ranking pool scored in a pool that adds it alone to ``pool`` (the candidates and the noisy
+    input), as CSV, Markdown and LaTeX (label ``tab:extras-<metric>``). No extras: a table with a
+    sentence saying so."""
+    from mcbench.metrics import METRIC_LABELS
+    from mcbench.ranking import extras_table, format_latex, format_markdown
+
+    metrics = read_table(metrics_csv, columns=("scene", "spp", "candidate", "metric", "value"))
+    table = extras_table(metrics, metric, pool=list(pool), extras=list(extras))
+    write_csv(csv_path, table.reset_index(), float_format="%.4f")
+    entries = len(pool) + 1
+    scoring = (f"Each method outside the ranking pool is scored in a pool that adds it alone to the "
+               f"{len(pool)} entries of the main table (candidates and the noisy input): in each test case the "
+               f"{entries} entries get scores from {entries} (lowest error) to 1, and the row is the method's own "
+               f"score (Zheng et al. 2021 Sec. 5.3.3), so the main table never depends on these methods.")
+    body = format_markdown(table, labels) if len(table) else "No method outside the ranking pool in this config."
+    write_text(md_path, f"# Extra methods by {METRIC_LABELS.get(metric, metric)}\n\n{scoring}\n\n{body}\n")
+    if tex_path is not None:
+        text = (format_latex(table, labels, caption=f"Extra methods by {METRIC_LABELS.get(metric, metric)}. "
+                             + scoring + " Best per column in bold.", label=f"tab:extras-{metric}")
+                if len(table) else "% No method outside the ranking pool in this config.\n")
+        write_text(tex_path, text)
     return table
 
 
@@ -483,8 +521,10 @@ def write_viewer_case(scene: str, spp: int, reference_path: str, render_path: st
     ``flip_maps_path``: the case's FLIP maps from :func:`compute_case_metrics` (else evaluated here)."""
     from mcbench.viewer import CASE_RECORD, write_case_images
 
-    reference = read_layers(reference_path, ["color"])
+    needs_variance = any(metric in REFERENCE_METRICS for metric in metrics)
+    reference = read_layers(reference_path, ["color", "variance"] if needs_variance else ["color"])
     check_finite(reference_path, reference)
+    reference_variance = reference.get("variance")
     reference = reference["color"]
     sources = {NOISY: render_path, **candidate_paths}
     images, weights = {}, {}

@@ -236,3 +236,45 @@ def test_flip_refuses_what_it_cannot_compare():
 def test_metrics_registry_order():
     assert list(METRICS) == ["relmse", "smape", "dssim", "flip"]
     assert METRICS["flip"] is flip
+
+
+def test_relmse_corrected_is_unbiased_where_the_raw_one_is_not():
+    """Synthetic truth μ, a fixed image y, references r = μ + e with known per-pixel variance v:
+    over many reference draws the corrected relMSE averages to the true relMSE (y vs μ), while
+    the raw relMSE is off by about the reference's noise floor mean(v / (μ² + 0.01))."""
+    from mcbench.metrics import relmse_corrected
+
+    rng = np.random.default_rng(7)
+    mu = rng.uniform(0.2, 3.0, size=(16, 16, 3))
+    y = mu * (1.0 + rng.normal(0.0, 0.05, size=mu.shape))          # a candidate with a small error
+    v = (0.04 * mu) ** 2                                             # the reference's variance of the mean
+    truth = relmse(y, mu)
+    floor = float(np.mean(v / (mu * mu + 0.01)))
+    raw, corrected = [], []
+    for _ in range(400):
+        r = mu + rng.normal(0.0, 1.0, size=mu.shape) * np.sqrt(v)
+        raw.append(relmse(y, r))
+        corrected.append(relmse_corrected(y, r, v))
+    raw_bias, corrected_bias = np.mean(raw) - truth, np.mean(corrected) - truth
+    assert raw_bias == pytest.approx(floor, rel=0.15)                 # the raw metric sees the noise
+    assert abs(corrected_bias) < 0.05 * raw_bias                       # the corrected one does not
+    # what remains is the ratio's second-order term, about 4 relMSE(y, μ) v / μ² per pixel
+    residual = float(np.mean(4.0 * relmse(y, mu) * v / (mu * mu + 0.01)))
+    assert abs(corrected_bias) < 3.0 * residual + 4.0 * np.std(corrected) / np.sqrt(400)
+
+
+def test_relmse_corrected_reduces_to_relmse_for_a_noiseless_reference_and_checks_its_input():
+    from mcbench.metrics import relmse_corrected, relmse_corrected_map
+
+    rng = np.random.default_rng(3)
+    r = rng.uniform(0.0, 2.0, size=(8, 8, 3))
+    y = r + rng.normal(0.0, 0.1, size=r.shape)
+    assert relmse_corrected(y, r, np.zeros_like(r)) == pytest.approx(relmse(y, r), rel=1e-12)
+    # an image equal to the reference, whose noise is v: each term is -v / (r² - v + 0.01)
+    v = np.full_like(r, 1e-3)
+    expected = np.mean(-v / (np.maximum(r * r - v, 0.0) + 0.01), axis=-1)
+    np.testing.assert_allclose(relmse_corrected_map(r, r, v), expected, rtol=1e-12)
+    with pytest.raises(ValueError, match="variance shape"):
+        relmse_corrected(y, r, v[:4])
+    with pytest.raises(ValueError, match="NaN or Inf"):
+        relmse_corrected(y, r, np.full_like(r, np.nan))
