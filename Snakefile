@@ -40,6 +40,7 @@ rule all:
         rules.gather_metrics.output,
         rules.gather_timings.output,
         expand(rules.ranking_table.output, metric=config["metrics"]),
+        expand(rules.extras_table.output, metric=config["metrics"]),
         rules.scene_table.output,
         rules.gallery.output,
         expand(rules.error_curves.output, metric=config["metrics"]),

@@ -16,7 +16,8 @@ from scipy.stats import rankdata
 
 from mcbench import BenchError
 
-__all__ = ["IncompleteMetricsError", "check_complete", "case_scores", "ranking_table", "format_markdown",
+__all__ = ["IncompleteMetricsError", "check_complete", "case_scores", "score_table", "ranking_table", "extras_table",
+           "format_markdown",
            "format_latex", "latex_escape"]
 
 COLUMNS = ["scene", "spp", "candidate", "metric", "value"]
@@ -81,17 +82,52 @@ def case_scores(metrics: pd.DataFrame, metric: str) -> pd.DataFrame:
     return pd.concat(out, ignore_index=True)
 
 
-def ranking_table(metrics: pd.DataFrame, metric: str) -> pd.DataFrame:
-    """Table 3 of the paper: rows candidates, columns spp (mean score over scenes) and ``Avg.``
-    (mean over spp), sorted by overall score, best first."""
-    scores = case_scores(metrics, metric)
-    per_spp = scores.groupby(["candidate", "spp"])["score"].mean().unstack("spp")
+def score_table(scores: pd.DataFrame) -> pd.DataFrame:
+    """Per-case scores (:func:`case_scores`) reduced as Table 3: rows candidates, columns spp (mean
+    score over scenes, as strings) and ``Avg.`` (mean over spp), in the order the candidates
+    first appear."""
+    per_spp = scores.groupby(["candidate", "spp"], sort=False)["score"].mean().unstack("spp")
     per_spp = per_spp.reindex(columns=sorted(per_spp.columns))
     per_spp.columns = [str(c) for c in per_spp.columns]
     per_spp["Avg."] = per_spp.mean(axis=1)
-    per_spp = per_spp.sort_values("Avg.", ascending=False, kind="stable")
     per_spp.index.name = "candidate"
     return per_spp
+
+
+def ranking_table(metrics: pd.DataFrame, metric: str, *, order: list[str] | None = None) -> pd.DataFrame:
+    """Table 3 of the paper: rows candidates, columns spp (mean score over scenes) and ``Avg.``
+    (mean over spp); sorted by overall score, best first, or in ``order`` (every candidate of the
+    table once, e.g. the pool's ID order)."""
+    table = score_table(case_scores(metrics, metric))
+    if order is None:
+        return table.sort_values("Avg.", ascending=False, kind="stable")
+    if sorted(order) != sorted(table.index):
+        raise ValueError(f"order names {sorted(set(order) ^ set(table.index))[:6]} not (only) in the table")
+    return table.loc[list(order)]
+
+
+def extras_table(metrics: pd.DataFrame, metric: str, *, pool: list[str], extras: list[str]) -> pd.DataFrame:
+    """Scores of methods outside the ranking pool, each scored in a pool that adds it alone.
+
+    For every extra method e and case, the entries ``pool + [e]`` (K = len(pool) + 1) are scored as
+    in :func:`case_scores` (K for the lowest error, 1 for the highest, ties averaged) and e's score is
+    kept: e's row says where it would stand among the pool, and the pool's own table never depends
+    on which extras a config runs. Returns rows ``extras`` (in that order), columns spp and ``Avg.``
+    as :func:`ranking_table`. Every case must hold every pool member and extra (checked).
+    """
+    rows = metrics[metrics["metric"] == metric]
+    check_complete(rows[rows["candidate"].isin(pool + extras)], candidates=list(pool) + list(extras),
+                   metric_names=[metric])
+    out = []
+    for (scene, spp), case in rows.groupby(["scene", "spp"], sort=True):
+        values = dict(zip(case["candidate"], case["value"].to_numpy(dtype=np.float64)))
+        pool_values = np.array([values[name] for name in pool], dtype=np.float64)
+        for name in extras:
+            scores = rankdata(-np.append(pool_values, values[name]), method="average")
+            out.append({"scene": scene, "spp": spp, "candidate": name, "score": float(scores[-1])})
+    if not out:
+        return pd.DataFrame(columns=["Avg."])
+    return score_table(pd.DataFrame(out)).loc[list(extras)]
 
 
 def _best_per_column(table: pd.DataFrame) -> pd.DataFrame:

@@ -214,3 +214,34 @@ def test_write_rankings_writes_the_latex_table(tmp_path):
     write_rankings(path, "dssim", str(tmp_path / "q.csv"), str(tmp_path / "q.md"),
                    candidates=["noisy", "a", "b"], labels={})
     assert not (tmp_path / "q.tex").exists()
+
+
+def test_extras_are_scored_each_alone_in_the_pool_by_hand():
+    # pool: a, b, noisy; extras x (best in the case), y (between a and b)
+    metrics = _tidy([
+        ("s", 4, "a", "relmse", 1.0), ("s", 4, "b", "relmse", 3.0), ("s", 4, "noisy", "relmse", 9.0),
+        ("s", 4, "x", "relmse", 0.5), ("s", 4, "y", "relmse", 2.0),
+        ("t", 4, "a", "relmse", 2.0), ("t", 4, "b", "relmse", 1.0), ("t", 4, "noisy", "relmse", 9.0),
+        ("t", 4, "x", "relmse", 9.0), ("t", 4, "y", "relmse", 1.0),
+    ])
+    from mcbench.ranking import extras_table
+
+    table = extras_table(metrics, "relmse", pool=["a", "b", "noisy"], extras=["y", "x"])
+    assert list(table.index) == ["y", "x"]
+    # scene s: x beats all 3 -> 4; y beats b and noisy -> 3. scene t: x ties noisy at the bottom
+    # -> (1 + 2) / 2 = 1.5; y ties b at the top -> (4 + 3) / 2 = 3.5
+    assert table.loc["x", "4"] == pytest.approx((4 + 1.5) / 2)
+    assert table.loc["y", "4"] == pytest.approx((3 + 3.5) / 2)
+    # the pool's own scores do not move whatever the extras are
+    pool_only = ranking_table(metrics[metrics["candidate"].isin(["a", "b", "noisy"])], "relmse")
+    assert pool_only.loc["a", "Avg."] == pytest.approx((3 + 2) / 2)
+    with pytest.raises(Exception, match="incomplete|missing"):
+        extras_table(metrics[metrics["candidate"] != "x"], "relmse", pool=["a", "b", "noisy"], extras=["x"])
+
+
+def test_ranking_rows_follow_a_given_order_and_refuse_a_wrong_one():
+    metrics = _tidy([("s", 4, "a", "relmse", 2.0), ("s", 4, "b", "relmse", 1.0), ("s", 4, "noisy", "relmse", 3.0)])
+    assert list(ranking_table(metrics, "relmse").index) == ["b", "a", "noisy"]
+    assert list(ranking_table(metrics, "relmse", order=["a", "b", "noisy"]).index) == ["a", "b", "noisy"]
+    with pytest.raises(ValueError, match="order"):
+        ranking_table(metrics, "relmse", order=["a", "noisy"])

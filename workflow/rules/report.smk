@@ -18,6 +18,8 @@ rule ranking_table:
     params:
         candidates=[NOISY] + RANKED,
         labels=LABELS,
+        order=RANKED + [NOISY] if POOL_STUDY else None,
+        note=POOL_NOTE,
     threads: 1
     resources:
         **job_resources("ranking_table"),
@@ -25,6 +27,36 @@ rule ranking_table:
         "../envs/mcbench.yaml"
     log:
         f"{RESULTS}/logs/ranking_{{metric}}.log",
+    script:
+        "../scripts/ranking_table.py"
+
+
+# Every method outside the ranking pool, each scored in a pool that adds it alone.
+rule extras_table:
+    localrule: True
+    input:
+        rules.gather_metrics.output[0],
+    output:
+        csv=report(
+            f"{RESULTS}/tables/extras_{{metric}}.csv",
+            caption="../report/extras.rst",
+            category="Rankings",
+            subcategory="Extra methods",
+            labels={"metric": "{metric}", "table": "extra methods, each added alone to the pool"},
+        ),
+        md=f"{RESULTS}/tables/extras_{{metric}}.md",
+        tex=f"{RESULTS}/tables/extras_{{metric}}.tex",
+    params:
+        pool=[NOISY] + RANKED,
+        extras=EXTRAS,
+        labels=LABELS,
+    threads: 1
+    resources:
+        **job_resources("extras_table"),
+    conda:
+        "../envs/mcbench.yaml"
+    log:
+        f"{RESULTS}/logs/extras_{{metric}}.log",
     script:
         "../scripts/ranking_table.py"
 
