@@ -716,9 +716,9 @@ def _finding_size(out: _Rows, avg: np.ndarray) -> None:
             rule="reproduced when every step is; not reproduced when one step's interval is below 0",
             note="" if 5 in per and len(steps) >= 2 else "sizes up to 5 missing from our data")
     larger = [k for k in per if k > 5]
-    rule_off = ("reproduced: no size > 5 above size 5 (interval of mean(k) - mean(5) not above 0) and the "
-                "gain shrinks ((mean5 - mean4) - (mean(next) - mean5) above 0); not reproduced: a size > 5 above "
-                "size 5 and the gain not shrinking; inconclusive otherwise")
+    rule_off = ("not reproduced: a size k > 5 above size 5 (interval of mean(k) - mean(5) above 0); reproduced: "
+                "none is, and the gain shrinks (interval of (mean5 - mean4) - (mean(k1) - mean5) above 0, k1 the "
+                "smallest size > 5); inconclusive otherwise")
     if not (4 in per and 5 in per and larger):
         out.add("a", "levels off past size 5", verdict=INCONCLUSIVE, rule=rule_off,
                 note="needs sizes 4, 5 and a size > 5 in our data")
@@ -730,8 +730,7 @@ def _finding_size(out: _Rows, avg: np.ndarray) -> None:
     shrink = out.add("a", f"(gain 4 -> 5) - (gain 5 -> {larger[0]})",
                      (per[5] - per[4]) - (per[larger[0]] - per[5]), rule="part of 'levels off'")
     shrinks = ci_verdict(shrink["ci_low"], shrink["ci_high"], claim="above") == REPRODUCED
-    verdict = REPRODUCED if not any(above) and shrinks else NOT_REPRODUCED if any(above) and not shrinks \
-        else INCONCLUSIVE
+    verdict = NOT_REPRODUCED if any(above) else REPRODUCED if shrinks else INCONCLUSIVE
     out.add("a", "levels off past size 5", verdict=verdict, rule=rule_off)
     # the chain of Table 3: #16 -> #24 -> #30 -> #33 grows, #35 drops
     chain = [pool.candidate_name(i) for i in (16, 24, 30, 33, 35)]
@@ -750,7 +749,7 @@ def _finding_size(out: _Rows, avg: np.ndarray) -> None:
 
 def _finding_members(out: _Rows) -> None:
     data = out.data
-    pairs, best, fully = [], [], []
+    lost, pair_count, best, fully = [], 0, [], []
     skipped = []
     for name in data.ensembles:
         members = [pool.candidate_name(m) for m in pool.candidate(name).members]
@@ -759,14 +758,17 @@ def _finding_members(out: _Rows) -> None:
             continue
         own = data.values[:, :, data.column(name)]                       # (scenes, spp)
         theirs = data.values[:, :, data.columns(members)]                # (scenes, spp, m)
-        pairs.append((own[:, :, None] > theirs).mean(axis=2))            # fraction of its members it loses to
+        lost.append((own[:, :, None] > theirs).sum(axis=2))             # members it loses to
+        pair_count += len(members)
         best.append(own > theirs.min(axis=2))
         fully.append(own > theirs.max(axis=2))
     note = f"ensembles without all members in the data left out: {_ids(skipped)}" if skipped else ""
-    if not pairs:
+    if not lost:
         out.add("b", "ensemble worse than a member", verdict=INCONCLUSIVE, note="no ensemble with its members")
         return
-    pairs, best, fully = (np.mean(np.stack(x, axis=2), axis=2) for x in (pairs, best, fully))  # (scenes, spp)
+    # (scenes, spp): pooled over (ensemble, member) pairs, and over ensembles
+    pairs = np.sum(np.stack(lost, axis=2), axis=2) / float(pair_count)
+    best, fully = (np.mean(np.stack(x, axis=2), axis=2) for x in (best, fully))
     for i, spp in enumerate(data.spps):
         out.add("b", f"{spp} spp: fraction of cases x ensembles worse than their best member", best[:, i])
         out.add("b", f"{spp} spp: fraction of cases x (ensemble, member) worse than that member", pairs[:, i])
@@ -878,10 +880,10 @@ def findings(data: StudyData, *, resampling: Resampling = Resampling()) -> pd.Da
     :func:`ci_verdict`, the others are the numbers behind it (empty verdict).
 
     a. Size: mean score per size (1 = the bases). "Grows up to 5": every step between
-       consecutive sizes <= 5 above 0. "Levels off past 5": reproduced when no size k > 5 is
-       above size 5 (interval of mean(k) - mean(5) not above 0) *and* the gain shrinks (interval
-       of (mean5 - mean4) - (mean(k1) - mean5) above 0, k1 the smallest size > 5); not reproduced
-       when some size > 5 is above size 5 and the gain does not shrink; inconclusive otherwise.
+       consecutive sizes <= 5 above 0. "Levels off past 5": not reproduced when some size k > 5
+       is above size 5 (interval of mean(k) - mean(5) above 0: the gains go on); reproduced when
+       none is *and* the gain shrinks (interval of (mean5 - mean4) - (mean(k1) - mean5) above 0,
+       k1 the smallest size > 5: not mere absence of evidence); inconclusive otherwise.
        Also the Table 3 chain #16 < #24 < #30 < #33 > #35 step by step (all steps must hold).
     b. Ensemble against its members, on the metric values per case: per spp and overall, the
        fraction of (case, ensemble) worse than the best member (the theory: never, in
