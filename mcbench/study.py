@@ -829,7 +829,8 @@ def _finding_families(out: _Rows) -> None:
         spps = pool.spp_band_members(data.spps, band)
         quantity = f"{band} band ({BAND_TEXT[band]}): learned ({_ids(learned)}) - classical ({_ids(classical)})"
         if not spps:
-            out.add("e", quantity, verdict=INCONCLUSIVE if band in claims else "", note="no spp of the band in our data")
+            out.add("e", quantity, verdict=INCONCLUSIVE if band in claims else "",
+                    note="no spp of the band in our data")
             continue
         per_scene = data.scene_scores(spps)
         diff = per_scene[:, data.columns(learned)].mean(axis=1) - per_scene[:, data.columns(classical)].mean(axis=1)

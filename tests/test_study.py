@@ -163,7 +163,8 @@ def _brute_tau(x, y):
             concordant += 1
         else:
             discordant += 1
-    return (concordant - discordant) / math.sqrt((concordant + discordant + ties_x) * (concordant + discordant + ties_y))
+    untied = concordant + discordant
+    return (concordant - discordant) / math.sqrt((untied + ties_x) * (untied + ties_y))
 
 
 @pytest.mark.parametrize("ours", [
