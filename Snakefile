@@ -32,6 +32,7 @@ include: "workflow/rules/viewer.smk"
 include: "workflow/rules/figures.smk"
 include: "workflow/rules/comparisons.smk"
 include: "workflow/rules/oracle.smk"
+include: "workflow/rules/study.smk"
 
 
 rule all:
@@ -50,4 +51,6 @@ rule all:
         rules.comparison_ablations.output,
         expand(rules.comparison_ranking.output, metric=config["metrics"]),
         expand(rules.oracle_study.output, scene=ORACLE_SCENE),
+        rules.study_tables.output,
+        expand(rules.study_figures.output, metric=config["metrics"]),
     default_target: True

@@ -400,6 +400,9 @@ def write_training_example(seed: int, output_paths: list[str], *, spp_levels, ta
         write_layers(path, layers, metadata=metadata)
 
 
+SURE_SUFFIX = "+sure"   # a training base "<name>+sure" also writes SURE's divergence term
+
+
 def write_correlated_training_inputs(base: str, crop_paths: list[str], output_paths: list[str], *,
                                      threads: int | None = None) -> None:
     """Run base denoiser ``base`` (``methods/<base>.py``; a learned one with its committed weights)
@@ -407,7 +410,12 @@ def write_correlated_training_inputs(base: str, crop_paths: list[str], output_pa
     the deep combiner's training (Back et al. 2020 Sec. 5): per level ``N`` the layers
     ``correlated_spp<N>``, ``correlated_a_spp<N>``, ``correlated_b_spp<N>`` and, for a base that
     writes sub-buffer results (:data:`mcbench.buffers.SUB_OUTPUTS`, e.g. kpcn),
-    ``correlated<half>_sub<j>_spp<N>``."""
+    ``correlated<half>_sub<j>_spp<N>``.
+
+    ``base`` ``<name>+sure`` (progressive denoising's training data): also the divergence term of
+    SURE of each image, ``divergence<half>_spp<N>`` (Eq. 2 with K = 1, ε = 1e-4, the base's
+    single-image function re-run on the perturbed colour; ``methods.progressive.divergence_map``,
+    seeded by crop, level and image)."""
     from mcbench.buffers import SUB_OUTPUTS
     from mcbench.nn.data import HALF_OF, crop_render_layers
     from mcbench.variants import set_threads
@@ -420,7 +428,11 @@ def write_correlated_training_inputs(base: str, crop_paths: list[str], output_pa
             torch.set_num_threads(int(threads))
         except ImportError:
             pass
-    module = load_method(base, kind="denoiser", config_key=f"base '{base}'")
+    name, with_sure = (base[:-len(SURE_SUFFIX)], True) if base.endswith(SURE_SUFFIX) else (base, False)
+    module = load_method(name, kind="denoiser", config_key=f"base '{base}'")
+    if with_sure:
+        from methods.progressive import IMAGE_INDEX, divergence_map, single_image_denoiser
+        denoise_image = single_image_denoiser(name)
     if len(crop_paths) != len(output_paths):
         raise BenchError(f"{len(crop_paths)} crops for {len(output_paths)} outputs of base '{base}'")
     for crop_path, output_path in zip(crop_paths, output_paths):
@@ -438,9 +450,13 @@ def write_correlated_training_inputs(base: str, crop_paths: list[str], output_pa
             for half, which in HALF_OF.items():
                 out[f"correlated{half}_spp{level}"] = result.image(which)
                 extras = result.extras or {}
-                for j, name in enumerate(SUB_OUTPUTS[which]):
-                    if name in extras:
-                        out[f"correlated{half}_sub{j}_spp{level}"] = extras[name]
+                for j, sub_name in enumerate(SUB_OUTPUTS[which]):
+                    if sub_name in extras:
+                        out[f"correlated{half}_sub{j}_spp{level}"] = extras[sub_name]
+                if with_sure:
+                    seed = [int(meta.get("seed", 0)), int(meta.get("crop", 0)), level, IMAGE_INDEX[which]]
+                    out[f"divergence{half}_spp{level}"] = divergence_map(
+                        denoise_image, buffers.image(which), seed=seed).astype(np.float32)
         check_finite(f"{output_path} (results of '{base}' on {crop_path})", out)
         write_layers(output_path, out, metadata={"base": base, "seed": meta.get("seed", ""),
                                                  "crop": meta.get("crop", ""), "spp_levels": meta["spp_levels"],
@@ -498,6 +514,46 @@ def write_error_curves(metrics_csv: str, metric: str, png_path: str, *, labels: 
     error_curves_figure(error_curves(metrics, metric=metric), png_path, metric=metric, labels=labels)
 
 
+def write_study(metrics_csv: str, out_dir: str, *, metrics: list[str], labels: dict[str, str],
+                candidates: list[str], n_resamples: int, seed: int) -> dict:
+    """The 39-candidate study's tables (:func:`mcbench.study.write_study_tables`) under ``out_dir``:
+    beside the paper's Table 3, recommendations, findings, bootstrap intervals, summary."""
+    from mcbench.study import write_study_tables
+
+    return write_study_tables(metrics_csv, out_dir, metrics=list(metrics), labels=labels,
+                              candidates=[c for c in candidates if c != NOISY], noisy=NOISY,
+                              n_resamples=n_resamples, seed=seed)
+
+
+def recommended_names(recommendations_csv: str, metric: str) -> list[str]:
+    """The ensembles the study recommends under ``metric`` (any scope), in the table's order; the
+    relMSE ones when the table has none for ``metric`` (e.g. a metric the study did not rank)."""
+    table = read_table(recommendations_csv)
+    for chosen in (metric, "relmse"):
+        rows = table[(table["metric"] == chosen) & table["ours"].notna()]
+        if len(rows):
+            return list(dict.fromkeys(str(n) for n in rows["ours"]))
+    return []
+
+
+def write_study_figures_of(metrics_csv: str, timings_csv: str, recommendations_csv: str, scores_ci_csv: str,
+                           render_paths: list[str], paths: dict[str, str], *, metric: str, candidates: list[str],
+                           labels: dict[str, str], inputs: dict[str, list[str]]) -> None:
+    """The study's figures for one metric (:func:`mcbench.study_figures.write_study_figures`): the
+    bases and the ensembles the study recommends (``recommendations_csv``) as curves, the bootstrap
+    intervals of ``scores_ci_csv`` on the size figure, render times from the renders' EXRs."""
+    from mcbench.study_figures import curve_candidates, write_study_figures
+
+    recommended = [n for n in recommended_names(recommendations_csv, metric) if n in candidates]
+    intervals = read_table(scores_ci_csv)
+    ci = (intervals.rename(columns={"avg_ci_low": "ci_low", "avg_ci_high": "ci_high"})[["candidate", "ci_low", "ci_high"]]
+          .dropna() if len(intervals) else None)
+    write_study_figures(metrics_csv, timings_csv, render_paths, paths, metric=metric,
+                        candidates=[c for c in candidates if c != NOISY],
+                        curves=[c for c in curve_candidates(recommended) if c in candidates], recommended=recommended,
+                        labels=labels, inputs=inputs, noisy=NOISY, ci=ci)
+
+
 def write_speed_error(metrics_csv: str, timings_csv: str, png_path: str, *, metric: str,
                       labels: dict[str, str], inputs: dict[str, list[str]]) -> None:
     """Each method's mean compute time (timings.csv; a combiner's with the ``inputs`` it takes)
@@ -521,10 +577,8 @@ def write_viewer_case(scene: str, spp: int, reference_path: str, render_path: st
     ``flip_maps_path``: the case's FLIP maps from :func:`compute_case_metrics` (else evaluated here)."""
     from mcbench.viewer import CASE_RECORD, write_case_images
 
-    needs_variance = any(metric in REFERENCE_METRICS for metric in metrics)
-    reference = read_layers(reference_path, ["color", "variance"] if needs_variance else ["color"])
+    reference = read_layers(reference_path, ["color"])
     check_finite(reference_path, reference)
-    reference_variance = reference.get("variance")
     reference = reference["color"]
     sources = {NOISY: render_path, **candidate_paths}
     images, weights = {}, {}

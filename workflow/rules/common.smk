@@ -15,6 +15,7 @@ from mcbench.comparisons import comparison_role  # noqa: E402
 from mcbench.config import config_digest, resolve_config  # noqa: E402
 from mcbench.metrics import ALL_METRICS  # noqa: E402
 from mcbench.pool import POOL  # noqa: E402
+from mcbench.study_figures import STUDY_FIGURES as STUDY_FIGURE_KEYS, curve_candidates, paper_recommended  # noqa: E402
 from mcbench.resources import JobCost, estimate_job, job_request, load_job_costs  # noqa: E402
 from mcbench.seeds import training_seeds  # noqa: E402
 from mcbench.weights import COMMITTED_WEIGHTS, is_learned_method  # noqa: E402

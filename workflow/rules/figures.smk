@@ -3,6 +3,10 @@
 
 # the speed-against-error figure's metric: relMSE (the paper's), or the first metric configured
 SPEED_METRIC = "relmse" if "relmse" in METRIC_NAMES else METRIC_NAMES[0]
+# the error curves' lines: with the pool, its bases and the paper's recommended ensembles (40
+# lines would hide each other; the study's figures draw the ensembles the data recommends),
+# otherwise every ranked candidate
+CURVES = ([name for name in curve_candidates(paper_recommended()) if name in RANKED] if POOL_STUDY else RANKED)
 
 
 rule error_curves:
@@ -19,7 +23,7 @@ rule error_curves:
         ),
     params:
         labels=LABELS,
-        candidates=[NOISY] + RANKED,
+        candidates=[NOISY] + CURVES,
     threads: 1
     resources:
         **job_resources("error_curves"),

@@ -1,0 +1,96 @@
+# The 39-candidate study of Zheng et al. 2021 Sec. 5.3 (mcbench.study, mcbench.study_figures):
+# the pool's scores beside the paper's Table 3, recommendations derived from the data with their
+# stability under scene resampling, the paper's findings with verdicts, bootstrap intervals, and
+# the study's figures (error and score curves, score against size, speed against score, equal
+# time). Ranked over the pool and the noisy input only (RANKED, common.smk).
+
+STUDY_DIR = f"{RESULTS}/tables/study"
+STUDY_FIGURES_DIR = f"{RESULTS}/figures/study"
+
+
+rule study_tables:
+    localrule: True
+    input:
+        metrics=rules.gather_metrics.output[0],
+    output:
+        paper=report(
+            f"{STUDY_DIR}/paper_table3.md",
+            caption="../report/study.rst",
+            category="Study",
+            subcategory="Tables",
+            labels={"table": "beside the paper's Table 3"},
+        ),
+        paper_csv=f"{STUDY_DIR}/paper_table3.csv",
+        recommendations=report(
+            f"{STUDY_DIR}/recommendations.md",
+            caption="../report/study.rst",
+            category="Study",
+            subcategory="Tables",
+            labels={"table": "recommendations"},
+        ),
+        recommendations_csv=f"{STUDY_DIR}/recommendations.csv",
+        findings=report(
+            f"{STUDY_DIR}/findings.md",
+            caption="../report/study.rst",
+            category="Study",
+            subcategory="Tables",
+            labels={"table": "the paper's findings"},
+        ),
+        findings_csv=f"{STUDY_DIR}/findings.csv",
+        summary=report(
+            f"{STUDY_DIR}/summary.md",
+            caption="../report/study.rst",
+            category="Study",
+            subcategory="Tables",
+            labels={"table": "summary"},
+        ),
+        scores_ci=expand(f"{STUDY_DIR}/scores_ci_{{metric}}.csv", metric=METRIC_NAMES),
+    params:
+        metrics=METRIC_NAMES,
+        labels=LABELS,
+        candidates=[NOISY] + RANKED,
+        n_resamples=config["study"]["bootstrap"],
+        seed=config["study"]["seed"],
+    threads: 1
+    resources:
+        **job_resources("study_tables"),
+    conda:
+        "../envs/mcbench.yaml"
+    log:
+        f"{RESULTS}/logs/study_tables.log",
+    script:
+        "../scripts/study.py"
+
+
+rule study_figures:
+    localrule: True
+    input:
+        metrics=rules.gather_metrics.output[0],
+        timings=rules.gather_timings.output[0],
+        recommendations=rules.study_tables.output.recommendations_csv,
+        scores_ci=f"{STUDY_DIR}/scores_ci_{{metric}}.csv",
+        renders=expand(rules.render_noisy.output[0], scene=SCENES, spp=SPPS),
+    output:
+        **{
+            key: report(
+                f"{STUDY_FIGURES_DIR}/{key}_{{metric}}.png",
+                caption="../report/study_figures.rst",
+                category="Study",
+                subcategory="Figures",
+                labels={"metric": "{metric}", "figure": key.replace("_", " ")},
+            )
+            for key in STUDY_FIGURE_KEYS
+        },
+    params:
+        candidates=[NOISY] + RANKED,
+        labels=LABELS,
+        inputs={name: list(spec["inputs"]) for name, spec in METHODS.items()},
+    threads: 1
+    resources:
+        **job_resources("study_figures"),
+    conda:
+        "../envs/mcbench.yaml"
+    log:
+        f"{RESULTS}/logs/study_figures_{{metric}}.log",
+    script:
+        "../scripts/study.py"

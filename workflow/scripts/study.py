@@ -1,0 +1,18 @@
+from pathlib import Path
+
+from mcbench.logs import run_logged
+from mcbench.steps import write_study, write_study_figures_of
+
+# the two rules of workflow/rules/study.smk
+if snakemake.rule == "study_tables":
+    run_logged(snakemake.log[0], write_study, snakemake.input.metrics, str(Path(snakemake.output.summary).parent),
+               metrics=list(snakemake.params.metrics), labels=dict(snakemake.params.labels),
+               candidates=list(snakemake.params.candidates), n_resamples=int(snakemake.params.n_resamples),
+               seed=int(snakemake.params.seed))
+else:
+    paths = {key: str(value) for key, value in snakemake.output.items()}
+    run_logged(snakemake.log[0], write_study_figures_of, snakemake.input.metrics, snakemake.input.timings,
+               snakemake.input.recommendations, snakemake.input.scores_ci, list(snakemake.input.renders), paths,
+               metric=snakemake.wildcards.metric, candidates=list(snakemake.params.candidates),
+               labels=dict(snakemake.params.labels),
+               inputs={name: list(names) for name, names in dict(snakemake.params.inputs).items()})
