@@ -219,3 +219,183 @@ def test_t_test_is_finite_on_fireflies_and_black_regions_and_converges():
     scales = [sure.t_test(truth, biased, np.full_like(truth, v), np.ones_like(truth)).alpha.mean()
               for v in (1e-2, 1e-4, 1e-6)]
     assert scales[0] > 0.5 and scales[-1] < 1e-3 and scales[0] > scales[1] > scales[2]
+
+
+# --- the network's inputs, the swap, f_act in torch ---------------------------------------------
+
+def random_batch(rng, n=2, h=9, w=11):
+    import torch
+
+    x = rng.uniform(0, 3, (n, 3, h, w))
+    y = x * rng.uniform(0.5, 1.5, (n, 3, h, w))
+    variance = rng.uniform(0, 0.2, (n, 3, h, w))
+    divergence = variance * rng.uniform(0, 1, (n, 3, h, w))
+    return {k: torch.from_numpy(v).float() for k, v in
+            dict(color=x, correlated=y, variance=variance, divergence=divergence).items()}
+
+
+def random_network(**arch):
+    import torch
+
+    import methods.progressive as progressive
+
+    torch.manual_seed(0)
+    net = progressive.build_network(**{**progressive.NETWORK, **arch})
+    with torch.no_grad():                       # a network whose α varies over [0, 1]
+        net.conv_out.weight.mul_(30.0)
+    return net.eval()
+
+
+def test_network_inputs_follow_sec_4_3_and_the_swap_exchanges_the_pairs():
+    import torch
+
+    from mcbench.nn.progressive import network_inputs
+
+    batch = random_batch(np.random.default_rng(1))
+    x, y, v, d = (batch[k].double() for k in ("color", "correlated", "variance", "divergence"))
+    inputs = network_inputs(x, y, v, d)
+    terms = sure.sure_terms(x.numpy(), y.numpy(), v.numpy(), d.numpy())
+    expected = [np.log1p(x.numpy()), np.log1p(y.numpy()), np.arctan(v.numpy()), np.arctan(terms.sure),
+                np.arctan(d.numpy()), np.arctan(terms.residual_sq)]
+    np.testing.assert_allclose(inputs.numpy(), np.concatenate(expected, axis=1), rtol=1e-12, atol=1e-12)
+    swap = torch.tensor([1.0, 0.0]).view(2, 1, 1, 1)
+    both = network_inputs(x, y, v, d, swap=swap).numpy()
+    blocks = np.split(inputs.numpy(), 6, axis=1)
+    swapped = np.concatenate([blocks[1], blocks[0], blocks[3], blocks[2], blocks[4], blocks[5]], axis=1)
+    np.testing.assert_array_equal(both[0], swapped[0])       # HDR↔DEN, VAR↔SURE, the rest kept
+    np.testing.assert_array_equal(both[1], inputs.numpy()[1])
+    no_sure = network_inputs(x, y, v, d, sure_input=False).numpy()
+    assert np.all(no_sure[:, 9:15] == 0) and np.array_equal(no_sure[:, :9], inputs.numpy()[:, :9])
+
+
+def test_swap_mixes_towards_the_other_image_so_the_target_alpha_is_one_minus_alpha():
+    """With the same inputs a swapped item's z is y + α_s (x − y): the network output that
+    reproduces an unswapped z = x + α (y − x) is α_s = 1 − α (the augmentation's target)."""
+    import torch
+
+    from mcbench.nn.progressive import MixingNetwork
+
+    net = random_network()
+    batch = random_batch(np.random.default_rng(2))
+    x, y = batch["color"].double(), batch["correlated"].double()
+    with torch.no_grad():
+        for flag in (0.0, 1.0):
+            swap = torch.full((2, 1, 1, 1), flag)
+            alpha = net.alpha(batch, swap).double()
+            z = net({**batch, "swap": swap}).double()
+            a, b = (y, x) if flag else (x, y)
+            np.testing.assert_allclose(z.numpy(), (a + alpha * (b - a)).numpy(), rtol=1e-5, atol=1e-5)
+            np.testing.assert_allclose(z.numpy(), sure.mix(x.numpy(), y.numpy(), (1 - alpha.numpy()) if flag
+                                                           else alpha.numpy()), rtol=1e-5, atol=1e-5)
+        assert isinstance(net, MixingNetwork)
+        np.testing.assert_array_equal(net(batch).numpy(), net({**batch, "swap": torch.zeros(2, 1, 1, 1)}).numpy())
+
+
+def test_torch_f_act_matches_numpy_and_alpha_is_clipped():
+    import torch
+
+    from mcbench.nn.progressive import f_act, mixing_alpha
+
+    rng = np.random.default_rng(3)
+    x1, x2, x3 = rng.normal(0, 1, (3, 4, 5))
+    x3[0, 0] = 0.0
+    x3[1, 1] = -2.0
+    got = f_act(*(torch.from_numpy(a) for a in (x1, x2, x3))).numpy()
+    np.testing.assert_allclose(got, sure.f_act(x1, x2, x3), rtol=1e-12)
+    outputs = torch.from_numpy(np.concatenate([x1[None], x2[None], x3[None]]).repeat(3, axis=0)[None])
+    alpha = mixing_alpha(outputs).numpy()
+    np.testing.assert_allclose(alpha[0, 0], sure.mixing_alpha(x1, x2, x3), rtol=1e-12)
+    direct = mixing_alpha(torch.from_numpy(rng.normal(0, 2, (1, 3, 4, 5))), use_f_act=False).numpy()
+    assert direct.min() >= 0 and direct.max() <= 1
+
+
+def test_initial_network_starts_near_alpha_one_half():
+    import methods.progressive as progressive
+
+    net = progressive.build_network(**progressive.NETWORK).eval()
+    import torch
+    with torch.no_grad():
+        alpha = net.alpha(random_batch(np.random.default_rng(4)))
+    assert 0.3 < float(alpha.mean()) < 0.7
+
+
+# --- the combiner -------------------------------------------------------------------------------
+
+def hard_cases(make_render_buffers):
+    from tests.test_method_contract import COMBINER_CASES, hard_case
+
+    return {case: hard_case(case, make_render_buffers) for case in COMBINER_CASES}
+
+
+@pytest.mark.parametrize("options", [dict(), dict(t_test=False), dict(divergence="jbf"),
+                                     dict(divergence="oidn", iterations=2)])
+def test_combiner_is_finite_and_deterministic_on_hard_cases(make_render_buffers, options):
+    import methods.progressive as progressive
+
+    net = random_network()
+    for case, (buffers, inputs) in hard_cases(make_render_buffers).items():
+        first = progressive.combine_images(buffers, inputs[:1], net=net, **options)
+        second = progressive.combine_images(buffers, inputs[:1], net=net, **options)
+        for which in ("full", "a", "b"):
+            image = first.image(which)
+            assert image.shape == buffers.shape + (3,) and image.dtype == np.float32, (case, which)
+            assert np.isfinite(image).all(), (case, which)
+            np.testing.assert_array_equal(image, second.image(which), err_msg=f"{case} {which}")
+            alpha = first.extras["alpha" + {"full": "", "a": "_a", "b": "_b"}[which]]
+            assert np.all((alpha >= 0) & (alpha <= 1)), (case, which)
+
+
+def test_each_half_uses_only_its_own_samples_and_base_result(make_render_buffers):
+    """Changing B's samples and B's base result leaves A's output unchanged (and vice versa)."""
+    import methods.progressive as progressive
+    from mcbench.buffers import Denoised
+
+    net = random_network()
+    buffers = make_render_buffers(height=12, width=10, seed=1, bins=True)
+    base = Denoised(buffers.color * 0.9, buffers.color_a * 0.9, buffers.color_b * 0.9)
+    first = progressive.combine_images(buffers, [base], net=net, divergence="oidn")
+    layers = dict(buffers.layers)
+    layers["color_b"] = layers["color_b"] * 1.3
+    layers["variance_b"] = layers["variance_b"] * 2.0
+    changed = type(buffers)(layers=layers, spp=buffers.spp)
+    second = progressive.combine_images(changed, [Denoised(base.full, base.a, base.b * 1.1)], net=net,
+                                        divergence="oidn")
+    np.testing.assert_array_equal(first.a, second.a)
+    np.testing.assert_array_equal(first.full, second.full)
+    assert not np.array_equal(first.b, second.b)
+
+
+def test_t_test_only_mode_converges_to_the_noisy_image_when_the_base_is_biased(make_render_buffers):
+    """network=False: α = 1 then Eq. 18; a strongly biased base is rejected where the noise is
+    small, kept where it is large."""
+    import methods.progressive as progressive
+    from mcbench.buffers import Denoised
+
+    low = make_render_buffers(height=24, width=24, seed=5, half_std=1e-3)
+    high = make_render_buffers(height=24, width=24, seed=5, half_std=0.5)
+    for buffers, expected in ((low, "x"), (high, "y")):
+        biased = Denoised(*(img * 1.2 + 0.05 for img in (buffers.color, buffers.color_a, buffers.color_b)))
+        z = progressive.combine_images(buffers, [biased], net=None).full
+        target = buffers.color if expected == "x" else biased.full
+        assert np.abs(z - target).mean() < 0.05 * np.abs(buffers.color - biased.full).mean(), expected
+
+
+def test_divergence_bases_and_their_refusals():
+    import methods.progressive as progressive
+    from mcbench import BenchError
+
+    assert callable(progressive.single_image_denoiser("oidn"))
+    assert callable(progressive.single_image_denoiser("jbf"))
+    with pytest.raises(BenchError, match="no single-image function"):
+        progressive.single_image_denoiser("nfor")
+    with pytest.raises(BenchError):
+        progressive.combine(None, [], iterations=0)
+
+
+def test_importing_the_method_does_not_import_torch():
+    import subprocess
+    import sys
+
+    code = "import sys, methods.progressive, mcbench.sure; print('torch' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False"

@@ -27,7 +27,9 @@ layers ``correlated<half>_spp<N>`` and, for bases that expose a kernel, ``correl
 one item per (crop, base), with the extra input keys the combiner declares (``TRAINING_KEYS``):
 render layers by name (e.g. ``albedo_variance``), ``correlated`` (the base's result on that image),
 ``color_sub``/``variance_sub`` (the image's two sample subsets, :data:`mcbench.buffers.SUB_BUFFERS`,
-concatenated) and ``correlated_sub`` (the base's result on each).
+concatenated), ``correlated_sub`` (the base's result on each) and ``divergence`` (layers
+``divergence<half>_spp<N>``: the base's SURE divergence term, written for a base named
+``<base>+sure``, :func:`mcbench.steps.write_correlated_training_inputs`).
 
 Batches: step ``s`` of a run seeded ``seed`` draws from ``numpy.random.default_rng([seed, s])``
 item, level, buffer, patch position and one of the 8 rotations/flips of the square patch, so a
@@ -204,6 +206,8 @@ def input_layers(key: str, half: str, level: int) -> tuple[str, list[str]]:
 
     if key == "correlated":
         return "correlated", [f"correlated{half}_spp{level}"]
+    if key == "divergence":        # the base's SURE divergence term σ²f′ (progressive denoising, Eq. 2)
+        return "correlated", [f"divergence{half}_spp{level}"]
     if key == "correlated_sub":
         return "correlated", [f"correlated{half}_sub{j}_spp{level}" for j in (0, 1)]
     if key in ("color_sub", "variance_sub"):

@@ -15,7 +15,9 @@ Settings (a method's ``TRAINING`` dict, overridable from ``config.yaml``):
 (Adam; cosine-decayed to ``learning_rate * final_lr_fraction`` over the run), ``loss`` (a name
 in :data:`mcbench.nn.losses.LOSSES`), ``grad_clip`` (global gradient-norm clip; HDR fireflies
 make rare huge gradients), ``seed``, ``validate_every``, ``checkpoint_every``, ``threads``, and
-for adversarial training (a method that also defines ``build_critic``): ``adversarial_weight``,
+a method may define ``augment_batch(buffers, rng)`` (extra training inputs drawn from
+``default_rng([seed, step, 1])``, e.g. the swap flags of progressive denoising); for adversarial
+training (a method that also defines ``build_critic``): ``adversarial_weight``,
 ``gradient_penalty``, ``critic_learning_rate``.
 
 Determinism and resuming: weights are initialised from ``torch.manual_seed(seed)``; batch
@@ -218,6 +220,7 @@ def train_network(module: ModuleType, data: list[str | Path] | CropSet, weights_
             state.update(critic=critic.state_dict(), critic_optimizer=critic_optimizer.state_dict())
         _save_atomic(state, checkpoint)
 
+    augment = getattr(module, "augment_batch", None)
     network.train()
     started = time.perf_counter() - elapsed
     session_started = interval_started = time.perf_counter()
@@ -227,6 +230,8 @@ def train_network(module: ModuleType, data: list[str | Path] | CropSet, weights_
             group["lr"] = learning_rate(settings, step)
         buffers, targets = sample_batch(train_set, settings["seed"], step, settings["batch_size"],
                                         settings["patch"])
+        if augment is not None:   # a method's own augmentation (progressive: the swap), seeded per step
+            buffers = augment(buffers, np.random.default_rng([int(settings["seed"]), step, 1]))
         if adversarial:
             for group in critic_optimizer.param_groups:
                 group["lr"] = learning_rate(settings, step, "critic_learning_rate")

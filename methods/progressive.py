@@ -1,0 +1,240 @@
+"""Progressive denoising (Firmino et al. 2022, "Progressive denoising of Monte Carlo rendered
+images"), scaled to a 2-core CPU and trained by us on our procedural scenes: a per-pixel mix
+``z = x + α′ (y − x)`` of the noisy render x and one input's denoised y (Eq. 11), with α from a
+small CNN h_NN that sees both images and their error estimates (the variance of x, SURE of y) and
+α′ its t-test-bounded value (Eq. 12-18), so z converges to the truth as spp grows whatever y's
+bias. Weights: ``methods/weights/progressive.pt``, training record ``progressive.json``.
+
+Per image (full, A, B), each from its own samples and the input's result on that image (A never
+sees B's samples, as the deep combiner): x, σ² (the render's variance of the mean), y;
+
+1. the divergence term σ²f′ of SURE by Eq. 2 (:func:`mcbench.sure.mc_divergence`): the base
+   denoiser named by ``divergence`` re-run K times on x + ε b_k, b_k ~ N(0, diag σ²), ε = 1e-4
+   (the paper's value), K = ``iterations`` (default 1; the paper: 1 or 4), plus once on x itself
+   (F(x) recomputed in this process, so the difference sees only the perturbation);
+2. SURE = (y − x)² + 2σ²f′ − σ² (Eq. 1) and the network's 18 inputs
+   (:mod:`mcbench.nn.progressive`), α = clip(f_act(x1, x2, x3), 0, 1) (Eq. 19);
+3. α′ = (1 − Φ(2(|t| − 4.2))) α (Eq. 18, :func:`mcbench.sure.t_test`), z = x + α′(y − x).
+
+**The divergence needs F on an arbitrary image.** A combiner receives only its input's three
+images, so ``divergence`` names the single-image denoiser to re-run (:func:`single_image_denoiser`:
+a method module's ``denoise_image(ImageBuffers)``, or a learned denoiser's network through
+:func:`mcbench.nn.inference.run_network`), only the colour perturbed (variance and features as
+rendered). Supported, with the cost of one call at 128² measured here (× (K + 1) per image,
+× 3 images per case): ``oidn`` (~0.05 s), ``jbf``, ``kpcn``, ``mcgan``, ``optix_ae``, ``wskpn``
+(network inferences of 0.1-0.5 s). NFOR and RDFC have no single-image function (they
+cross-filter the two half buffers), nor have combiners. For an input that is not itself one of
+these -- an ensemble, a deep combiner -- we do not re-run it (the exact divergence of an ensemble
+would re-run every member K times on perturbed full, A and B images and then the ensemble's
+weights, roughly (K + 1)× the ensemble's whole cost): ``divergence`` may name a member as a
+*proxy* (e.g. ``oidn`` for an ensemble containing OIDN: its σ²f′ stands in for the ensemble's), or
+``none``: σ²f′ = 0, SURE = (y − x)² − σ², biased low by 2σ²E[f′] (which the t-test does not
+need: it uses only x, y, σ² and α). Default ``none`` -- a combiner cannot know which method made
+its input, so the config says it (``params: {divergence: oidn}`` for PD over OIDN).
+
+Config parameters (the ablations of Table 4 and the safeguard's parts):
+
+* ``divergence`` -- see above;
+* ``sure_input`` (default true) -- false: the network without the SURE and σ²f′ inputs (zeros),
+  no re-run; needs weights trained so (``progressive_no_sure.pt``, see "Ablation weights");
+* ``f_act`` (default true) -- false: the network outputs α directly (``progressive_no_fact.pt``);
+* ``t_test`` (default true) -- false: α′ = α (the same weights);
+* ``network`` (default true) -- false: α = 1 before the t-test, i.e. the base's result bounded by
+  the t-test alone (no weights needed; a consistent post-process of any denoiser);
+* ``iterations`` -- K of Eq. 2; ``seed`` -- the seed of the b_k (per image ``[seed, image]``).
+
+Extras written with the result: ``alpha``, ``alpha_a``, ``alpha_b`` (α′ per image).
+
+Scaling against the paper (what and why):
+
+=====================  =================================  ====================================
+                       Firmino et al. 2022                ours
+=====================  =================================  ====================================
+h_NN                   5×5 conv, 2 residual blocks of     the same (48 channels, 108,729
+                       2 3×3 convs, final conv; 48 ch;     parameters; final conv 3×3)
+                       ReLU; 'same' padding
+inputs                 log(1+x) HDR, DEN; arctan VAR,     the same (18 channels)
+                       SURE, σ²f′, (y−x)²
+output                 f_act (Eq. 19), 9 channels          the same, α clipped to [0, 1]
+swap augmentation      HDR,VAR ↔ DEN,SURE, random         the same, probability 1/2 per item
+loss                   SMAPE                              SMAPE (ε = 0.01, mcbench.nn.losses)
+optimiser              batch 12, One Cycle, max lr 2e-5,  batch 8 of 48² patches, Adam, cosine
+                       2500 epochs, ~10 h on an RTX 3090  from 1e-3, TRAINING["steps"] steps on
+                                                          2 CPU threads (minutes)
+training data          1348 crops 128², 2-4096 spp,       our procedural scenes' 64² crops at
+                       refs 32k-131k spp                  4-1024 spp (+ halves), 4096-spp targets
+base denoiser          OIDN (pre-trained) / their U-Nets  OIDN 2.x (pyoidn, albedo + normal)
+SURE                   K = 4 (their tool), ε = 1e-4       K = 1 (training data and default), ε = 1e-4
+t-test                 11×11, a = 2, c = 4.2              the same (choices: mcbench.sure)
+=====================  =================================  ====================================
+
+Ablation weights: ``sure_input=false`` and ``f_act=false`` are other networks (Table 4 retrains
+for each); their weights would be ``methods/weights/progressive_no_sure.pt`` /
+``progressive_no_fact.pt`` (:func:`ablation_weights_path`), trained with
+:func:`mcbench.nn.progressive.train_ablation`-style runs of the shared loop; without them the
+method stops with an error naming the file.
+"""
+
+from __future__ import annotations
+
+import sys
+from dataclasses import replace
+from functools import cache
+from pathlib import Path
+from types import SimpleNamespace
+from typing import Callable, Literal
+
+import numpy as np
+
+from mcbench import BenchError
+from mcbench import sure as sure_module
+from mcbench.buffers import BUFFER_SUFFIXES, Denoised, ImageBuffers, RenderBuffers
+
+KIND = "combiner"
+LABEL = "PD† progressive denoising (ours, scaled, trained on our scenes)"
+INPUTS = 1
+
+NETWORK = {"channels": 48, "first_kernel": 5, "sure_input": True, "f_act": True}
+TRAINING = {"steps": 2000, "batch_size": 8, "patch": 48, "learning_rate": 1e-3, "loss": "smape",
+            "validate_every": 500}
+# Tensors forward() needs beyond the render's: the base's result and its σ²f′ (Eq. 2).
+TRAINING_KEYS = {"correlated": 3, "divergence": 3}
+# Trained on OIDN's results with their divergence term ("+sure": mcbench.steps writes the
+# divergence layers too, into results/training/correlated/oidn+sure/).
+CORRELATED_BASES = ("oidn+sure",)
+RENDER_LAYERS = tuple(q + s for q in ("color", "variance", "albedo", "normal", "depth")
+                      for s in BUFFER_SUFFIXES.values())
+
+# Bases whose single-image function re-runs for the divergence (module docstring).
+DivergenceBase = Literal["none", "oidn", "jbf", "kpcn", "mcgan", "optix_ae", "wskpn"]
+IMAGE_INDEX = {"full": 0, "a": 1, "b": 2}
+
+
+@cache
+def network_classes() -> SimpleNamespace:
+    """The torch module of h_NN, imported on first use (importing this module imports no torch)."""
+    from mcbench.nn.progressive import MixingNetwork
+
+    return SimpleNamespace(MixingNetwork=MixingNetwork)
+
+
+def build_network(**arch):
+    """A ``torch.nn.Module`` h_NN of architecture ``arch`` (keys of NETWORK)."""
+    return network_classes().MixingNetwork(**arch)
+
+
+def augment_batch(buffers: dict, rng) -> dict:
+    """The swap augmentation (Sec. 4.3): a ``swap`` flag per item, 1 with probability 1/2, drawn
+    from ``rng`` (the training loop's per-step generator)."""
+    from mcbench.nn.progressive import swap_flags
+
+    return {**buffers, "swap": swap_flags(len(buffers["color"]), rng)}
+
+
+# --------------------------------------------------------------------------- divergence
+
+def single_image_denoiser(name: str) -> Callable[[ImageBuffers], np.ndarray]:
+    """Base denoiser ``name`` as a function of one :class:`ImageBuffers` -> (H, W, 3) radiance:
+    its ``denoise_image`` (default params), or a learned denoiser's committed network. A
+    :class:`BenchError` for a method without one (NFOR, RDFC, combiners)."""
+    from methods import load_method
+    from mcbench.weights import is_learned_method
+
+    module = load_method(name, kind="denoiser", config_key=f"divergence base '{name}'")
+    if callable(getattr(module, "denoise_image", None)):
+        return module.denoise_image
+    if is_learned_method(module):
+        from mcbench.nn.inference import load_network, run_network
+
+        network = load_network(module)
+        return lambda image: run_network(network, image)
+    raise BenchError(f"{name} has no single-image function (it filters the half buffers jointly); "
+                     f"the divergence of Eq. 2 can re-run one of "
+                     f"{', '.join(a for a in DivergenceBase.__args__ if a != 'none')}")
+
+
+def divergence_map(denoise_image: Callable[[ImageBuffers], np.ndarray], image: ImageBuffers, *,
+                   iterations: int = sure_module.ITERATIONS, epsilon: float = sure_module.EPSILON,
+                   seed=0) -> np.ndarray:
+    """σ²f′ of Eq. 2 for one image (float64 (H, W, 3)): ``denoise_image`` re-run on the image with
+    its colour perturbed (variance and features as they are), K = ``iterations`` times plus once
+    unperturbed."""
+    return sure_module.mc_divergence(lambda color: denoise_image(replace(image, color=color)), image.color,
+                                     image.variance, epsilon=epsilon, iterations=iterations, seed=seed)
+
+
+# --------------------------------------------------------------------------- combination
+
+def ablation_weights_path(*, sure_input: bool, f_act: bool) -> Path:
+    """The weights of the network variant (full model: ``progressive.pt``)."""
+    from mcbench.weights import weights_path
+
+    suffix = "" if sure_input and f_act else "_no_sure" if f_act else "_no_fact" if sure_input else "_no_sure_no_fact"
+    return Path(weights_path("progressive" + suffix))
+
+
+def load_variant(*, sure_input: bool, f_act: bool):
+    """The trained h_NN of a variant (committed weights; an error naming the missing file)."""
+    from mcbench.nn.inference import load_network
+
+    path = ablation_weights_path(sure_input=sure_input, f_act=f_act)
+    network = load_network(sys.modules[__name__], path)
+    if bool(network.sure_input) != sure_input or bool(network.use_f_act) != f_act:
+        raise BenchError(f"{path}: weights of another variant (sure_input={network.sure_input}, "
+                         f"f_act={network.use_f_act})")
+    return network
+
+
+def combine_images(buffers: RenderBuffers, inputs: list[Denoised], *, net=None, divergence: str = "none",
+                   t_test: bool = True, iterations: int = sure_module.ITERATIONS, seed: int = 0) -> Denoised:
+    """Progressive denoising of each image with network ``net`` (an h_NN module in eval mode, or
+    None for α = 1) -- :func:`combine` without loading weights (tests pass a random network)."""
+    if len(inputs) != INPUTS:
+        raise BenchError(f"progressive combines exactly {INPUTS} input, got {len(inputs)}")
+    base = inputs[0]
+    needs_divergence = net is not None and net.sure_input and divergence != "none"
+    denoise_image = single_image_denoiser(divergence) if needs_divergence else None
+    results, extras = {}, {}
+    for which in BUFFER_SUFFIXES:
+        image = buffers.image(which)
+        x = np.asarray(image.color, np.float64)
+        variance = np.maximum(np.asarray(image.variance, np.float64), 0.0)
+        y = np.asarray(base.image(which), np.float64)
+        if y.shape != x.shape:
+            raise BenchError(f"{base.source}: result on image '{which}' is {y.shape}, the render "
+                             f"{buffers.source} is {x.shape}")
+        if net is None:
+            alpha = np.ones_like(x)
+        else:
+            d = (divergence_map(denoise_image, image, iterations=iterations, seed=[seed, IMAGE_INDEX[which]])
+                 if denoise_image is not None else np.zeros_like(x))
+            alpha = network_alpha(net, x, y, variance, d)
+        if t_test:
+            alpha = sure_module.t_test_scale(x, y, variance, alpha)
+        results[which] = sure_module.mix(x, y, alpha).astype(np.float32)
+        extras["alpha" + BUFFER_SUFFIXES[which]] = alpha.astype(np.float32)
+    for which, result in results.items():
+        if not np.isfinite(result).all():
+            raise BenchError(f"progressive: non-finite output on image '{which}' of {buffers.source}")
+    return Denoised(full=results["full"], a=results["a"], b=results["b"], extras=extras)
+
+
+def network_alpha(net, x: np.ndarray, y: np.ndarray, variance: np.ndarray, divergence: np.ndarray) -> np.ndarray:
+    """h_NN's α (float64 (H, W, 3) in [0, 1]) for one image, deterministic float32 inference."""
+    from mcbench.nn.inference import array_tensor, deterministic_inference, tensor_image
+
+    batch = {"color": array_tensor(x), "correlated": array_tensor(y), "variance": array_tensor(variance),
+             "divergence": array_tensor(np.clip(divergence, -3e38, 3e38))}
+    with deterministic_inference():
+        return np.asarray(tensor_image(net.alpha(batch)), np.float64)
+
+
+def combine(buffers, inputs, *, divergence: DivergenceBase = "none", sure_input: bool = True, f_act: bool = True,
+            t_test: bool = True, network: bool = True, iterations: int = 1, seed: int = 0):
+    """Progressive denoising of ``inputs[0]`` (one method's :class:`Denoised`) with the noisy
+    render, on the full image and on each half buffer (module docstring)."""
+    if iterations < 1:
+        raise BenchError(f"progressive: iterations (K of Eq. 2) must be at least 1, got {iterations}")
+    net = load_variant(sure_input=sure_input, f_act=f_act) if network else None
+    return combine_images(buffers, inputs, net=net, divergence=divergence, t_test=t_test,
+                          iterations=iterations, seed=seed)
