@@ -218,30 +218,33 @@ def t_test(x: np.ndarray, y: np.ndarray, variance: np.ndarray, alpha: np.ndarray
     alpha = np.broadcast_to(_as64(alpha), x.shape)
     z = mix(x, y, alpha)
     sigma = spatial_sigma(variance) if sigma_s is None else max(float(sigma_s), MIN_SIGMA_S)
-    kappa = gaussian_kappa(sigma, window)
+    if window < 1 or window % 2 == 0:
+        raise ValueError(f"the t-test window must be odd and positive, got {window}")
     r = window // 2
     h, w = x.shape[:2]
+    # Σ_q κ_pq v_q over the window cut to the image: κ = g(dy) g(dx) / (σ_s sqrt(2π)) is separable
+    # (g(d) = exp(−d²/(2σ_s²))), so two 1-D passes of `window` taps over zero-padded arrays.
+    g = np.exp(-np.arange(-r, r + 1, dtype=np.float64) ** 2 / (2.0 * sigma ** 2))
+    norm = 1.0 / (sigma * np.sqrt(2.0 * np.pi))
+    sum_x = norm * _separable_sum(x, g, r)
+    sum_z = norm * _separable_sum(z, g, r)
+    sum_v = norm ** 2 * _separable_sum(variance, g * g, r)
+    # M_p: running maximum of σ² over the window offsets in row-major (dy, dx) order (strictly
+    # greater replaces, so the first of equal maxima stays); outside the image σ² = −inf.
     pad = ((r, r), (r, r)) + ((0, 0),) * (x.ndim - 2)
     xp, zp = np.pad(x, pad), np.pad(z, pad)
-    vp = np.pad(variance, pad)
-    inside = np.pad(np.ones((h, w) + (1,) * (x.ndim - 2), dtype=bool), pad)
-    sum_x = np.zeros_like(x)
-    sum_z = np.zeros_like(x)
-    sum_v = np.zeros_like(x)
+    vp = np.pad(variance, pad, constant_values=-np.inf)
     best_v = np.full_like(x, -np.inf)
     best_x = np.zeros_like(x)
     best_z = np.zeros_like(x)
+    better = np.empty(x.shape, dtype=bool)
     for i in range(window):
         for j in range(window):
-            xs, zs, vs = xp[i:i + h, j:j + w], zp[i:i + h, j:j + w], vp[i:i + h, j:j + w]
-            k = kappa[i, j]
-            sum_x += k * xs                        # outside the image x, z, σ² are padded with 0
-            sum_z += k * zs
-            sum_v += k * k * vs
-            better = inside[i:i + h, j:j + w] & (vs > best_v)
-            best_v = np.where(better, vs, best_v)
-            best_x = np.where(better, xs, best_x)
-            best_z = np.where(better, zs, best_z)
+            vs = vp[i:i + h, j:j + w]
+            np.greater(vs, best_v, out=better)
+            np.copyto(best_v, vs, where=better)
+            np.copyto(best_x, xp[i:i + h, j:j + w], where=better)
+            np.copyto(best_z, zp[i:i + h, j:j + w], where=better)
     x_bar = best_x + sum_x                         # Eq. 12
     var_bar = np.maximum(best_v, 0.0) + sum_v      # Eq. 13
     z_bar = best_z + sum_z                         # Eq. 14
@@ -249,6 +252,20 @@ def t_test(x: np.ndarray, y: np.ndarray, variance: np.ndarray, alpha: np.ndarray
     scale = 1.0 - ndtr(strength * (np.abs(t) - shift))          # Eq. 18
     return TTest(x_bar=x_bar, var_bar=var_bar, z_bar=z_bar, t=t, scale=scale, alpha=scale * alpha,
                  sigma_s=sigma)
+
+
+def _separable_sum(image: np.ndarray, taps: np.ndarray, r: int) -> np.ndarray:
+    """Σ_{dy,dx} taps[dy] taps[dx] image[p + (dy, dx)] with zeros outside the image (H, W[, C])."""
+    h, w = image.shape[:2]
+    rows = np.zeros_like(image)
+    padded = np.pad(image, ((r, r),) + ((0, 0),) * (image.ndim - 1))
+    for i, tap in enumerate(taps):
+        rows += tap * padded[i:i + h]
+    out = np.zeros_like(image)
+    padded = np.pad(rows, ((0, 0), (r, r)) + ((0, 0),) * (image.ndim - 2))
+    for j, tap in enumerate(taps):
+        out += tap * padded[:, j:j + w]
+    return out
 
 
 def t_test_scale(x, y, variance, alpha, **options) -> np.ndarray:

@@ -50,7 +50,7 @@ Scaling against the paper (what and why):
 =====================  =================================  ====================================
                        Firmino et al. 2022                ours
 =====================  =================================  ====================================
-h_NN                   5×5 conv, 2 residual blocks of     the same (48 channels, 108,729
+h_NN                   5×5 conv, 2 residual blocks of     the same (48 channels, 108,681
                        2 3×3 convs, final conv; 48 ch;     parameters; final conv 3×3)
                        ReLU; 'same' padding
 inputs                 log(1+x) HDR, DEN; arctan VAR,     the same (18 channels)
@@ -70,9 +70,9 @@ t-test                 11×11, a = 2, c = 4.2              the same (choices: mc
 
 Ablation weights: ``sure_input=false`` and ``f_act=false`` are other networks (Table 4 retrains
 for each); their weights would be ``methods/weights/progressive_no_sure.pt`` /
-``progressive_no_fact.pt`` (:func:`ablation_weights_path`), trained with
-:func:`mcbench.nn.progressive.train_ablation`-style runs of the shared loop; without them the
-method stops with an error naming the file.
+``progressive_no_fact.pt`` (:func:`ablation_weights_path`), trained on the same data by the shared
+loop with ``python -m methods.progressive no_sure`` (``no_fact``; :func:`train_variant`); without
+them the method stops with an error naming the file.
 """
 
 from __future__ import annotations
@@ -238,3 +238,58 @@ def combine(buffers, inputs, *, divergence: DivergenceBase = "none", sure_input:
     net = load_variant(sure_input=sure_input, f_act=f_act) if network else None
     return combine_images(buffers, inputs, net=net, divergence=divergence, t_test=t_test,
                           iterations=iterations, seed=seed)
+
+
+# --------------------------------------------------------------------------- ablation training
+
+VARIANTS = {"no_sure": {"sure_input": False}, "no_fact": {"f_act": False}}
+
+
+def variant_module(variant: str):
+    """A stand-in method module for the network variant ``variant`` (a key of :data:`VARIANTS`):
+    this module's attributes with NETWORK changed, named ``progressive_<variant>`` so that the
+    shared training loop (:func:`mcbench.nn.train.train_network`) writes
+    ``methods/weights/progressive_<variant>.{pt,json}``."""
+    import types
+
+    if variant not in VARIANTS:
+        raise BenchError(f"unknown progressive variant '{variant}'; known: {', '.join(VARIANTS)}")
+    this = sys.modules[__name__]
+    module = types.ModuleType(f"methods.progressive_{variant}")
+    for attribute in ("KIND", "INPUTS", "TRAINING", "TRAINING_KEYS", "CORRELATED_BASES", "build_network",
+                      "augment_batch", "combine"):
+        setattr(module, attribute, getattr(this, attribute))
+    module.LABEL = f"{LABEL}, ablation {variant}"
+    module.NETWORK = {**NETWORK, **VARIANTS[variant]}
+    return module
+
+
+def train_variant(variant: str, data: str = "results/training", steps: int | None = None) -> dict:
+    """Train ablation ``variant`` on the same data as the full model (the crops with results of
+    :data:`CORRELATED_BASES` under ``<data>/correlated/``); weights and record beside the full
+    model's, checkpoint ``results/training/checkpoints/progressive_<variant>.ckpt``."""
+    from mcbench.nn.data import crop_paths
+    from mcbench.nn.train import correlated_paths, train_network
+    from mcbench.steps import training_data
+    from mcbench.weights import record_path, weights_path
+
+    module = variant_module(variant)
+    files, correlated = correlated_paths(data, CORRELATED_BASES, crop_paths(data))
+    crops = training_data("progressive", [str(f) for f in files], {b: [str(f) for f in fs] for b, fs in correlated.items()})
+    name = f"progressive_{variant}"
+    return train_network(module, crops, weights_path(name), record_path(name),
+                         f"results/training/checkpoints/{name}.ckpt", {"steps": steps} if steps else {},
+                         log=lambda message: print(message, file=sys.stderr, flush=True))
+
+
+if __name__ == "__main__":
+    # python -m methods.progressive no_sure [--steps N]: train an ablation network of Table 4
+    import argparse
+
+    parser = argparse.ArgumentParser(prog="python -m methods.progressive",
+                                     description="Train an ablation variant of progressive denoising's h_NN.")
+    parser.add_argument("variant", choices=sorted(VARIANTS))
+    parser.add_argument("--data", default="results/training")
+    parser.add_argument("--steps", type=int, default=None)
+    arguments = parser.parse_args()
+    train_variant(arguments.variant, arguments.data, arguments.steps)
