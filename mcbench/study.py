@@ -68,7 +68,8 @@ __all__ = ["NOISY", "PAPER_ENTRIES", "SEED", "N_RESAMPLES", "CONFIDENCE", "ALMOS
            "StudyData", "study_data", "avg_scores", "ranking_from", "resample_indices", "bootstrap_ci",
            "score_cis", "difference_ci", "is_real", "place_fractions", "paper_comparison", "paper_kendall",
            "paper_comparison_markdown", "recommendations", "recommendation_sentences", "recommendations_markdown",
-           "ci_verdict", "findings", "findings_markdown", "study_outputs", "write_study_tables"]
+           "ci_verdict", "findings", "findings_markdown", "REFERENCE_NOISE_COLUMNS", "reference_noise_effect",
+           "reference_noise_markdown", "study_outputs", "write_study_tables"]
 
 NOISY = "noisy"
 PAPER_ENTRIES = 40              # the paper's scale: 39 candidates + the noisy input
@@ -85,7 +86,7 @@ CLASSICAL_BASES = tuple(sorted(pool.CLASSICAL_IDS))              # 4 NFOR, 8 RDF
 REPRODUCED, NOT_REPRODUCED, INCONCLUSIVE = "reproduced", "not reproduced", "inconclusive"
 BAND_TEXT = {"low": "4–32 spp", "medium": "32–256 spp", "high": ">256 spp"}
 STUDY_FILES = ("paper_table3.csv", "paper_table3.md", "recommendations.csv", "recommendations.md", "findings.csv",
-               "findings.md", "summary.md")
+               "findings.md", "reference_noise.csv", "reference_noise.md", "summary.md")
 
 
 # --------------------------------------------------------------------------------------------
@@ -712,9 +713,15 @@ def _finding_size(out: _Rows, avg: np.ndarray) -> None:
         row = out.add("a", f"gain size {a} -> {b}", per[b] - per[a], rule=rule_up)
         row["verdict"] = ci_verdict(row["ci_low"], row["ci_high"], claim="above")
         parts.append(row["verdict"])
-    out.add("a", "gains grow up to size 5", verdict=_combine(parts) if len(steps) >= 2 else INCONCLUSIVE,
-            rule="reproduced when every step is; not reproduced when one step's interval is below 0",
-            note="" if 5 in per and len(steps) >= 2 else "sizes up to 5 missing from our data")
+    complete = all(k in per for k in range(1, 6))
+    verdict = _combine(parts) if len(steps) >= 2 else INCONCLUSIVE
+    if not complete and verdict == REPRODUCED:
+        verdict = INCONCLUSIVE      # every step we have grows, but the steps up to 5 are not all there
+    out.add("a", "gains grow up to size 5", verdict=verdict,
+            rule="reproduced when sizes 1-5 are all present and every step is; not reproduced when one "
+                 "step's interval is below 0",
+            note="" if complete else "sizes " + ", ".join(str(k) for k in range(1, 6) if k not in per)
+            + " missing from our data")
     larger = [k for k in per if k > 5]
     rule_off = ("not reproduced: a size k > 5 above size 5 (interval of mean(k) - mean(5) above 0); reproduced: "
                 "none is, and the gain shrinks (interval of (mean5 - mean4) - (mean(k1) - mean5) above 0, k1 the "
@@ -941,6 +948,71 @@ def findings_markdown(table: pd.DataFrame, *, resampling: Resampling = Resamplin
 
 
 # --------------------------------------------------------------------------------------------
+# references you can trust (item 7): raw against reference-noise-corrected relMSE
+# --------------------------------------------------------------------------------------------
+
+REFERENCE_NOISE_COLUMNS = ["spp", "kendall_tau", "max_abs_change", "real_changes", "changed", "top_raw",
+                           "top_corrected", "agree"]
+
+
+def reference_noise_effect(raw: StudyData, corrected: StudyData, *, resampling: Resampling = Resampling(),
+                           top: int = 3) -> pd.DataFrame:
+    """How the ranking moves when relMSE is corrected for the reference's own noise
+    (:func:`mcbench.metrics.relmse_corrected`), per spp and over all spp (``Avg.``).
+
+    ``raw`` and ``corrected``: the two metrics' :class:`StudyData` over the same scenes, spp and
+    entries. Per column: the Kendall tau of the two mean-score orderings, the largest change of a
+    mean score, and the entries whose score changes *really* (the paired scene-bootstrap interval
+    of corrected - raw per-scene score excludes 0, :func:`is_real`), with the ``top`` entries of
+    each ordering. ``agree`` is "yes" when no entry's score changes really: the raw ranking is then
+    trustworthy within the intervals, i.e. the references are quiet enough for this study; "no"
+    names the spp at which the reference noise reorders candidates.
+    """
+    if (raw.scenes, raw.spps, raw.names) != (corrected.scenes, corrected.spps, corrected.names):
+        raise BenchError("reference noise: the raw and corrected relMSE cover different scenes, spp or entries")
+    rows = []
+    columns = [(str(s), [s]) for s in raw.spps] + [("Avg.", list(raw.spps))]
+    for label, spps in columns:
+        a, b = raw.scene_scores(spps), corrected.scene_scores(spps)          # (scenes, names)
+        mean_a, mean_b = a.mean(axis=0), b.mean(axis=0)
+        tau = stats.kendalltau(mean_a, mean_b).statistic if len(raw.names) > 1 else None
+        cis = bootstrap_ci(b - a, resampling=resampling)
+        changed = [n for n, low, high in zip(raw.names, cis["ci_low"], cis["ci_high"]) if is_real(low, high)]
+        order_a = [raw.names[i] for i in np.argsort(-mean_a, kind="stable")[:top]]
+        order_b = [raw.names[i] for i in np.argsort(-mean_b, kind="stable")[:top]]
+        rows.append({"spp": label, "kendall_tau": None if tau is None or not np.isfinite(tau) else float(tau),
+                     "max_abs_change": float(np.max(np.abs(mean_b - mean_a))), "real_changes": len(changed),
+                     "changed": " ".join(changed), "top_raw": " ".join(order_a), "top_corrected": " ".join(order_b),
+                     "agree": "yes" if not changed else "no"})
+    return pd.DataFrame(rows, columns=REFERENCE_NOISE_COLUMNS)
+
+
+def reference_noise_markdown(table: pd.DataFrame, *, labels: dict[str, str] | None = None,
+                             resampling: Resampling = Resampling()) -> str:
+    """The reference-noise table as Markdown with a verdict sentence."""
+    labels = labels or {}
+    lines = ["# References you can trust: raw against corrected relMSE", "",
+             "Scores by relMSE against the reference (raw) and by relMSE corrected for the reference's own "
+             "noise with its stored variance (corrected; `mcbench.metrics.relmse_corrected`). An entry's score "
+             "changes *really* when the paired scene-bootstrap interval of its score change excludes 0 "
+             f"({100 * resampling.confidence:.0f} %, {resampling.n_resamples} resamples).", ""]
+    if table.empty:
+        return "\n".join(lines + ["No relmse and relmse_corrected values to compare (both must be configured)."]) + "\n"
+    lines += ["| spp | Kendall τ | largest change | real changes | top 3 raw | top 3 corrected |", "|---|---|---|---|---|---|"]
+    for r in map(_clean, table.to_dict("records")):
+        tops = [", ".join(labels.get(n, n) for n in str(r[k] or "").split()) for k in ("top_raw", "top_corrected")]
+        changed = ", ".join(labels.get(n, n) for n in str(r["changed"] or "").split()) or "none"
+        lines.append(f"| {r['spp']} | {_cell(r['kendall_tau'], 3)} | {_cell(r['max_abs_change'], 2)} | "
+                     f"{r['real_changes']} ({changed}) | {tops[0]} | {tops[1]} |")
+    disagree = [str(s) for s, a in zip(table["spp"], table["agree"]) if a != "yes"]
+    lines += ["", "Verdict: " + ("the raw and corrected rankings agree within the intervals at every spp; the "
+                                 "references are quiet enough for this study." if not disagree else
+                                 "the reference noise really changes scores at spp " + ", ".join(disagree)
+                                 + "; there, read the corrected ranking (or render longer references).")]
+    return "\n".join(lines) + "\n"
+
+
+# --------------------------------------------------------------------------------------------
 # writers
 # --------------------------------------------------------------------------------------------
 
@@ -1040,6 +1112,16 @@ def write_study_tables(metrics_csv, out_dir, *, metrics=("relmse", "dssim"), lab
         for r in kendall.itertuples():
             lines.append(f"- Kendall tau by {r.basis}: " + ("undefined" if r.tau is None else
                                                             f"{r.tau:.3f} (p = {r.p_value:.3g}, n = {r.n})"))
+    if "relmse" in data_by_metric and "relmse_corrected" in data_by_metric:
+        noise = reference_noise_effect(data_by_metric["relmse"], data_by_metric["relmse_corrected"],
+                                       resampling=resampling)
+    else:
+        noise = pd.DataFrame(columns=REFERENCE_NOISE_COLUMNS)
+    write_csv(out_dir / "reference_noise.csv", noise, float_format="%.4f")
+    noise_text = reference_noise_markdown(noise, labels=shown, resampling=resampling)
+    write_text(out_dir / "reference_noise.md", noise_text)
+    written["reference_noise"] = noise
+    lines += ["", "## References", "", noise_text.strip().splitlines()[-1]]
     lines += ["", "## Findings", ""]
     for r in map(_clean, find_table[find_table["verdict"] != ""].to_dict("records")):
         numbers = "" if r["estimate"] is None else \

@@ -332,6 +332,17 @@ def test_size_verdicts_from_constructed_data(means, grows, levels):
     assert _finding(table, "a", "levels off past size 5")["verdict"] == levels
 
 
+def test_growth_up_to_size_5_is_inconclusive_when_sizes_are_missing():
+    # only the bases and the size-2 ensembles: the one step 1 -> 2 grows, but 2 -> 5 is unseen
+    names = [n for n in ALL if pool.candidate(n).size <= 2]
+    metrics = _from_orders(lambda scene, spp: [n for n in names if not pool.candidate(n).is_base],
+                           scenes=list("abc"), spps=(4, 64), names=names)
+    table = study.findings(study.study_data(metrics, "relmse", candidates=names), resampling=FAST)
+    assert _finding(table, "a", "gain size 1 -> 2")["verdict"] == study.REPRODUCED
+    row = _finding(table, "a", "gains grow up to size 5")
+    assert row["verdict"] == study.INCONCLUSIVE and "3, 4, 5 missing" in row["note"]
+
+
 # --------------------------------------------------------------------------------------------
 # the writer
 # --------------------------------------------------------------------------------------------
@@ -363,3 +374,35 @@ def test_writer_writes_the_declared_files_without_nan_and_skips_absent_metrics(t
     broken.to_csv(path, index=False)
     with pytest.raises(BenchError, match="ens31"):
         study.write_study_tables(str(path), out, metrics=("relmse",), n_resamples=100)
+
+
+def test_reference_noise_effect_names_the_spp_where_the_ranking_really_moves():
+    # raw: the same order everywhere; corrected: #10 and #15 swap at 1024 spp in every scene (the
+    # reference noise had hidden #15's lead there) -> a real change at 1024 only
+    names = [n for n in ALL if pool.candidate(n).size <= 2]
+    head = [n for n in names if not pool.candidate(n).is_base]
+
+    def raw_order(scene, spp):
+        return head
+
+    def corrected_order(scene, spp):
+        if spp != 1024:
+            return head
+        swap = {"ens10": "ens15", "ens15": "ens10"}
+        return [swap.get(n, n) for n in head]
+    raw = study.study_data(_from_orders(raw_order, scenes=list("abcd"), spps=(4, 1024), names=names), "relmse",
+                           candidates=names)
+    corrected = study.study_data(_from_orders(corrected_order, scenes=list("abcd"), spps=(4, 1024), names=names,
+                                              metric="relmse_corrected"), "relmse_corrected", candidates=names)
+    table = study.reference_noise_effect(raw, corrected, resampling=FAST).set_index("spp")
+    assert table.loc["4", "agree"] == "yes" and table.loc["4", "kendall_tau"] == pytest.approx(1.0)
+    assert table.loc["1024", "agree"] == "no"
+    assert set(table.loc["1024", "changed"].split()) == {"ens10", "ens15"}
+    gap = head.index("ens15") - head.index("ens10")                      # places between them
+    assert table.loc["1024", "max_abs_change"] == pytest.approx(gap)
+    assert head.index("ens10") < 3 and table.loc["1024", "top_corrected"].split()[head.index("ens10")] == "ens15"
+    text = study.reference_noise_markdown(table.reset_index())
+    assert "really changes scores at spp 1024" in text
+    with pytest.raises(Exception, match="different"):
+        study.reference_noise_effect(raw, study.study_data(_from_orders(raw_order, scenes=list("ab"), spps=(4,),
+                                                                        names=names), "relmse", candidates=names))

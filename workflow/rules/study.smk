@@ -37,6 +37,14 @@ rule study_tables:
             labels={"table": "the paper's findings"},
         ),
         findings_csv=f"{STUDY_DIR}/findings.csv",
+        reference_noise=report(
+            f"{STUDY_DIR}/reference_noise.md",
+            caption="../report/study.rst",
+            category="Study",
+            subcategory="Tables",
+            labels={"table": "raw against reference-noise-corrected relMSE"},
+        ),
+        reference_noise_csv=f"{STUDY_DIR}/reference_noise.csv",
         summary=report(
             f"{STUDY_DIR}/summary.md",
             caption="../report/study.rst",
