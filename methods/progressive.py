@@ -95,7 +95,7 @@ LABEL = "PD† progressive denoising (ours, scaled, trained on our scenes)"
 INPUTS = 1
 
 NETWORK = {"channels": 48, "first_kernel": 5, "sure_input": True, "f_act": True}
-TRAINING = {"steps": 2000, "batch_size": 8, "patch": 48, "learning_rate": 1e-3, "loss": "smape",
+TRAINING = {"steps": 1500, "batch_size": 8, "patch": 48, "learning_rate": 1e-3, "loss": "smape",
             "validate_every": 500}
 # Tensors forward() needs beyond the render's: the base's result and its σ²f′ (Eq. 2).
 TRAINING_KEYS = {"correlated": 3, "divergence": 3}

@@ -328,11 +328,14 @@ def hard_cases(make_render_buffers):
 
 
 @pytest.mark.parametrize("options", [dict(), dict(t_test=False), dict(divergence="jbf"),
-                                     dict(divergence="oidn", iterations=2)])
+                                     dict(divergence="oidn", iterations=2), dict(network=False),
+                                     dict(sure_input=False, divergence="oidn"), dict(f_act=False)])
 def test_combiner_is_finite_and_deterministic_on_hard_cases(make_render_buffers, options):
     import methods.progressive as progressive
 
-    net = random_network()
+    options = dict(options)
+    variant = {k: options.pop(k) for k in ("sure_input", "f_act") if k in options}
+    net = random_network(**variant) if options.pop("network", True) else None
     for case, (buffers, inputs) in hard_cases(make_render_buffers).items():
         first = progressive.combine_images(buffers, inputs[:1], net=net, **options)
         second = progressive.combine_images(buffers, inputs[:1], net=net, **options)
@@ -399,3 +402,19 @@ def test_importing_the_method_does_not_import_torch():
     code = "import sys, methods.progressive, mcbench.sure; print('torch' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
+
+
+def test_ablation_variants_are_other_networks_with_their_own_weights():
+    import methods.progressive as progressive
+    from mcbench import BenchError
+
+    module = progressive.variant_module("no_sure")
+    assert module.__name__ == "methods.progressive_no_sure" and module.NETWORK["sure_input"] is False
+    assert module.build_network(**module.NETWORK).sure_input is False
+    assert progressive.variant_module("no_fact").build_network(**progressive.variant_module("no_fact").NETWORK
+                                                               ).conv_out.out_channels == 3
+    assert progressive.ablation_weights_path(sure_input=True, f_act=True).name == "progressive.pt"
+    assert progressive.ablation_weights_path(sure_input=False, f_act=True).name == "progressive_no_sure.pt"
+    assert progressive.ablation_weights_path(sure_input=True, f_act=False).name == "progressive_no_fact.pt"
+    with pytest.raises(BenchError):
+        progressive.variant_module("no_t_test")
