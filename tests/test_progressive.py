@@ -418,3 +418,20 @@ def test_ablation_variants_are_other_networks_with_their_own_weights():
     assert progressive.ablation_weights_path(sure_input=True, f_act=False).name == "progressive_no_fact.pt"
     with pytest.raises(BenchError):
         progressive.variant_module("no_t_test")
+
+
+def test_stacks_over_an_ensemble(make_render_buffers):
+    """Progressive with an ensemble's result as its denoised input (OIDN's divergence as the
+    proxy, the documented choice): finite, each image from its own samples."""
+    import methods.ensemble as ensemble
+    import methods.progressive as progressive
+    from tests.test_method_contract import synthetic_inputs
+
+    buffers = make_render_buffers(height=16, width=14, seed=6, bins=True)
+    ens = ensemble.combine(buffers, synthetic_inputs(buffers))
+    result = progressive.combine_images(buffers, [ens], net=random_network(), divergence="oidn")
+    for which in ("full", "a", "b"):
+        assert np.isfinite(result.image(which)).all()
+        alpha = result.extras["alpha" + {"full": "", "a": "_a", "b": "_b"}[which]]
+        np.testing.assert_allclose(result.image(which), sure.mix(buffers.image(which).color, ens.image(which), alpha),
+                                   rtol=1e-5, atol=1e-6)
