@@ -1,14 +1,21 @@
 """One ensemble job as the DAG runs it, for ``bench_ensemble.py`` to time as a whole process:
 
-    python benchmarks/ensemble_job.py RENDER.exr OUT.exr INPUT1.exr ... [--param key=value ...]
+    python benchmarks/ensemble_job.py RENDER.exr OUT.exr INPUT1.exr ... [--eager] [--param key=value ...]
 
-Like :func:`mcbench.steps.run_methods` for a batch of ensembles: read the render's
-``RENDER_LAYERS`` (``RenderBuffers.load``) and each input (``Denoised.load``; the ensemble
-reads no extras), ``methods.ensemble.combine``, write the output
-EXR (``write_layers``). Prints one JSON line: seconds spent importing, reading, loading the
-numba cache (a combine of an 8 x 8 crop, ``jit_s``), combining and writing (wall,
-``time.perf_counter``). The parent measures the whole process (wall time and
-peak RSS from ``os.wait4``).
+Like :func:`mcbench.steps.run_methods` for a batch of ensembles: the render's ``RENDER_LAYERS``
+and each input's three images, ``methods.ensemble.combine``, write the output EXR
+(``write_layers``). Two ways to read them:
+
+* default (the job path proposed for ``run_methods``, issue 14): a combiner that declares
+  ``READS_ROWS`` gets the render's layers and the inputs' images as
+  :class:`mcbench.exr.LayerRows` (:func:`mcbench.exr.layer_rows`: only headers are read here;
+  combine reads rows as it goes, so no input is held whole);
+* ``--eager``: as ``run_methods`` reads today, every layer whole (``RenderBuffers.load`` of the
+  ``RENDER_LAYERS``, ``Denoised.load``; the ensemble reads no extras).
+
+Prints one JSON line: seconds spent importing, reading, loading the numba cache (a combine of
+an 8 x 8 crop, ``jit_s``), combining and writing (wall, ``time.perf_counter``). The parent
+measures the whole process (wall time and peak RSS from ``os.wait4``).
 """
 
 from __future__ import annotations
@@ -48,10 +55,23 @@ def main(argv):
     if "--param" in argv:
         at = argv.index("--param")
         argv, params = argv[:at], [p for p in argv[at + 1:] if p != "--param"]
+    eager = "--eager" in argv or not getattr(ensemble, "READS_ROWS", False)
+    argv = [a for a in argv if a != "--eager"]
     render, output, *inputs = argv
     imported = time.perf_counter()
-    buffers = RenderBuffers.load(render, layers=ensemble.RENDER_LAYERS)     # as run_methods reads it
-    denoised = [Denoised.load(path) for path in inputs]                       # combine() reads no extras
+    if eager:
+        buffers = RenderBuffers.load(render, layers=ensemble.RENDER_LAYERS)  # as run_methods reads it
+        denoised = [Denoised.load(path) for path in inputs]                    # combine() reads no extras
+    else:
+        from mcbench.exr import layer_rows, read_metadata
+
+        buffers = RenderBuffers(layers=layer_rows(render, ["color", *ensemble.RENDER_LAYERS]),
+                                spp=int(read_metadata(render).get("spp", 0)), source=render)
+        denoised = []
+        for path in inputs:
+            layers = layer_rows(path, ["color", "color_a", "color_b"])
+            denoised.append(Denoised(full=layers["color"], a=layers["color_a"],
+                                     b=layers["color_b"], source=path))
     read = time.perf_counter()
     ensemble.combine(RenderBuffers(layers={k: v[:8, :8] for k, v in buffers.layers.items()},
                                    spp=buffers.spp),

@@ -118,13 +118,16 @@ def _add_weighted_row(out, wsum, values, krow, kk, y, band_row, x0, j0, src_y, s
 
 @cached_njit(parallel=True, error_model="numpy")
 def _cbf_bands(values, channels, guide, guide_var, feats, spatial, consts, exp_consts, radius,
-               band_rows):
+               band_rows, out0, out1):
     """values (G, H, W * channels): G maps of ``channels``-vectors per pixel; guide, guide_var
     (Cg, H, W) planar float64 (Cg = 0 for no colour term); feats (F, H, W) planar, pre-scaled so
     that the feature term is sum_f (f_p - f_q)^2; spatial (r + 1, 2r + 1): |d|^2 / (2 sigma_s^2)
     for the offset (dy, dx - r); consts (float64): [colour scale 1/(2 sigma_g^2) (/ Cg for the
     mean), variance floor, impossible term]; exp_consts (:func:`_exp_constants`), values, feats,
-    spatial in the working dtype. Returns (G, H, W * channels) of the working dtype."""
+    spatial in the working dtype. Only the output rows out0 .. out1 - 1 are computed (the other
+    rows are read as neighbours: a tile with its halo); each pixel's sums are added in the same
+    order whatever the bands and rows (upper pixel row ascending, then dy, dx), so a row's result
+    does not depend on them. Returns (G, out1 - out0, W * channels) of the working dtype."""
     G, H, WC = values.shape
     W = WC // channels
     Cg = guide.shape[0]
@@ -134,16 +137,16 @@ def _cbf_bands(values, channels, guide, guide_var, feats, spatial, consts, exp_c
     impossible = consts[2]
     zero = consts[0] - consts[0]            # float64, for the guide's term
     one = spatial[0, 0] * 0 + 1             # the working dtype
-    out = np.empty_like(values)
-    nbands = (H + band_rows - 1) // band_rows
+    out = np.empty((G, out1 - out0, WC), values.dtype)
+    nbands = (out1 - out0 + band_rows - 1) // band_rows
     for band in prange(nbands):
-        y0 = band * band_rows
-        y1 = min(H, y0 + band_rows)
+        y0 = out0 + band * band_rows
+        y1 = min(out1, y0 + band_rows)
         wsum = np.ones((y1 - y0, W), values.dtype)   # the centre pixel, kappa(p, p) = 1
         for y in range(y0, y1):
             for g in range(G):
                 for j in range(WC):
-                    out[g, y, j] = values[g, y, j]
+                    out[g, y - out0, j] = values[g, y, j]
         erow = np.empty(W, values.dtype)
         krow = np.empty(W, values.dtype)
         kexp = np.empty(WC, values.dtype)
@@ -200,11 +203,11 @@ def _cbf_bands(values, channels, guide, guide_var, feats, spatial, consts, exp_c
                     jp = np.uint64(xs * channels)
                     jq = np.uint64((xs + dx) * channels)
                     if own1:      # p gets q's values
-                        _add_weighted_row(out, wsum, values, krow, kk, y, y - y0, op, jp, y2, jq, m,
-                                          mc)
+                        _add_weighted_row(out, wsum, values, krow, kk, y - out0, y - y0, op, jp, y2,
+                                          jq, m, mc)
                     if own2:      # q gets p's values
-                        _add_weighted_row(out, wsum, values, krow, kk, y2, y2 - y0, oq, jq, y, jp, m,
-                                          mc)
+                        _add_weighted_row(out, wsum, values, krow, kk, y2 - out0, y2 - y0, oq, jq, y,
+                                          jp, m, mc)
         inv = np.empty(WC, values.dtype)
         for y in range(y0, y1):
             for x in range(W):
@@ -213,7 +216,7 @@ def _cbf_bands(values, channels, guide, guide_var, feats, spatial, consts, exp_c
                     inv[x * channels + c] = q
             for g in range(G):
                 for j in range(WC):
-                    out[g, y, j] *= inv[j]
+                    out[g, y - out0, j] *= inv[j]
     return out
 
 
@@ -230,13 +233,17 @@ def _planar(array, name, shape, dtype) -> np.ndarray:
 def cross_bilateral_filter_vectors(values, guide, guide_variance, features, feature_sigmas,
                                    sigma_spatial, sigma_guide, radius, *,
                                    colour_distance: Literal["mean", "sum"] = "mean",
-                                   dtype=np.float64) -> np.ndarray:
+                                   dtype=np.float64, rows: tuple[int, int] | None = None
+                                   ) -> np.ndarray:
     """Filter G maps of per-pixel C-vectors, values (G, H, W, C), with one shared kernel per pixel
     (Eq. 32-34); the arguments as :func:`cross_bilateral_filter`. ``values`` is used without a
     copy when it is already C-contiguous of ``dtype`` (e.g. the ensemble's (N, H, W, 3) float32
     weights), and so are ``guide`` and ``guide_variance`` when they are float64 views
     ``np.moveaxis(planar, 0, 2)`` of contiguous (C, H, W) arrays (neither is modified).
-    Returns (G, H, W, C) of ``dtype`` (float32 or float64)."""
+    ``rows=(r0, r1)``: only the output rows r0 .. r1 - 1 (the others are read as neighbours,
+    e.g. a tile's halo of ``radius`` rows): the result equals those rows of the whole filter
+    bit for bit when the arrays hold every row within ``radius`` of them (or the image ends
+    there). Returns (G, H, W, C) (or (G, r1 - r0, W, C)) of ``dtype`` (float32 or float64)."""
     dtype = np.dtype(dtype)
     if dtype not in (np.float32, np.float64):
         raise ValueError(f"dtype must be float32 or float64, got {dtype}")
@@ -282,9 +289,12 @@ def cross_bilateral_filter_vectors(values, guide, guide_variance, features, feat
     spatial = ((np.arange(radius + 1)[:, None] ** 2 + offsets[None, :] ** 2)
                / (2.0 * float(sigma_spatial) ** 2)).astype(dtype)
     consts = np.array([colour_scale, VARIANCE_FLOOR, _IMPOSSIBLE])
+    r0, r1 = (0, H) if rows is None else (int(rows[0]), int(rows[1]))
+    if not 0 <= r0 <= r1 <= H:
+        raise ValueError(f"rows {rows} outside the {H} rows of the values")
     out = _cbf_bands(vals.reshape(G, H, W * C), C, g, gv, feats, spatial, consts,
-                     _exp_constants(dtype), radius, BAND_ROWS)
-    return out.reshape(G, H, W, C)
+                     _exp_constants(dtype), radius, BAND_ROWS, r0, r1)
+    return out.reshape(G, r1 - r0, W, C)
 
 
 def cross_bilateral_filter(values, guide, guide_variance, features, feature_sigmas,
@@ -340,11 +350,85 @@ def gaussian_kernel(kernel_size: int) -> np.ndarray:
     return taps / taps.sum()
 
 
-def gaussian_blur(image, *, kernel_size: int = 9) -> np.ndarray:
+@cached_njit(parallel=True, error_model="numpy")
+def _blur_axis0(a, taps, idx, n_out):
+    """out[i] = sum_k taps[k] a[idx[i + k]] (k ascending, from 0.0), i < n_out; a (T, M)."""
+    m = a.shape[1]
+    out = np.zeros((n_out, m))
+    for i in prange(n_out):
+        for k in range(taps.shape[0]):
+            t = taps[k]
+            src = idx[i + k]
+            for j in range(m):
+                out[i, j] += t * a[src, j]
+    return out
+
+
+@cached_njit(parallel=True, error_model="numpy")
+def _blur_axis1(a, taps, idx):
+    """out[:, x] = sum_k taps[k] a[:, idx[x + k]] (k ascending, from 0.0); a (T, W, C). Each row
+    is padded once (``idx``), then the taps run over contiguous memory."""
+    t_rows, w, c = a.shape
+    wc = w * c
+    out = np.zeros((t_rows, wc))
+    for y in prange(t_rows):
+        padded = np.empty(idx.shape[0] * c)
+        for x in range(idx.shape[0]):
+            for ch in range(c):
+                padded[x * c + ch] = a[y, idx[x], ch]
+        for k in range(taps.shape[0]):
+            t = taps[k]
+            off = k * c
+            for j in range(wc):
+                out[y, j] += t * padded[off + j]
+    return out.reshape(t_rows, w, c)
+
+
+def _reflect_index(length: int, r: int) -> np.ndarray:
+    """Source index of each of the length + 2 r padded positions: BORDER_REFLECT_101 (NumPy's
+    "reflect", repeated for short axes), "edge" for an axis of length 1. int64."""
+    return np.pad(np.arange(length), r, mode="reflect" if length > 1 else "edge")
+
+
+def gaussian_blur(image, *, kernel_size: int = 9, rows: tuple[int, int] | None = None,
+                  first_row: int = 0, height: int | None = None) -> np.ndarray:
     """Separable Gaussian blur of an (H, W) or (H, W, C) image with :func:`gaussian_kernel`,
     borders reflected without repeating the edge pixel (OpenCV's default BORDER_REFLECT_101,
-    NumPy's ``pad`` mode "reflect"; an axis of length 1 is constant). Returns float64 of the
-    image's shape."""
+    NumPy's ``pad`` mode "reflect"; an axis of length 1 is constant): rows first, then columns,
+    each output the sum of tap x value from k = 0 up (the order of the NumPy formulation
+    ``out += tap * shifted``, so the result is the same bit for bit; tests/test_bilateral.py).
+
+    A tile: ``image`` holds the rows ``first_row`` .. ``first_row + T - 1`` of an image of
+    ``height`` rows (default: the whole image), and ``rows=(r0, r1)`` asks for the blurred rows
+    r0 .. r1 - 1 of the image (default: the tile's); every row within kernel_size // 2 of them
+    (reflected at the image's borders) must be in the tile. Returns float64 of shape
+    (r1 - r0, W[, C])."""
+    a = np.asarray(image, np.float64)
+    flat = a.ndim == 2
+    if flat:
+        a = a[:, :, None]
+    if a.ndim != 3:
+        raise ValueError(f"image must be (H, W) or (H, W, C), got shape {np.shape(image)}")
+    taps = gaussian_kernel(kernel_size)
+    r = kernel_size // 2
+    t_rows, w, c = a.shape
+    height = first_row + t_rows if height is None else int(height)
+    r0, r1 = (first_row, first_row + t_rows) if rows is None else (int(rows[0]), int(rows[1]))
+    idx0 = _reflect_index(height, r)[r0:r1 + 2 * r] - first_row
+    if r1 > r0 and (idx0.min() < 0 or idx0.max() >= t_rows):
+        raise ValueError(f"blurred rows {r0}:{r1} need image rows outside the tile "
+                         f"{first_row}:{first_row + t_rows}")
+    if r1 <= r0:
+        out = np.zeros((0, w, c))
+    else:
+        out = _blur_axis0(np.ascontiguousarray(a).reshape(t_rows, w * c), taps, idx0, r1 - r0)
+        out = _blur_axis1(out.reshape(r1 - r0, w, c), taps, _reflect_index(w, r))
+    return out[..., 0] if flat else out
+
+
+def gaussian_blur_reference(image, *, kernel_size: int = 9) -> np.ndarray:
+    """:func:`gaussian_blur` in NumPy (pad, then ``out += tap * shifted`` per axis), the
+    reference of its tests. Returns float64 of the image's shape."""
     a = np.asarray(image, np.float64)
     taps = gaussian_kernel(kernel_size)
     r = kernel_size // 2

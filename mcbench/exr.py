@@ -17,7 +17,8 @@ import OpenEXR
 from mcbench import BenchError
 from mcbench.io import write_atomically
 
-__all__ = ["ExrError", "NonFiniteError", "read_layers", "write_layers", "read_metadata", "check_finite"]
+__all__ = ["ExrError", "NonFiniteError", "read_layers", "write_layers", "read_metadata", "check_finite",
+           "LayerRows", "layer_rows"]
 
 
 class ExrError(BenchError):
@@ -70,11 +71,11 @@ def write_layers(path: str | os.PathLike, layers: dict[str, np.ndarray],
     write_atomically(path, save, suffix=".tmp.exr")
 
 
-def _open(path: Path) -> OpenEXR.File:
+def _open(path: Path, *, header_only: bool = False) -> OpenEXR.File:
     if not path.exists():
         raise ExrError(f"{path}: EXR file is missing")
     try:
-        return OpenEXR.File(str(path))
+        return OpenEXR.File(str(path), header_only=header_only)
     except Exception as exc:  # the bindings raise a bare Exception on corrupt files
         raise ExrError(f"{path}: cannot read EXR ({exc})") from exc
 
@@ -100,10 +101,141 @@ def read_layers(path: str | os.PathLike, names: list[str] | None = None,
         return {n: np.asarray(available[n], dtype=dtype) for n in wanted}
 
 
+class _FileRows:
+    """The row reader one file's :class:`LayerRows` share: a request for some rows of a layer
+    reads those rows of every layer of the file requested so far in one call (an uncompressed
+    scanline holds all channels, so one read of a row range costs about what one layer's does)
+    and keeps the others' rows for one request each (handed out, not shared: no aliasing)."""
+
+    def __init__(self, path: Path, channels: dict[str, list[str]], width: int, first_row: int):
+        self.path, self.channels, self.width, self.first_row = path, channels, width, first_row
+        self.used: dict[str, None] = {}
+        self.span: tuple[int, int] | None = None
+        self.pending: dict[str, np.ndarray] = {}
+
+    def rows(self, name: str, y0: int, y1: int) -> np.ndarray:
+        if self.span == (y0, y1) and name in self.pending:
+            return self.pending.pop(name)
+        self.used[name] = None
+        names = list(self.used)
+        wanted = [c for n in names for c in self.channels[n]]
+        import Imath   # the scanline API's pixel types (installed with the OpenEXR bindings)
+
+        try:
+            exr = OpenEXR.InputFile(str(self.path))
+            try:
+                planes = exr.channels(wanted, Imath.PixelType(Imath.PixelType.FLOAT),
+                                      self.first_row + y0, self.first_row + y1 - 1)
+            finally:
+                exr.close()
+        except Exception as exc:   # the bindings raise bare exceptions on truncated files
+            raise ExrError(f"{self.path}: cannot read rows {y0}:{y1} of layer(s) {names} "
+                           f"({exc})") from exc
+        out, k = {}, 0
+        for n in names:
+            block = np.empty((y1 - y0, self.width, len(self.channels[n])), np.float32)
+            for j in range(block.shape[2]):
+                block[..., j] = np.frombuffer(planes[k], np.float32).reshape(y1 - y0, self.width)
+                k += 1
+            out[n] = block
+        mine = out.pop(name)
+        self.span, self.pending = (y0, y1), out
+        return mine
+
+
+class LayerRows:
+    """One layer of an EXR file, read from the file by rows when indexed: a read-only stand-in
+    for the (H, W, 3) or (H, W) float32 array :func:`read_layers` would return, holding no
+    pixels. ``layer[y0:y1]`` (or ``layer[y0:y1, cols...]``, ``layer[y]``) decodes only those
+    scanlines (OpenEXR's scanline API, ``InputFile.channels`` over a row range: for the
+    uncompressed files the harness writes that reads only their bytes) and returns a new array;
+    ``np.asarray(layer)`` reads the whole layer. Values equal :func:`read_layers`'s exactly. Each
+    read opens the file (~0.1 ms), so no handle stays open; the layers of one :func:`layer_rows`
+    call share one read per row range (:class:`_FileRows`)."""
+
+    def __init__(self, reader: _FileRows, name: str, shape: tuple[int, ...]):
+        self._reader, self.name, self.path = reader, name, reader.path
+        self.shape = shape
+        self.dtype = np.dtype(np.float32)
+        self.ndim = len(shape)
+
+    def __len__(self) -> int:
+        return self.shape[0]
+
+    def __repr__(self) -> str:
+        return f"LayerRows({str(self.path)!r}, {self.name!r}, shape={self.shape})"
+
+    def rows(self, y0: int, y1: int) -> np.ndarray:
+        """Rows y0 .. y1 - 1 (0 <= y0 <= y1 <= H): a new (y1 - y0, W[, 3]) float32 array."""
+        height = self.shape[0]
+        if not 0 <= y0 <= y1 <= height:
+            raise IndexError(f"{self.path}: rows {y0}:{y1} of layer '{self.name}' with {height} rows")
+        if y1 == y0:
+            return np.empty((0,) + self.shape[1:], np.float32)
+        block = self._reader.rows(self.name, y0, y1)
+        return block if self.ndim == 3 else block[..., 0]
+
+    def __getitem__(self, key) -> np.ndarray:
+        first, rest = (key[0], key[1:]) if isinstance(key, tuple) else (key, ())
+        if first is Ellipsis:
+            return np.asarray(self)[key]
+        if isinstance(first, slice):
+            start, stop, step = first.indices(self.shape[0])
+            stop = max(stop, start)
+            block = self.rows(start, stop) if step == 1 else self.rows(0, self.shape[0])[first]
+            return block[(slice(None), *rest)] if rest else block
+        y = int(first)                      # one row (numpy's negative indices included)
+        y = y + self.shape[0] if y < 0 else y
+        if not 0 <= y < self.shape[0]:
+            raise IndexError(f"row {first} out of range for {self.shape[0]} rows")
+        return self.rows(y, y + 1)[(0, *rest)]
+
+    def __array__(self, dtype=None, copy=None):
+        whole = self.rows(0, self.shape[0])
+        return whole if dtype is None else whole.astype(dtype, copy=False)
+
+
+def layer_rows(path: str | os.PathLike, names: list[str] | None = None) -> dict[str, LayerRows]:
+    """The named layers (all when ``names`` is None) of an EXR as :class:`LayerRows`, read by
+    rows when indexed; only the header is read here. A layer is the channels ``name.R``,
+    ``name.G``, ``name.B`` (3-channel, as :func:`write_layers` stores it) or the single channel
+    ``name``. Raises :class:`ExrError` naming the file when it is missing or corrupt, or lacks
+    a layer."""
+    path = Path(path)
+    if not path.exists():
+        raise ExrError(f"{path}: EXR file is missing")
+    try:
+        exr = OpenEXR.InputFile(str(path))
+        try:
+            header = exr.header()
+        finally:
+            exr.close()
+        window = header["dataWindow"]
+        x0, y0, x1, y1 = window.min.x, window.min.y, window.max.x, window.max.y
+        present = set(header["channels"])
+    except Exception as exc:
+        raise ExrError(f"{path}: cannot read EXR ({exc})") from exc
+    shape = (y1 - y0 + 1, x1 - x0 + 1)
+    layers: dict[str, list[str]] = {}
+    for channel in sorted(present):
+        stem, _, last = channel.rpartition(".")
+        if stem and last in ("R", "G", "B") and all(f"{stem}.{c}" in present for c in "RGB"):
+            layers[stem] = [f"{stem}.{c}" for c in "RGB"]
+        elif not (stem and last in ("R", "G", "B", "A")):
+            layers[channel] = [channel]
+    wanted = list(layers) if names is None else list(names)
+    missing = [n for n in wanted if n not in layers]
+    if missing:
+        raise ExrError(f"{path}: missing layer(s) {missing}; file has {sorted(layers)}")
+    reader = _FileRows(path, {n: layers[n] for n in wanted}, shape[1], y0)
+    return {n: LayerRows(reader, n, shape + ((3,) if len(layers[n]) == 3 else ()))
+            for n in wanted}
+
+
 def read_metadata(path: str | os.PathLike) -> dict[str, str]:
     """Return the ``mcbench.*`` header attributes of an EXR (prefix stripped)."""
     path = Path(path)
-    with _open(path) as exr:
+    with _open(path, header_only=True) as exr:      # the pixels are not decoded
         return {k[len("mcbench."):]: str(v) for k, v in exr.header().items() if k.startswith("mcbench.")}
 
 

@@ -96,13 +96,19 @@ guided by z/Var[z], albedo and normal (``mcbench.bilateral``). A convex combinat
 simplex vectors stays on the simplex.
 
 Precision and memory (issue 14): the solvers' geometry is float64 throughout (Eq. 29's c1
-and the hull tests subtract nearly equal radiance values). :func:`combine` solves blocks of
-rows (:data:`BLOCK_PIXELS`; float64 copies of one block's inputs only) straight into the float32
-raw weight maps it returns, and the guide z, Var[z] (float64: the filter's colour term needs
-it, see ``mcbench.bilateral``); the weight filter otherwise runs in float32 (relative rounding
+and the hull tests subtract nearly equal radiance values). :func:`combine` makes one pass down
+the image in bands of rows (:data:`FILTER_BLOCK_PIXELS`): it solves blocks of rows
+(:data:`BLOCK_PIXELS`; float64 copies of one block's inputs only) as far as a band's halo needs,
+straight into the float32 raw weight maps it returns, keeping the guide z, Var[z] (float64: the
+filter's colour term needs it, see ``mcbench.bilateral``) of the rows a band still needs only;
+filters the band from its tile (the weight filter otherwise in float32: relative rounding
 1e-7, far below what a weight map shows; the blend equals the float64 code's to ~1e-15 relMSE,
-tests/test_ensemble.py); the blend (Eq. 35) accumulates in float64. The iterative solver's
-generator is keyed by the problem's index in the image, so blocks change nothing.
+tests/test_ensemble.py) and blends it (Eq. 35, float64 accumulation). The iterative solver's
+generator is keyed by the problem's index in the image, so blocks change nothing; the filter
+and blur give each row of a tile the whole image's result bit for bit, the outlier pass to
+rounding of its float64 window sums. Whole arrays are only what :func:`combine` returns (three
+images, 2N weight maps); the render's layers and the inputs are read by rows
+(:data:`READS_ROWS`).
 
 The public code's post-processing (LuisaGroup/Ensemble-Denoising, ``filter.h``/``main.cpp``;
 ``../shared/study/public-code-facts.md`` items 1-3), each a documented switch of
@@ -155,6 +161,9 @@ KIND = "combiner"
 LABEL = "Ensemble"
 # what combine() reads of the render: the noisy halves (Eq. 11-14) and the filter's features
 RENDER_LAYERS = ("color_a", "color_b", "albedo", "normal")
+# combine() only ever indexes the render's layers and the inputs' images by rows (x[y0:y1]), so a
+# job may hand it mcbench.exr.LayerRows (layers read from their files by rows) instead of arrays
+READS_ROWS = True
 
 SOLVERS = ("iterative", "exact", "qp")
 MAX_EXACT_N = 20
@@ -1198,21 +1207,71 @@ def _onto_constraint(weights, *, nonnegative, check, fallback=None):
     weights /= total
 
 
-def _filter_raw_weights(values, guide, guide_variance, albedo, normal, *, radius, sigma_spatial,
-                        sigma_color, sigma_albedo, sigma_normal, nonnegative, guide_variance_blur,
-                        outlier_removal, colour_distance, dtype):
-    """Sec. 4.2 on raw weights ``values`` (N, H, W, C) with the guide z and Var[z] (H, W, C) given,
-    plus the public code's optional passes; returns (N, H, W, C) weights of ``dtype``."""
+FILTER_BLOCK_PIXELS = 1 << 17   # output pixels per band of the tiled weight filter (memory bound)
+
+
+def _tile_rows(y0, y1, height, *, radius, blur, outliers):
+    """The rows each stage needs for the final weights of rows y0 .. y1 - 1 (half-open ranges,
+    clipped to the image): (o0, o1) the filtered rows the outlier pass reads (its window's
+    radius :data:`OUTLIER_RADIUS` around them), (f0, f1) the rows of raw weights, z and
+    features the filter reads for those (``radius`` around), (v0, v1) the rows of Var[z] the
+    9 x 9 blur reads for those (4 around)."""
+    r_out = OUTLIER_RADIUS if outliers else 0
+    r_blur = 4 if blur else 0
+    o0, o1 = max(0, y0 - r_out), min(height, y1 + r_out)
+    f0, f1 = max(0, o0 - radius), min(height, o1 + radius)
+    return (o0, o1), (f0, f1), (max(0, f0 - r_blur), min(height, f1 + r_blur))
+
+
+def _filter_band(values, y0, y1, guide, guide_variance, v0, albedo, normal, *, radius,
+                 sigma_spatial, sigma_color, sigma_albedo, sigma_normal, nonnegative,
+                 guide_variance_blur, outlier_removal, colour_distance, dtype):
+    """Sec. 4.2 plus the public code's optional passes for the rows y0 .. y1 - 1 of an image of
+    H rows, from a tile with its halo (:func:`_tile_rows`): ``values`` (N, H, W, C) raw weights
+    (whole, or any array-like read by rows), ``guide`` and ``guide_variance`` planar (C, T, W)
+    float64 holding the rows v0 .. v0 + T - 1 of z and Var[z] (at least (v0, v1) of
+    :func:`_tile_rows`), ``albedo``, ``normal`` (H, W, 3) read by rows. Returns the final weights
+    (N, y1 - y0, W, C) of ``dtype``.
+
+    Each stage works on the rows it needs only; the filter and the blur give every row exactly
+    the whole image's result (:func:`mcbench.bilateral.cross_bilateral_filter_vectors`,
+    :func:`mcbench.bilateral.gaussian_blur`: same sums in the same order), the outlier pass's
+    window statistics start their running sums at the tile (float64; differences ~1e-16
+    relative, tests/test_ensemble.py)."""
+    height = values.shape[1]
+    (o0, o1), (f0, f1), (vv0, vv1) = _tile_rows(
+        y0, y1, height, radius=radius, blur=guide_variance_blur == "gaussian9",
+        outliers=outlier_removal)
+    z = np.moveaxis(guide[:, f0 - v0:f1 - v0], 0, 2)
     if guide_variance_blur == "gaussian9":
-        guide_variance = gaussian_blur(guide_variance, kernel_size=9)
-    out = cross_bilateral_filter_vectors(values, guide, guide_variance, [albedo, normal],
+        var = gaussian_blur(np.moveaxis(guide_variance[:, vv0 - v0:vv1 - v0], 0, 2),
+                            kernel_size=9, rows=(f0, f1), first_row=vv0, height=height)
+    else:
+        var = np.moveaxis(guide_variance[:, f0 - v0:f1 - v0], 0, 2)
+    out = cross_bilateral_filter_vectors(values[:, f0:f1], z, var, [albedo[f0:f1], normal[f0:f1]],
                                          [sigma_albedo, sigma_normal], sigma_spatial, sigma_color,
-                                         radius, colour_distance=colour_distance, dtype=dtype)
+                                         radius, colour_distance=colour_distance, dtype=dtype,
+                                         rows=(o0 - f0, o1 - f0))
     _onto_constraint(out, nonnegative=nonnegative, check=True)
-    if outlier_removal:
-        cleaned = remove_outliers(out, radius=OUTLIER_RADIUS, threshold=OUTLIER_THRESHOLD)
-        _onto_constraint(cleaned, nonnegative=nonnegative, check=False, fallback=out)
-        out = cleaned
+    if not outlier_removal:
+        return out
+    keep = slice(y0 - o0, y1 - o0)
+    cleaned = remove_outliers(out, radius=OUTLIER_RADIUS, threshold=OUTLIER_THRESHOLD)[:, keep]
+    _onto_constraint(cleaned, nonnegative=nonnegative, check=False, fallback=out[:, keep])
+    return cleaned
+
+
+def _filter_all(values, guide, guide_variance, albedo, normal, *, dtype, **options):
+    """:func:`_filter_band` over the bands of :data:`FILTER_BLOCK_PIXELS` pixels of whole
+    arrays: values (N, H, W, C), guide and guide_variance planar (C, H, W) float64. Returns
+    (N, H, W, C) of ``dtype``."""
+    n, h, wd, c = values.shape
+    out = np.empty((n, h, wd, c), dtype)
+    step = max(1, FILTER_BLOCK_PIXELS // max(wd, 1))
+    for y0 in range(0, h, step):
+        y1 = min(h, y0 + step)
+        out[:, y0:y1] = _filter_band(values, y0, y1, guide, guide_variance, 0, albedo, normal,
+                                     dtype=dtype, **options)
     return out
 
 
@@ -1243,29 +1302,135 @@ def filter_weights(weights, denoised_full, denoised_a, denoised_b, albedo, norma
     """
     _check_choices(guide_variance_blur=guide_variance_blur, colour_distance=colour_distance)
     w = np.asarray(weights, np.float64)
-    z = combine_with(w, denoised_full)
-    var = 0.5 * (combine_with(w, denoised_a) - combine_with(w, denoised_b)) ** 2
-    return _filter_raw_weights(w, z, var, albedo, normal, radius=radius,
-                               sigma_spatial=sigma_spatial, sigma_color=sigma_color,
-                               sigma_albedo=sigma_albedo, sigma_normal=sigma_normal,
-                               nonnegative=nonnegative, guide_variance_blur=guide_variance_blur,
-                               outlier_removal=outlier_removal, colour_distance=colour_distance,
-                               dtype=dtype)
+    z = _planar64(combine_with(w, denoised_full))
+    var = _planar64(0.5 * (combine_with(w, denoised_a) - combine_with(w, denoised_b)) ** 2)
+    return _filter_all(w, z, var, np.asarray(albedo), np.asarray(normal), dtype=dtype,
+                       radius=radius, sigma_spatial=sigma_spatial, sigma_color=sigma_color,
+                       sigma_albedo=sigma_albedo, sigma_normal=sigma_normal,
+                       nonnegative=nonnegative, guide_variance_blur=guide_variance_blur,
+                       outlier_removal=outlier_removal, colour_distance=colour_distance)
+
+
+def _planar64(image) -> np.ndarray:
+    """(H, W, C) -> contiguous (C, H, W) float64 (the filter's layout of z and Var[z])."""
+    return np.ascontiguousarray(np.moveaxis(np.asarray(image, np.float64), 2, 0))
 
 
 def _rows_of(inputs, which, rows) -> np.ndarray:
-    """The inputs' results on image ``which`` for the rows ``rows``: (N, T, W, C) float64."""
-    return np.stack([np.asarray(d.image(which)[rows], np.float64) for d in inputs])
+    """The inputs' results on image ``which`` for the rows ``rows`` (a slice): (N, T, W, C)
+    float64, filled input by input (each input's rows read once, no stacked temporaries)."""
+    first = np.asarray(inputs[0].image(which)[rows])
+    out = np.empty((len(inputs),) + first.shape)
+    out[0] = first
+    for i, d in enumerate(inputs[1:], 1):
+        out[i] = d.image(which)[rows]
+    return out
 
 
 def blend(weights, inputs, which) -> np.ndarray:
     """Eq. 35 for image ``which`` (``"full"``, ``"a"``, ``"b"``) of the Denoised ``inputs``:
     sum_i w_i y_i accumulated in float64 one input at a time; weights (N, H, W, C). Returns
     (H, W, C) float64."""
-    out = np.zeros(np.shape(weights)[1:])
+    return _blend_rows(weights, inputs, which, slice(None))
+
+
+def _blend_rows(weights, inputs, which, rows) -> np.ndarray:
+    """:func:`blend` on the rows ``rows`` (a slice) of the weights and of each input's image
+    (whole arrays or array-likes read by rows). Returns (T, W, C) float64."""
+    return _blend_band(weights, inputs, rows, (which,))[which]
+
+
+def _blend_band(weights, inputs, rows, images=("full", "a", "b")) -> dict:
+    """Eq. 35 on the rows ``rows`` (a slice) for each image in ``images``, input by input (one
+    read of an input's rows when it is read from its file): {image: (T, W, C) float64}, each
+    accumulated in float64 in input order as :func:`blend`."""
+    out = {}
     for w, d in zip(weights, inputs):
-        out += w * np.asarray(d.image(which), np.float64)
+        w = w[rows]
+        for which in images:
+            term = w * np.asarray(d.image(which)[rows], np.float64)
+            if which not in out:
+                out[which] = np.zeros(term.shape)
+            out[which] += term
     return out
+
+
+class _Solver:
+    """combine()'s solve (Sec. 4.1) of blocks of :data:`BLOCK_PIXELS` pixels of rows, in order,
+    on demand (:meth:`until`): raw weights into ``raw`` (float32), and for the filter the guide
+    z and Var[z] of the rows solved (float64, planar blocks) until :meth:`drop_before` lets them
+    go, so only a band's halo of them is ever held. Counts non-finite input pixels block by
+    block; at the first, it stops solving, counts the rest and raises the message of
+    :func:`_check_finite` (whole-image counts)."""
+
+    def __init__(self, buffers, inputs, raw, *, guide, options):
+        self.buffers, self.inputs, self.raw = buffers, inputs, raw
+        self.guide, self.options = guide, options
+        _, self.height, self.width, _ = raw.shape
+        self.step = max(1, BLOCK_PIXELS // max(self.width, 1))
+        self.next_row = 0
+        self.blocks: list[tuple[int, np.ndarray, np.ndarray]] = []   # (first row, z, Var[z])
+
+    def _block(self, rows):
+        xa = np.asarray(self.buffers.color_a[rows], np.float64)
+        xb = np.asarray(self.buffers.color_b[rows], np.float64)
+        ya, yb, yf = (np.empty((len(self.inputs),) + xa.shape) for _ in range(3))
+        for i, d in enumerate(self.inputs):    # input by input: one read of a file's rows
+            ya[i], yb[i], yf[i] = d.a[rows], d.b[rows], d.full[rows]
+        block = {"color_a": xa, "color_b": xb, "denoised_a": ya, "denoised_b": yb,
+                 "denoised_full": yf}
+        if self.guide:   # the filter's features: checked here too when read from files by rows
+            for name in ("albedo", "normal"):
+                layer = getattr(self.buffers, name)
+                if not isinstance(layer, np.ndarray):
+                    block[name] = np.asarray(layer[rows])
+        return block
+
+    def _raise_nonfinite(self, bad):
+        for y0 in range(self.next_row, self.height, self.step):
+            block = self._block(slice(y0, min(self.height, y0 + self.step)))
+            for name, array in block.items():
+                bad[name] = bad.get(name, 0) + _nonfinite_pixels([array])
+        bad = {name: count for name, count in bad.items() if count}
+        detail = ", ".join(f"{k}: {c}" for k, c in bad.items())
+        raise ValueError(f"non-finite (NaN/Inf) values in {sum(bad.values())} pixel(s) "
+                         f"of the ensemble inputs ({detail})")
+
+    def until(self, row):
+        """Solve blocks until every row < ``row`` is."""
+        while self.next_row < min(row, self.height):
+            y0 = self.next_row
+            rows = slice(y0, min(self.height, y0 + self.step))
+            block = self._block(rows)
+            # a NaN/Inf makes the sum non-finite (an overflowing sum only costs the exact count)
+            if not all(np.isfinite(a.sum()) for a in block.values()):
+                bad = {name: _nonfinite_pixels([a]) for name, a in block.items()}
+                if any(bad.values()):
+                    self.next_row = rows.stop
+                    self._raise_nonfinite(bad)
+            ya, yb = block["denoised_a"], block["denoised_b"]
+            w, _ = _solve_block(block["color_a"], block["color_b"], ya, yb, first_row=y0,
+                                **self.options)
+            self.raw[:, rows] = w
+            if self.guide:
+                z = _planar64(combine_with(w, block["denoised_full"]))
+                var = _planar64(0.5 * (combine_with(w, ya) - combine_with(w, yb)) ** 2)
+                self.blocks.append((y0, z, var))
+            self.next_row = rows.stop
+
+    def guide_rows(self, v0, v1):
+        """z and Var[z] of the rows v0 .. v1 - 1 (solved, not dropped): planar (C, v1 - v0, W)."""
+        parts = [(max(v0, y0) - y0, min(v1, y0 + z.shape[1]) - y0, z, var)
+                 for y0, z, var in self.blocks if y0 < v1 and y0 + z.shape[1] > v0]
+        if len(parts) == 1:
+            a, b, z, var = parts[0]
+            return z[:, a:b], var[:, a:b]
+        return (np.concatenate([z[:, a:b] for a, b, z, _ in parts], axis=1),
+                np.concatenate([var[:, a:b] for a, b, _, var in parts], axis=1))
+
+    def drop_before(self, row):
+        """Let the guide blocks that end at or before ``row`` go."""
+        self.blocks = [b for b in self.blocks if b[0] + b[1].shape[1] > row]
 
 
 def combine(buffers: RenderBuffers, inputs: list[Denoised], *,
@@ -1293,10 +1458,17 @@ def combine(buffers: RenderBuffers, inputs: list[Denoised], *,
     outlier_removal=False`` is the paper's filter alone. ``start``: the iterative solver's start (see
     :func:`solve_weights`; the paper's random one by default).
 
-    Memory: the rows are solved in blocks of about :data:`BLOCK_PIXELS` pixels (float64 copies
-    of one block only), straight into the float32 raw weight maps and the float64 guide z and
-    Var[z]; the weight filter works in float32 except for its colour term (float64) and the
-    blend accumulates in float64.
+    Memory (issue 14): one pass down the image in bands of :data:`FILTER_BLOCK_PIXELS` pixels.
+    For each band the rows are solved (blocks of :data:`BLOCK_PIXELS` pixels, float64 copies of
+    one block only) as far as its halo needs (:func:`_tile_rows`: 14 rows with the default
+    passes), straight into the float32 raw weight maps, keeping the float64 guide z and Var[z]
+    of those rows only; the band is filtered from its tile (float32 but the colour term;
+    :func:`_filter_band`), written to the float32 filtered maps, and blended (Eq. 35, float64
+    accumulation) into the float32 images. What stays whole is what is returned: the three
+    images and the 2N weight maps. The render's layers and the inputs' images are only ever
+    indexed by rows (``x[y0:y1]``), so they may be array-likes read from their files by rows
+    (:class:`mcbench.exr.LayerRows`, see :data:`READS_ROWS`): then no input is ever held whole.
+    Each input row is read twice (solve, blend).
 
     Returns Denoised(full, a, b, extras) with float32 images; ``extras`` holds
     ``weights_raw_{i}`` and ``weights_filtered_{i}`` (H, W, 3) per input i (with
@@ -1309,50 +1481,51 @@ def combine(buffers: RenderBuffers, inputs: list[Denoised], *,
         raise ValueError("the ensemble needs at least one input")
     _check_choices(solver=solver, weights=weights, channels=channels, start=start,
                    guide_variance_blur=guide_variance_blur, colour_distance=colour_distance)
-    xa, xb = np.asarray(buffers.color_a), np.asarray(buffers.color_b)
+    xa, xb = buffers.color_a, buffers.color_b
+    shape = tuple(np.shape(xa))
     for i, d in enumerate(inputs):
         for which in ("full", "a", "b"):
-            if np.shape(d.image(which)) != xa.shape:
+            if tuple(np.shape(d.image(which))) != shape:
                 raise ValueError(f"ensemble input {i} ({d.source}) image {which} has shape "
-                                 f"{np.shape(d.image(which))}, the render's is {xa.shape}")
-    _check_shapes(xa, xb, np.empty((1,) + xa.shape, np.uint8), np.empty((1,) + xa.shape, np.uint8))
-    _check_finite({"color_a": xa, "color_b": xb, "denoised_a": [d.a for d in inputs],
-                   "denoised_b": [d.b for d in inputs], "denoised_full": [d.full for d in inputs]})
+                                 f"{np.shape(d.image(which))}, the render's is {shape}")
+    _check_shapes(np.empty(shape, np.uint8), np.empty(np.shape(xb), np.uint8),
+                  np.empty((1,) + shape, np.uint8), np.empty((1,) + shape, np.uint8))
     n = len(inputs)
-    h, wd, c = xa.shape
+    h, wd, c = shape
     raw = np.empty((n, h, wd, c), np.float32)
-    # z and Var[z] in float64, laid out planar (C, H, W) as the filter reads them (no copy)
-    guide = np.moveaxis(np.empty((c, h, wd)), 0, 2)
-    guide_variance = np.moveaxis(np.empty((c, h, wd)), 0, 2)
-    step = max(1, BLOCK_PIXELS // max(wd, 1))
+    filt = np.empty((n, h, wd, c), np.float32) if filter else raw
+    images = {key: np.empty((h, wd, c), np.float32) for key in ("full", "a", "b")}
+    solve = _Solver(buffers, inputs, raw, guide=filter,
+                    options=dict(solver=solver, seed=seed, max_iterations=max_iterations,
+                                 tolerance=tolerance, weights=weights, channels=channels,
+                                 start=start))
+    passes = dict(radius=radius, blur=guide_variance_blur == "gaussian9", outliers=outlier_removal)
+    options = dict(radius=radius, sigma_spatial=sigma_spatial, sigma_color=sigma_color,
+                   sigma_albedo=sigma_albedo, sigma_normal=sigma_normal,
+                   nonnegative=weights == "simplex", guide_variance_blur=guide_variance_blur,
+                   outlier_removal=outlier_removal, colour_distance=colour_distance,
+                   dtype=np.float32)
+    step = max(1, FILTER_BLOCK_PIXELS // max(wd, 1))
     for y0 in range(0, h, step):
-        rows = slice(y0, min(h, y0 + step))
-        ya, yb = _rows_of(inputs, "a", rows), _rows_of(inputs, "b", rows)
-        w, _ = _solve_block(np.asarray(xa[rows], np.float64), np.asarray(xb[rows], np.float64),
-                            ya, yb, solver=solver, seed=seed, max_iterations=max_iterations,
-                            tolerance=tolerance, weights=weights, channels=channels,
-                            first_row=y0, start=start)
-        raw[:, rows] = w
+        y1 = min(h, y0 + step)
         if filter:
-            guide[rows] = combine_with(w, _rows_of(inputs, "full", rows))
-            guide_variance[rows] = 0.5 * (combine_with(w, ya) - combine_with(w, yb)) ** 2
-    if filter:
-        filt = _filter_raw_weights(raw, guide, guide_variance, buffers.albedo, buffers.normal,
-                                   radius=radius, sigma_spatial=sigma_spatial,
-                                   sigma_color=sigma_color, sigma_albedo=sigma_albedo,
-                                   sigma_normal=sigma_normal, nonnegative=weights == "simplex",
-                                   guide_variance_blur=guide_variance_blur,
-                                   outlier_removal=outlier_removal,
-                                   colour_distance=colour_distance, dtype=np.float32)
-    else:
-        filt = raw
-    del guide, guide_variance
+            v0, v1 = _tile_rows(y0, y1, h, **passes)[2]
+            solve.until(v1)
+            z, var = solve.guide_rows(v0, v1)
+            filt[:, y0:y1] = _filter_band(raw, y0, y1, z, var, v0, buffers.albedo, buffers.normal,
+                                          **options)
+            del z, var
+            solve.drop_before(_tile_rows(y1, y1 + 1, h, **passes)[2][0])
+        else:
+            solve.until(y1)
+        for key, rows in _blend_band(filt, inputs, slice(y0, y1)).items():
+            images[key][y0:y1] = rows
+    solve.until(h)      # (h == 0)
     extras = {}
     for i in range(n):
         extras[f"weights_raw_{i}"] = raw[i]
     for i in range(n):
         extras[f"weights_filtered_{i}"] = filt[i]
-    images = {key: blend(filt, inputs, key).astype(np.float32) for key in ("full", "a", "b")}
     bad = [key for key, image in images.items() if not np.isfinite(image).all()]
     if bad:
         raise ValueError(f"ensemble ({weights} weights) combined image(s) {bad} overflow "

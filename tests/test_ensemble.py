@@ -643,3 +643,125 @@ def test_solve_in_blocks_equals_whole_image(monkeypatch, make_render_buffers):
             out = E.combine(buffers, inputs, solver=solver, channels=channels, filter=False)
             got = np.stack([out.extras[f"weights_raw_{i}"] for i in range(3)])
             assert np.array_equal(got, whole.astype(np.float32)), (solver, channels)
+
+
+# ---------------------------------------------------------------------------------------
+# the band-wise pass (issue 14, memory): tiles with their halos equal the whole image
+# ---------------------------------------------------------------------------------------
+def test_gaussian_blur_kernel_and_tiles_equal_the_numpy_blur():
+    """mcbench.bilateral.gaussian_blur (numba) equals its NumPy formulation bit for bit, on
+    whole images (axes of length 1, 2, 3: NumPy's repeated reflection) and on tiles holding
+    only the rows within 4 of the rows asked for (or the image's border)."""
+    from mcbench import bilateral
+
+    rng = np.random.default_rng(3)
+    for shape in [(1, 1, 3), (1, 6, 3), (2, 3, 3), (3, 9, 1), (5, 4, 3), (17, 2), (40, 33, 3)]:
+        image = rng.normal(size=shape) * 10
+        assert np.array_equal(bilateral.gaussian_blur(image),
+                              bilateral.gaussian_blur_reference(image)), shape
+    image = rng.normal(size=(50, 21, 3))
+    whole = bilateral.gaussian_blur_reference(image)
+    for r0, r1 in [(0, 1), (0, 10), (3, 30), (20, 21), (40, 50), (46, 50)]:
+        v0, v1 = max(0, r0 - 4), min(50, r1 + 4)
+        tile = bilateral.gaussian_blur(image[v0:v1], rows=(r0, r1), first_row=v0, height=50)
+        assert np.array_equal(tile, whole[r0:r1]), (r0, r1)
+    with pytest.raises(ValueError, match="outside the tile"):
+        bilateral.gaussian_blur(image[10:20], rows=(10, 20), first_row=10, height=50)
+
+
+def test_filter_rows_of_a_tile_equal_the_whole_filter():
+    """cross_bilateral_filter_vectors(rows=...) on a tile holding radius rows around them (or
+    the border) gives exactly those rows of the whole image's filter, for bands of the kernel
+    that do not line up with the tile (BAND_ROWS 64 against rows cut at 5 and 23)."""
+    from mcbench import bilateral
+
+    rng = np.random.default_rng(4)
+    h, w, r = 41, 19, 7
+    values = rng.dirichlet(np.ones(3), size=(h, w, 3)).transpose(3, 0, 1, 2).astype(np.float32)
+    guide = rng.uniform(0.2, 1.0, (h, w, 3))
+    var = rng.uniform(0.0, 0.02, (h, w, 3))
+    var[5:9, 3:7] = 0.0                          # the zero-variance guard in the tile
+    feats = [rng.uniform(0, 1, (h, w, 3)), rng.normal(size=(h, w, 3))]
+    args = (feats, [0.25, 0.15], 3.0, 2.0, r)
+    whole = bilateral.cross_bilateral_filter_vectors(values, guide, var, *args, dtype=np.float32)
+    for o0, o1 in [(0, 5), (5, 23), (23, 41), (12, 13), (0, 41)]:
+        f0, f1 = max(0, o0 - r), min(h, o1 + r)
+        tile = bilateral.cross_bilateral_filter_vectors(
+            values[:, f0:f1], guide[f0:f1], var[f0:f1], [f[f0:f1] for f in feats], *args[1:],
+            dtype=np.float32, rows=(o0 - f0, o1 - f0))
+        assert np.array_equal(tile, whole[:, o0:o1]), (o0, o1)
+
+
+@pytest.mark.parametrize("passes", ["default", "paper"])
+@pytest.mark.parametrize("solver", ["iterative", "exact"])
+def test_banded_combine_equals_the_whole_image_pass(passes, solver, monkeypatch,
+                                                    make_render_buffers):
+    """combine's one pass in bands (filter bands of 4 rows, solve blocks of 3, so both cut the
+    37 x 23 image everywhere and a band's halo of 14 rows spans several of them) against one
+    band and one block for the whole image (what combine did before the bands): raw weights
+    equal bit for bit; with the paper's filter alone the filtered weights and blends too; with
+    the default passes the outlier pass's float64 running sums start at each tile, so within
+    rounding (max |dw| 1e-6, blend relMSE 1e-12)."""
+    buffers, inputs, _ = synthetic_scene(make_render_buffers, np.random.default_rng(21),
+                                         H=37, W=23, n=4)
+    # a firefly-like spike so that the outlier pass replaces values near band borders
+    inputs[1].a[16:18, 5:8] += 3.0
+    options = dict(solver=solver, **(E.PAPER_FILTER if passes == "paper" else {}))
+    monkeypatch.setattr(E, "FILTER_BLOCK_PIXELS", 10 ** 9)
+    monkeypatch.setattr(E, "BLOCK_PIXELS", 10 ** 9)
+    whole = E.combine(buffers, inputs, **options)
+    monkeypatch.setattr(E, "FILTER_BLOCK_PIXELS", 4 * 23)
+    monkeypatch.setattr(E, "BLOCK_PIXELS", 3 * 23)
+    banded = E.combine(buffers, inputs, **options)
+    for i in range(4):
+        assert np.array_equal(banded.extras[f"weights_raw_{i}"], whole.extras[f"weights_raw_{i}"])
+        got, expected = (d.extras[f"weights_filtered_{i}"] for d in (banded, whole))
+        if passes == "paper":
+            assert np.array_equal(got, expected)
+        else:
+            assert np.abs(got - expected).max() <= 1e-6
+    for which in ("full", "a", "b"):
+        got, expected = (d.image(which).astype(np.float64) for d in (banded, whole))
+        assert np.mean((got - expected) ** 2 / (expected ** 2 + 1e-2)) < 1e-12
+        if passes == "paper":
+            assert np.array_equal(got, expected)
+    # the filter did act across band borders (the comparison has power)
+    raw = np.stack([whole.extras[f"weights_raw_{i}"] for i in range(4)])
+    filt = np.stack([whole.extras[f"weights_filtered_{i}"] for i in range(4)])
+    assert np.abs(raw - filt).max() > 1e-2
+
+
+def test_combine_reads_layers_by_rows(tmp_path, monkeypatch, make_render_buffers):
+    """The render's layers and the inputs as mcbench.exr.LayerRows (read from their files by
+    rows, E.READS_ROWS) give the same output, bit for bit, as the same files read whole; a NaN
+    in a file is refused with the whole image's count, as for arrays."""
+    from mcbench.buffers import RenderBuffers
+    from mcbench.exr import layer_rows, write_layers
+
+    buffers, inputs, _ = synthetic_scene(make_render_buffers, np.random.default_rng(22),
+                                         H=30, W=17, n=3)
+    monkeypatch.setattr(E, "FILTER_BLOCK_PIXELS", 5 * 17)
+    monkeypatch.setattr(E, "BLOCK_PIXELS", 4 * 17)
+    write_layers(tmp_path / "render.exr", buffers.layers, metadata={"spp": 8})
+    paths = [tmp_path / f"in{i}.exr" for i in range(3)]
+    for path, d in zip(paths, inputs):
+        write_layers(path, {"color": d.full, "color_a": d.a, "color_b": d.b})
+
+    def lazy():
+        render = RenderBuffers(layers=layer_rows(tmp_path / "render.exr",
+                                                 ["color", *E.RENDER_LAYERS]), spp=8)
+        return render, [Denoised(full=L["color"], a=L["color_a"], b=L["color_b"])
+                        for L in (layer_rows(p) for p in paths)]
+
+    eager = E.combine(RenderBuffers.load(tmp_path / "render.exr", layers=E.RENDER_LAYERS),
+                      [Denoised.load(p) for p in paths])
+    by_rows = E.combine(*lazy())
+    for name, layer in eager.layers().items():
+        assert np.array_equal(by_rows.layers()[name], layer), name
+    bad = inputs[2].b.copy()
+    bad[29, 3, 1] = np.nan
+    bad[0, 0] = np.inf
+    write_layers(paths[2], {"color": inputs[2].full, "color_a": inputs[2].a, "color_b": bad})
+    with pytest.raises(ValueError, match=r"non-finite \(NaN/Inf\) values in 2 pixel\(s\) .*"
+                                         r"denoised_b: 2"):
+        E.combine(*lazy())

@@ -90,3 +90,38 @@ def test_half_buffer_view_uses_its_own_features(render_layers):
     assert np.all(a.albedo == 0.25) and a.spp == 4
     np.testing.assert_array_equal(a.color, layers["color_a"])
     np.testing.assert_array_equal(buffers.image("b").albedo, layers["albedo"])  # falls back to full
+
+
+@pytest.mark.parametrize("compression", ["none", "zip"])
+def test_layer_rows_read_what_read_layers_reads(tmp_path, render_layers, compression):
+    """mcbench.exr.layer_rows: every layer (3-channel and the 1-channel depth), indexed by rows,
+    single rows (negative too), rows and columns, or whole, equals read_layers bit for bit; the
+    layers of one file share reads, and a block handed out is the caller's own (writing to it
+    changes no later read)."""
+    from mcbench.exr import layer_rows
+
+    path = tmp_path / "render.exr"
+    write_layers(path, render_layers, metadata={"spp": 4}, compression=compression)
+    whole = read_layers(path)
+    lazy = layer_rows(path)
+    assert sorted(lazy) == sorted(whole)
+    for name, layer in lazy.items():
+        expected = whole[name]
+        assert layer.shape == expected.shape and layer.dtype == np.float32 and len(layer) == 6
+        assert np.array_equal(np.asarray(layer), expected)
+        for key in (slice(0, 6), slice(2, 5), slice(4, 99), slice(-2, None), slice(3, 3), 0, -1,
+                    (slice(1, 4), slice(2, 6)), (2, slice(0, 3)), slice(0, 6, 2)):
+            assert np.array_equal(layer[key], expected[key]), (name, key)
+    color, color_a = lazy["color"], lazy["color_a"]
+    block = color[1:4]
+    color_a[1:4][:] = -1.0                    # handed out from the shared read: the caller's
+    assert np.array_equal(color_a[1:4], whole["color_a"][1:4])
+    block[:] = 0.0
+    assert np.array_equal(color[1:4], whole["color"][1:4])
+    assert read_metadata(path) == {"spp": "4"}
+    with pytest.raises(IndexError):
+        color[6]
+    with pytest.raises(ExrError, match="missing layer"):
+        layer_rows(path, ["color", "nope"])
+    with pytest.raises(ExrError, match="missing"):
+        layer_rows(tmp_path / "absent.exr")
