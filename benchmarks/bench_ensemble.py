@@ -1,7 +1,7 @@
 """Speed and memory of the ensemble combiner (Zheng et al. 2021, Sec. 4), issue 14 target 1.
 A script, not a timed test:
 
-    python benchmarks/bench_ensemble.py [--quick] [--keep DIR]
+    python benchmarks/bench_ensemble.py [--quick] [--keep DIR] [--baseline COMMIT | --no-baseline]
 
 Every figure is one whole process (``benchmarks/ensemble_job.py``: Python start, imports, EXR
 reads of the render and the N inputs, solve + weight filter + blend, EXR write), as the DAG runs
@@ -10,14 +10,24 @@ least) and peak RSS (``os.wait4`` of the child). Printed:
 
 1. 1024^2, N = 2, 4, 8, ``solver=iterative`` and ``exact``: wall, peak RSS and the phases, beside
    the authors' C++ program on the same kind of inputs (``../shared/study/public-code-facts.md``:
-   9.0 / 13.0 / 20.4 s, 274 / 395 / 635 MiB) as ratios (target: wall <= 0.25x, RSS <= 1.2x);
+   9.0 / 13.0 / 20.4 s, 274 / 395 / 635 MiB) as ratios (target: wall <= 0.25x, RSS <= 1.2x).
+   Three jobs per line, one after the other: ``rows`` (the job reading the render and the
+   inputs by rows, the path proposed for ``run_methods``), ``eager`` (every layer read whole,
+   as ``run_methods`` reads today) and ``base`` (the whole job as of ``--baseline``, default
+   :data:`BASELINE_COMMIT`, the code before the issue-14 memory work: its files extracted from
+   git (``git archive``) into the temporary folder and run from there, so it loads its own numba
+   cache; ``baseline.load_baseline`` loads one module into this process, which would compile
+   its kernels in the job and count the compiler's memory); then the ratios rows / base of
+   wall, CPU and RSS from the same minute, and the largest relMSE between the rows job's output
+   layers (images and weight maps) and the baseline's (0 when equal);
 2. the fitted exponent b of combine time ~ pixels^b (256^2 ... 2048^2, N = 4) and ~ N^b
    (N = 2 ... 8 at 1024^2), both solvers (1.0 = linear);
 3. numba against NumPy in the same run: the weight filter (Eq. 32-34) of
    ``methods.ensemble.filter_weights`` against a vectorised NumPy implementation of the same
    equations (one shifted-image pass per window offset, float64) at 256^2, N = 4, and the
    relMSE between their blends;
-4. the machine load (``os.getloadavg``) before and after.
+4. the machine load (``os.getloadavg``) before and after (and the 1-minute load after each job
+   of 1.).
 
 Synthetic inputs (:func:`synthetic_parts`; linear radiance, float32 EXRs written once per size
 and N into a temporary folder): a smooth truth mu (H, W, 3); noisy halves x^h = mu + sqrt(mu) 0.3 eps with 0.1 %
@@ -44,6 +54,7 @@ sys.path.insert(0, str(HERE.parent))
 from mcbench.exr import write_layers  # noqa: E402
 
 CPP_REFERENCE = {2: (9.0, 274.0), 4: (13.0, 395.0), 8: (20.4, 635.0)}  # N: (wall s, peak MiB)
+BASELINE_COMMIT = "cedab75"   # the last commit before the band-wise combine (issue 14 target 1)
 WALL_TARGET, RSS_TARGET = 0.25, 1.2
 
 
@@ -116,10 +127,41 @@ def write_case(folder: Path, size: int, n: int, seed: int = 0):
     return render, inputs
 
 
-def run_job(render: Path, inputs: list[Path], output: Path, **params) -> dict:
-    """One ``ensemble_job.py`` process: its phases plus wall seconds and peak RSS (MiB)."""
-    command = [sys.executable, str(HERE / "ensemble_job.py"), str(render), str(output),
+def baseline_tree(commit: str, folder: Path) -> Path:
+    """``methods/``, ``mcbench/`` and ``benchmarks/ensemble_job.py`` as of ``commit``, extracted
+    into ``folder/<commit>`` (``git archive``); returns that job script."""
+    root = folder / f"baseline_{commit}"
+    script = root / "benchmarks" / "ensemble_job.py"
+    if not script.exists():
+        root.mkdir(parents=True, exist_ok=True)
+        archive = subprocess.run(["git", "archive", commit, "methods", "mcbench",
+                                  "benchmarks/ensemble_job.py"], cwd=HERE.parent, check=True,
+                                 capture_output=True).stdout
+        subprocess.run(["tar", "-x", "-C", str(root)], input=archive, check=True)
+    return script
+
+
+def output_relmse(path: Path, reference: Path) -> float:
+    """The largest relMSE (as the study's: mean (x - r)^2 / (r^2 + 1e-2)) over the layers of
+    two EXRs with the same layers."""
+    from mcbench.exr import read_layers
+
+    a, b = read_layers(path), read_layers(reference)
+    if sorted(a) != sorted(b):
+        raise ValueError(f"{path} and {reference} hold different layers")
+    return max(float(np.mean((a[k].astype(np.float64) - b[k]) ** 2 / (b[k].astype(np.float64) ** 2
+                                                                      + 1e-2))) for k in a)
+
+
+def run_job(render: Path, inputs: list[Path], output: Path, *, script: Path | None = None,
+            eager: bool = False, **params) -> dict:
+    """One ``ensemble_job.py`` process (``script``: another tree's, e.g. :func:`baseline_tree`;
+    ``eager``: read every layer whole): its phases plus wall seconds, CPU seconds, peak RSS
+    (MiB) and the 1-minute load average after it."""
+    command = [sys.executable, str(script or HERE / "ensemble_job.py"), str(render), str(output),
                *map(str, inputs)]
+    if eager:
+        command.append("--eager")
     if params:
         command += ["--param", *(f"{k}={v}" for k, v in params.items())]
     start = time.perf_counter()
@@ -132,7 +174,7 @@ def run_job(render: Path, inputs: list[Path], output: Path, **params) -> dict:
         raise RuntimeError(f"{' '.join(command)} failed:\n{stderr[-3000:]}")
     phases = json.loads(stdout.strip().splitlines()[-1])
     return dict(phases, wall_s=wall, cpu_s=usage.ru_utime + usage.ru_stime,
-                rss_mib=usage.ru_maxrss / 1024.0)
+                rss_mib=usage.ru_maxrss / 1024.0, load=os.getloadavg()[0])
 
 
 def fitted_exponent(xs, ys) -> float:
@@ -202,6 +244,9 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--quick", action="store_true", help="small sizes (a smoke run of the script)")
     ap.add_argument("--keep", type=Path, help="folder for the synthetic EXRs (kept between runs)")
+    ap.add_argument("--baseline", default=BASELINE_COMMIT,
+                    help=f"commit whose job runs beside today's in 1. (default {BASELINE_COMMIT})")
+    ap.add_argument("--no-baseline", action="store_true", help="skip the baseline and eager jobs")
     args = ap.parse_args(argv)
     sys.path.insert(0, str(HERE))
     main_size = 256 if args.quick else 1024
@@ -218,10 +263,13 @@ def main(argv=None):
     def case(size, n):
         return write_case(root / f"s{size}_n{n}", size, n)
 
-    # warm the numba cache once (compilation is not part of a job's cost)
+    base_script = None if args.no_baseline else baseline_tree(args.baseline, root)
+    # warm the numba caches once (compilation is not part of a job's cost)
     render, inputs = case(64, 2)
     for solver in ("iterative", "exact"):
         run_job(render, inputs, root / "warm.exr", solver=solver)
+        if base_script:
+            run_job(render, inputs, root / "warm.exr", script=base_script, solver=solver)
 
     results = {}
 
@@ -234,16 +282,36 @@ def main(argv=None):
 
     print(f"\n1. whole process at {main_size}^2 (C++ reference: public-code-facts.md, 1024^2; target "
           f"wall <= {WALL_TARGET}x, RSS <= {RSS_TARGET}x)")
-    print(f"{'N':>2} {'solver':>9} {'wall_s':>7} {'cpu_s':>6} {'import':>7} {'read':>6} {'jit':>5} "
-          f"{'combine':>8} {'write':>6} {'RSS_MiB':>8} {'C++_s':>6} {'x_C++':>6} {'C++MiB':>7} {'xRSS':>5}")
+    print(f"{'N':>2} {'solver':>9} {'job':>5} {'wall_s':>7} {'cpu_s':>6} {'import':>7} {'read':>6} "
+          f"{'jit':>5} {'combine':>8} {'write':>6} {'RSS_MiB':>8} {'C++_s':>6} {'x_C++':>6} "
+          f"{'C++MiB':>7} {'xRSS':>5} {'load':>5}")
+    worst = 0.0
     for n in ns:
         for solver in ("iterative", "exact"):
-            r = job(main_size, n, solver)
             cpp_s, cpp_mib = CPP_REFERENCE[n]
-            print(f"{n:>2} {solver:>9} {r['wall_s']:7.2f} {r['cpu_s']:6.2f} {r['import_s']:7.2f} "
-                  f"{r['read_s']:6.2f} {r['jit_s']:5.2f} "
-                  f"{r['combine_s']:8.2f} {r['write_s']:6.2f} {r['rss_mib']:8.0f} {cpp_s:6.1f} "
-                  f"{r['wall_s'] / cpp_s:6.2f} {cpp_mib:7.0f} {r['rss_mib'] / cpp_mib:5.2f}", flush=True)
+            render, inputs = case(main_size, n)
+            runs = {"rows": job(main_size, n, solver)}
+            if base_script:
+                runs["eager"] = run_job(render, inputs, root / "eager.exr", eager=True,
+                                        solver=solver)
+                runs["base"] = run_job(render, inputs, root / "base.exr", script=base_script,
+                                       solver=solver)
+                worst = max(worst, output_relmse(root / "out.exr", root / "base.exr"))
+                runs["eager"]["relmse"] = output_relmse(root / "eager.exr", root / "out.exr")
+            for kind, r in runs.items():
+                print(f"{n:>2} {solver:>9} {kind:>5} {r['wall_s']:7.2f} {r['cpu_s']:6.2f} "
+                      f"{r['import_s']:7.2f} {r['read_s']:6.2f} {r['jit_s']:5.2f} "
+                      f"{r['combine_s']:8.2f} {r['write_s']:6.2f} {r['rss_mib']:8.0f} {cpp_s:6.1f} "
+                      f"{r['wall_s'] / cpp_s:6.2f} {cpp_mib:7.0f} {r['rss_mib'] / cpp_mib:5.2f} "
+                      f"{r['load']:5.2f}", flush=True)
+            if base_script:
+                new, old = runs["rows"], runs["base"]
+                print(f"{'':>18} rows / base: wall {new['wall_s'] / old['wall_s']:.2f}x, cpu "
+                      f"{new['cpu_s'] / old['cpu_s']:.2f}x, RSS {new['rss_mib'] / old['rss_mib']:.2f}x"
+                      f"; eager output vs rows relMSE {runs['eager']['relmse']:.1e}", flush=True)
+    if base_script:
+        print(f"   largest relMSE of any output layer (blends, raw and filtered weight maps) of the "
+              f"rows job against the baseline {args.baseline}: {worst:.1e}")
 
     print("\n2. scaling of the combine phase (after the numba cache is loaded; fitted exponent b of "
           "time ~ x^b)")

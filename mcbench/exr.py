@@ -15,7 +15,6 @@ import numpy as np
 import OpenEXR
 
 from mcbench import BenchError
-from mcbench.io import write_atomically
 
 __all__ = ["ExrError", "NonFiniteError", "read_layers", "write_layers", "read_metadata", "check_finite",
            "LayerRows", "layer_rows"]
@@ -67,6 +66,8 @@ def write_layers(path: str | os.PathLike, layers: dict[str, np.ndarray],
     def save(tmp):
         with OpenEXR.File(header, channels) as exr:
             exr.write(tmp)
+
+    from mcbench.io import write_atomically   # here: mcbench.io imports pandas (~30 MiB, 0.3 s)
 
     write_atomically(path, save, suffix=".tmp.exr")
 
