@@ -27,10 +27,13 @@ finite for finite inputs.
 
 Implementation. The kernel is symmetric, kappa(p, q) = kappa(q, p), so each pair of pixels is
 evaluated once and added to both ends (half of the (2r + 1)^2 - 1 offsets per pixel), and it is
-evaluated once per pair for all K maps (and their C channels). The image is cut into bands of
-:data:`BAND_ROWS` rows, one parallel work item each (numba ``prange``); a band owns its output
-rows, so pairs that cross a band border are evaluated by both bands (about r / BAND_ROWS extra
-work) and no two threads write the same memory. The inner loops run along image rows on planar
+evaluated once per pair for all K maps (and their C channels). The image (or the rows asked
+for) is cut into bands of about :data:`BAND_ROWS` rows, one parallel work item each (numba
+``prange``), as many bands as a multiple of the thread count and of equal height
+(:func:`_band_rows`: numba hands each thread an equal run of items, so 3 bands on 2 threads
+would leave one thread idle for a third of the work); a band owns its output rows, so pairs that
+cross a band border are evaluated by both bands (about r / BAND_ROWS extra work) and no two
+threads write the same memory. A pixel's sums are added in the same order whatever the bands. The inner loops run along image rows on planar
 copies of the guide and features, so they vectorise. ``dtype`` is the working precision of the
 kernel, the accumulation and the result: float64 by default (and for every caller that does not
 ask), float32 for the ensemble's weight maps, where its 1e-7 relative rounding is far below
@@ -48,6 +51,7 @@ from __future__ import annotations
 import math
 from typing import Literal
 
+import numba
 import numpy as np
 from numba import prange
 
@@ -220,6 +224,15 @@ def _cbf_bands(values, channels, guide, guide_var, feats, spatial, consts, exp_c
     return out
 
 
+def _band_rows(rows: int) -> int:
+    """Rows per band of :func:`_cbf_bands` for ``rows`` output rows: a multiple of numba's thread
+    count of bands (the nearest to rows / BAND_ROWS, at least one per thread) of equal height
+    (1024 rows on 2 threads: 16 bands of 64)."""
+    threads = max(1, numba.get_num_threads())
+    bands = threads * max(1, round(rows / (threads * BAND_ROWS)))
+    return max(1, -(-rows // bands))
+
+
 def _planar(array, name, shape, dtype) -> np.ndarray:
     """(H, W[, C]) -> contiguous (C, H, W) of ``dtype``; ``name`` for errors."""
     a = np.asarray(array)
@@ -293,7 +306,7 @@ def cross_bilateral_filter_vectors(values, guide, guide_variance, features, feat
     if not 0 <= r0 <= r1 <= H:
         raise ValueError(f"rows {rows} outside the {H} rows of the values")
     out = _cbf_bands(vals.reshape(G, H, W * C), C, g, gv, feats, spatial, consts,
-                     _exp_constants(dtype), radius, BAND_ROWS, r0, r1)
+                     _exp_constants(dtype), radius, _band_rows(r1 - r0), r0, r1)
     return out.reshape(G, r1 - r0, W, C)
 
 
@@ -351,37 +364,32 @@ def gaussian_kernel(kernel_size: int) -> np.ndarray:
 
 
 @cached_njit(parallel=True, error_model="numpy")
-def _blur_axis0(a, taps, idx, n_out):
-    """out[i] = sum_k taps[k] a[idx[i + k]] (k ascending, from 0.0), i < n_out; a (T, M)."""
+def _blur_kernel(a, taps, idx0, idx1, n_out, c):
+    """Rows, then columns: t[i] = sum_k taps[k] a[idx0[i + k]] (i < n_out), then
+    out[:, x] = sum_k taps[k] t[:, idx1[x + k]], each sum from 0.0 with k ascending; a (T, W C)
+    float64, idx0 / idx1 the padded rows' / columns' sources. Each row of t is padded once, so
+    the column taps run over contiguous memory. Returns (n_out, W C)."""
     m = a.shape[1]
-    out = np.zeros((n_out, m))
+    w = m // c
+    t_rows = np.zeros((n_out, m))
     for i in prange(n_out):
         for k in range(taps.shape[0]):
-            t = taps[k]
-            src = idx[i + k]
+            tap = taps[k]
+            src = idx0[i + k]
             for j in range(m):
-                out[i, j] += t * a[src, j]
-    return out
-
-
-@cached_njit(parallel=True, error_model="numpy")
-def _blur_axis1(a, taps, idx):
-    """out[:, x] = sum_k taps[k] a[:, idx[x + k]] (k ascending, from 0.0); a (T, W, C). Each row
-    is padded once (``idx``), then the taps run over contiguous memory."""
-    t_rows, w, c = a.shape
-    wc = w * c
-    out = np.zeros((t_rows, wc))
-    for y in prange(t_rows):
-        padded = np.empty(idx.shape[0] * c)
-        for x in range(idx.shape[0]):
+                t_rows[i, j] += tap * a[src, j]
+    out = np.zeros((n_out, m))
+    for y in prange(n_out):
+        padded = np.empty(idx1.shape[0] * c)
+        for x in range(idx1.shape[0]):
             for ch in range(c):
-                padded[x * c + ch] = a[y, idx[x], ch]
+                padded[x * c + ch] = t_rows[y, idx1[x] * c + ch]
         for k in range(taps.shape[0]):
-            t = taps[k]
+            tap = taps[k]
             off = k * c
-            for j in range(wc):
-                out[y, j] += t * padded[off + j]
-    return out.reshape(t_rows, w, c)
+            for j in range(m):
+                out[y, j] += tap * padded[off + j]
+    return out
 
 
 def _reflect_index(length: int, r: int) -> np.ndarray:
@@ -421,8 +429,8 @@ def gaussian_blur(image, *, kernel_size: int = 9, rows: tuple[int, int] | None =
     if r1 <= r0:
         out = np.zeros((0, w, c))
     else:
-        out = _blur_axis0(np.ascontiguousarray(a).reshape(t_rows, w * c), taps, idx0, r1 - r0)
-        out = _blur_axis1(out.reshape(r1 - r0, w, c), taps, _reflect_index(w, r))
+        out = _blur_kernel(np.ascontiguousarray(a).reshape(t_rows, w * c), taps, idx0,
+                           _reflect_index(w, r), r1 - r0, c).reshape(r1 - r0, w, c)
     return out[..., 0] if flat else out
 
 

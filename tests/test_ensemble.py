@@ -690,6 +690,16 @@ def test_filter_rows_of_a_tile_equal_the_whole_filter():
             values[:, f0:f1], guide[f0:f1], var[f0:f1], [f[f0:f1] for f in feats], *args[1:],
             dtype=np.float32, rows=(o0 - f0, o1 - f0))
         assert np.array_equal(tile, whole[:, o0:o1]), (o0, o1)
+    # the kernel's bands: a multiple of the thread count, of equal height (numba gives each
+    # thread an equal run of bands), about BAND_ROWS rows (1024 rows on 2 threads: 16 of 64)
+    threads = numba.get_num_threads()
+    for rows in (1, 6, 70, 134, 1024, 1031):
+        band = bilateral._band_rows(rows)
+        bands = -(-rows // band)
+        assert bands % threads == 0 or band == 1, (rows, band)
+        assert bands * band - rows < bands, (rows, band)
+    if threads == 2:
+        assert bilateral._band_rows(1024) == 64 and bilateral._band_rows(134) == 67
 
 
 @pytest.mark.parametrize("passes", ["default", "paper"])
