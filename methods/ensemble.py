@@ -1009,7 +1009,7 @@ def qp_simplex_weights(points, targets) -> np.ndarray:
 WEIGHTS = ("simplex", "unconstrained")
 CHANNELS = ("rgb", "single")
 GUIDE_VARIANCE_BLURS = ("none", "gaussian9")
-BLOCK_PIXELS = 1 << 15   # pixels per block of rows that combine() solves at once (memory bound)
+BLOCK_PIXELS = 1 << 16   # pixels per block of rows that combine() solves at once (memory bound)
 _SIMPLEX_TOL = {np.dtype(np.float64): 1e-6, np.dtype(np.float32): 1e-4}  # |sum - 1| after filtering
 
 
