@@ -1316,17 +1316,6 @@ def _planar64(image) -> np.ndarray:
     return np.ascontiguousarray(np.moveaxis(np.asarray(image, np.float64), 2, 0))
 
 
-def _rows_of(inputs, which, rows) -> np.ndarray:
-    """The inputs' results on image ``which`` for the rows ``rows`` (a slice): (N, T, W, C)
-    float64, filled input by input (each input's rows read once, no stacked temporaries)."""
-    first = np.asarray(inputs[0].image(which)[rows])
-    out = np.empty((len(inputs),) + first.shape)
-    out[0] = first
-    for i, d in enumerate(inputs[1:], 1):
-        out[i] = d.image(which)[rows]
-    return out
-
-
 def blend(weights, inputs, which) -> np.ndarray:
     """Eq. 35 for image ``which`` (``"full"``, ``"a"``, ``"b"``) of the Denoised ``inputs``:
     sum_i w_i y_i accumulated in float64 one input at a time; weights (N, H, W, C). Returns
