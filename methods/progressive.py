@@ -72,7 +72,15 @@ Ablation weights: ``sure_input=false`` and ``f_act=false`` are other networks (T
 for each); their weights would be ``methods/weights/progressive_no_sure.pt`` /
 ``progressive_no_fact.pt`` (:func:`ablation_weights_path`), trained on the same data by the shared
 loop with ``python -m methods.progressive no_sure`` (``no_fact``; :func:`train_variant`); without
-them the method stops with an error naming the file.
+them the method stops with an error naming the file. They are **not committed**: on the shared
+machine there was no CPU time left for two more runs (about 20-35 minutes each at 1.3 s/step).
+
+Training here (``methods/weights/progressive.json``): 24 object scenes (seeds 0-23; 7, 15, 23
+validate) × 4 crops of 64², OIDN's results and divergence maps on them (``training.combiners:
+{count: 24, fibre_count: 0, crops: 4}``; no fibre scenes: a smaller set that renders in half an
+hour on the shared machine). The run was planned for 1500 steps (1.3 s/step); after step 750 the
+machine's other jobs left it under 30 % of a core, so the committed weights are its step-750
+checkpoint (record ``note``), finalised and validated by the shared loop.
 """
 
 from __future__ import annotations
