@@ -61,12 +61,16 @@ def run_methods(entries: list[dict], render_path: str, *, scene: str = "", spp: 
 
     modules = {entry["module"]: load_method(entry["module"], config_key=f"method '{entry['name']}'")
                for entry in entries}
-    buffers = RenderBuffers.load(render_path, layers=render_layers(modules.values()))
+    by_rows = reads_rows(modules.values())
+    if by_rows:
+        buffers = _render_by_rows(render_path, render_layers(modules.values()))
+    else:
+        buffers = RenderBuffers.load(render_path, layers=render_layers(modules.values()))
     loaded: dict[str, Denoised] = {}
 
     def input_of(path: str) -> Denoised:
         if path not in loaded:
-            denoised = Denoised.load(path, extras=True)
+            denoised = _denoised_by_rows(path) if by_rows else Denoised.load(path, extras=True)
             if denoised.full.shape != buffers.color.shape:
                 raise BenchError(f"{path}: shape {denoised.full.shape} does not match render "
                                  f"{render_path} of shape {buffers.color.shape}")
@@ -96,6 +100,35 @@ def run_methods(entries: list[dict], render_path: str, *, scene: str = "", spp: 
 
 
 WARM_UP_SIZE = 32  # pixels per side of the untimed warm-up crop of run_methods
+
+
+def reads_rows(modules) -> bool:
+    """Whether a job of these method modules reads its render and inputs by rows: every module
+    declares ``READS_ROWS`` (methods/__init__.py; the ensemble), so no layer is held whole (a
+    1024^2 N = 8 ensemble job: about 520 MiB instead of about 840, ``benchmarks/bench_ensemble.py``).
+    Such a method reads the rows it needs inside its own call, so its recorded seconds include
+    those reads (uncompressed scanlines, a few per cent of its compute); a batch with any other
+    method reads every file whole, before the timed call."""
+    modules = list(modules)
+    return bool(modules) and all(getattr(module, "READS_ROWS", False) for module in modules)
+
+
+def _render_by_rows(path: str, layers: tuple[str, ...] | None) -> RenderBuffers:
+    """A render whose layers (``color`` and ``layers``) are :class:`mcbench.exr.LayerRows`: only
+    the header is read here; the method checks the rows it reads for NaN/Inf."""
+    from mcbench.exr import layer_rows
+
+    names = list(dict.fromkeys(["color", *(layers or ())]))
+    return RenderBuffers(layers=layer_rows(path, names), spp=int(read_metadata(path).get("spp", 0)), source=path)
+
+
+def _denoised_by_rows(path: str) -> Denoised:
+    """A method's output as :class:`mcbench.exr.LayerRows` of ``color``, ``color_a``, ``color_b``
+    (read by rows when the method indexes them; no extras: a READS_ROWS method reads none)."""
+    from mcbench.exr import layer_rows
+
+    layers = layer_rows(path, ["color", "color_a", "color_b"])
+    return Denoised(full=layers["color"], a=layers["color_a"], b=layers["color_b"], source=path)
 
 
 def render_layers(modules) -> tuple[str, ...] | None:

@@ -230,3 +230,27 @@ def test_merge_reference_is_the_spp_weighted_mean(tmp_path):
         np.testing.assert_allclose(merged[name], pooled(name), rtol=1e-6, atol=1e-7)
     meta = read_metadata(out)
     assert meta["spp"] == "256" and meta["chunks"] == "2" and meta["scene"] == SCENE
+
+
+def test_a_job_of_row_reading_methods_never_reads_an_input_whole(case_files, tmp_path, monkeypatch):
+    """A job whose methods all declare READS_ROWS (the ensemble) reads the render and its inputs
+    by rows (no read_layers of those files) and writes what the whole-file path writes."""
+    render, _ = case_files
+    inputs = [run(name, render, tmp_path, module_name=name)[0] for name in ("jbf", "oidn")]
+    assert steps.reads_rows([load_method("ensemble")])
+    assert not steps.reads_rows([load_method("ensemble"), load_method("naive_average")])
+    expected = load_method("ensemble").combine(RenderBuffers.load(render), [Denoised.load(p) for p in inputs])
+    import mcbench.buffers
+    import mcbench.exr
+
+    def refuse(path, *args, **kwargs):
+        raise AssertionError(f"read whole: {path}")
+    monkeypatch.setattr(mcbench.buffers, "read_layers", refuse)
+    monkeypatch.setattr(mcbench.exr, "read_layers", refuse)
+    output = tmp_path / "ens_rows.exr"
+    steps.run_methods([{"name": "ens", "module": "ensemble", "params": {}, "input_paths": [str(p) for p in inputs],
+                        "exr": str(output), "timing": str(tmp_path / "ens_rows.json")}], str(render))
+    monkeypatch.undo()
+    layers = read_layers(output)
+    for name, value in expected.layers().items():
+        np.testing.assert_array_equal(layers[name], value)
