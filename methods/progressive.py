@@ -20,9 +20,12 @@ sees B's samples, as the deep combiner): x, σ² (the render's variance of the m
 images, so ``divergence`` names the single-image denoiser to re-run (:func:`single_image_denoiser`:
 a method module's ``denoise_image(ImageBuffers)``, or a learned denoiser's network through
 :func:`mcbench.nn.inference.run_network`), only the colour perturbed (variance and features as
-rendered). Supported, with the cost of one call at 128² measured here (× (K + 1) per image,
-× 3 images per case): ``oidn`` (~0.05 s), ``jbf``, ``kpcn``, ``mcgan``, ``optix_ae``, ``wskpn``
-(network inferences of 0.1-0.5 s). NFOR and RDFC have no single-image function (they
+rendered). Supported: ``oidn``, ``jbf``, ``kpcn``, ``mcgan``, ``optix_ae``, ``wskpn`` (each call
+costs what one image of the base costs; K + 1 calls per image, 3 images per case). Measured per
+128² case on 1 thread (best of 3, on the shared machine under load; synthetic render):
+network + t-test without divergence 0.20 s; with OIDN's divergence (K = 1) 0.38 s, K = 4 3.0 s
+(OIDN itself: 0.12 s for its 3 images); with KPCN's divergence 1.3 s; the t-test alone
+(``network: false``) 0.03 s. NFOR and RDFC have no single-image function (they
 cross-filter the two half buffers), nor have combiners. For an input that is not itself one of
 these -- an ensemble, a deep combiner -- we do not re-run it (the exact divergence of an ensemble
 would re-run every member K times on perturbed full, A and B images and then the ensemble's
