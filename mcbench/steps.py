@@ -12,7 +12,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
 
 from mcbench import BenchError
 from mcbench.buffers import Denoised, RenderBuffers
@@ -173,6 +172,8 @@ def compute_case_metrics(scene: str, spp: int, reference_path: str, render_path:
     also every entry's per-pixel HDR-FLIP map (one (H, W) layer per entry, named like it), from
     the same evaluation as the ``flip`` metric, so the viewer does not evaluate FLIP again.
     """
+    import pandas as pd
+
     from mcbench.metrics import flip_with_map
 
     start = time.perf_counter()
@@ -228,6 +229,8 @@ def gather_tables(paths: list[str], output_path: str, *, candidates: list[str], 
                   cases: list[tuple[str, int]]) -> pd.DataFrame:
     """Concatenate the per-case CSVs (``paths[i]`` holds ``cases[i]``) into one tidy table, after
     checking each is complete (:func:`read_case_metrics`): no table is ranked over lost rows."""
+    import pandas as pd
+
     if len(paths) != len(cases):
         raise BenchError(f"{output_path}: {len(paths)} case files for {len(cases)} cases")
     frames = [read_case_metrics(path, candidates=candidates, metric_names=metric_names, case=case)
@@ -239,6 +242,8 @@ def gather_tables(paths: list[str], output_path: str, *, candidates: list[str], 
 
 def gather_timings(paths: list[str], output_path: str) -> pd.DataFrame:
     """Collect the per-job timing JSONs into ``timings.csv`` (one row per method run)."""
+    import pandas as pd
+
     frame = pd.DataFrame([read_json(p) for p in paths])
     columns = ["scene", "spp", "method", "module", "kind", "seconds", "width", "height", "threads", "machine"]
     frame = frame[[c for c in columns if c in frame.columns]].sort_values(["method", "scene", "spp"])
@@ -379,6 +384,8 @@ def write_scene_table(metrics_csv: str, reference_paths: dict[str, str], referen
     Render costs come from the Snakemake ``benchmark:`` records of the noisy render jobs
     (``noisy_records``) and reference chunk jobs (``reference_records``), inputs of the rule.
     """
+    import pandas as pd
+
     from mcbench.reports import reference_relmse_floor, scene_latex, scene_markdown, scene_rows
     from scenes import load_scene
 
