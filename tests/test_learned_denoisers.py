@@ -40,7 +40,7 @@ def test_registry_lists_the_learned_methods_and_labels_stand_ins():
     learned = sorted(n for n in available_methods() if is_learned_method(load_method(n))
                      and load_method(n).KIND == "denoiser")
     assert learned == LEARNED
-    assert load_method("optix_ae").LABEL == "OptiX† (our autoencoder)"
+    assert load_method("optix_ae").LABEL == "#7 OptiX† (our autoencoder, a stand-in)"
     for name in LEARNED:
         assert "†" in load_method(name).LABEL      # every one is our own training, and says so
 
