@@ -51,6 +51,5 @@ rule all:
         rules.comparison_ablations.output,
         expand(rules.comparison_ranking.output, metric=config["metrics"]),
         expand(rules.oracle_study.output, scene=ORACLE_SCENE),
-        rules.study_tables.output,
-        expand(rules.study_figures.output, metric=config["metrics"]),
+        study_targets(),
     default_target: True

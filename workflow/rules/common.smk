@@ -356,3 +356,11 @@ def job_resources(rule_name):
         if config["gpu_model"]:
             resources["gpu_model"] = config["gpu_model"]
     return resources
+
+
+def study_targets(wildcards=None):
+    """The study's tables and figures (study.smk) when the config runs the pool (study.pool),
+    else nothing: without the pool there is no 39-candidate study to write."""
+    if not POOL_STUDY:
+        return []
+    return [*rules.study_tables.output, *expand(rules.study_figures.output, metric=METRIC_NAMES)]
