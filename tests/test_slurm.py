@@ -33,7 +33,7 @@ TIME_COLUMNS = {"time_ratio"}
 # rules that say `localrule: True` (run by the submitting Snakemake, never queued)
 LOCAL_RULES = {"all", "gather_metrics", "gather_timings", "ranking_table", "scene_table", "gallery",
                "error_curves", "speed_error", "comparison_onehot", "comparison_ablations",
-               "comparison_ranking", "training_data"}
+               "comparison_ranking", "training_data", "extras_table", "study_tables", "study_figures"}
 
 
 @pytest.fixture(scope="module")

@@ -265,7 +265,8 @@ def test_train_rule_trains_missing_weights_and_the_main_job_never_retrains(tmp_p
                 "networks": {"wskpn": {"steps": 3, "batch_size": 2, "patch": 12, "validate_every": 3,
                                        "checkpoint_every": 3}}}
     workdir = tmp_path / "train"
-    write_config(workdir, training=training, weights_dir=str(weights), denoisers=["oidn", "jbf", "wskpn"])
+    write_config(workdir, training=training, weights_dir=str(weights), denoisers=["oidn", "jbf", "wskpn"],
+                 study={"pool": False})      # no pool: its learned bases have no weights in this folder
     snakemake(workdir, "train_wskpn")
     blob = torch.load(weights / "wskpn.pt", weights_only=True)
     assert set(blob) == {"arch", "state_dict"}
@@ -349,7 +350,7 @@ def _job_counts(result: subprocess.CompletedProcess) -> dict[str, int]:
 def test_methods_of_a_case_share_jobs_unless_batching_is_off(tmp_path, batch):
     """batch_methods: one job per case for the learned denoisers and one for the combiners, one job
     per non-learned base denoiser; off: one job per method. The outputs planned are the same."""
-    config = write_config(tmp_path, batch_methods=batch)
+    config = write_config(tmp_path, batch_methods=batch, study={"pool": False})   # the config's methods only
     result = _dry_run(tmp_path, "--configfile", str(tmp_path / "config.yaml"))
     counts, cases = _job_counts(result), len(config["scenes"]) * len(config["spp"])
     learned = [d for d in config["denoisers"] if d == "kpcn"]
@@ -419,7 +420,7 @@ def test_parsing_the_dag_imports_no_torch_and_no_unnamed_method(tmp_path):
         "    pass\n"
         "print('MODULES', sorted(m for m in sys.modules if m == 'torch' or m.startswith('methods.')))\n")
     (tmp_path / "config.yaml").write_text(yaml.safe_dump({"scenes": ["cornell_box"], "denoisers": ["oidn", "kpcn"],
-                                                          "combiners": []}))
+                                                          "combiners": [], "study": {"pool": False}}))
     result = subprocess.run([sys.executable, str(probe), str(REPO / "Snakefile"), str(tmp_path / "config.yaml")],
                             capture_output=True, text=True, cwd=tmp_path, timeout=300)
     line = [l for l in result.stdout.splitlines() if l.startswith("MODULES")]

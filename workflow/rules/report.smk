@@ -40,8 +40,8 @@ rule extras_table:
         csv=report(
             f"{RESULTS}/tables/extras_{{metric}}.csv",
             caption="../report/extras.rst",
-            category="Rankings",
-            subcategory="Extra methods",
+            category="Extra methods",
+            subcategory="Scored alone against the pool",
             labels={"metric": "{metric}", "table": "extra methods, each added alone to the pool"},
         ),
         md=f"{RESULTS}/tables/extras_{{metric}}.md",
