@@ -54,27 +54,41 @@ def error_curves(metrics: pd.DataFrame, *, metric: str) -> dict[str, pd.DataFram
     return panels
 
 
+def input_closure(name: str, inputs: dict[str, list[str]]) -> list[str]:
+    """``name`` and every method it takes, transitively, each once (depth-first order). A DC
+    variant's closure holds its base; an ensemble's holds its members and theirs. Raises
+    ``ValueError`` on a cycle."""
+    seen: list[str] = []
+
+    def visit(method: str, chain: tuple[str, ...]) -> None:
+        if method in chain:
+            raise ValueError(f"method '{method}' takes itself as an input ({' -> '.join(chain + (method,))})")
+        if method in seen:
+            return
+        seen.append(method)
+        for other in inputs.get(method, []):
+            visit(other, chain + (method,))
+
+    visit(name, ())
+    return seen
+
+
 def combined_seconds(own_seconds: dict[str, float], inputs: dict[str, list[str]]) -> dict[str, float]:
-    """Compute time of each method including the methods it combines, recursively.
+    """Compute time of each method including every method it combines, transitively.
 
     ``own_seconds[name]``: mean seconds of ``name``'s own runs; ``inputs[name]``: the methods a
-    combiner takes (empty or absent for a base denoiser). A combiner's total is its own time plus
-    its inputs' totals (each input counted once per combiner run, as each run reads one output
-    of each input). Raises ``ValueError`` naming a method whose input has no timing.
+    combiner takes (empty or absent for a base denoiser). A method's total is the sum of the own
+    seconds over its :func:`input_closure`, each method counted once: a case runs every method
+    once, so a base reached along two paths (KPCN in an ensemble of KPCN and KPCN-DC) costs once.
+    Raises ``ValueError`` naming a method whose input has no timing, or a cycle.
     """
     totals: dict[str, float] = {}
-
-    def total(name: str, chain: tuple[str, ...]) -> float:
-        if name in chain:
-            raise ValueError(f"method '{name}' takes itself as an input ({' -> '.join(chain + (name,))})")
-        if name not in totals:
-            if name not in own_seconds:
-                raise ValueError(f"no timing for method '{name}' (an input of {chain[-1]})")
-            totals[name] = own_seconds[name] + sum(total(other, chain + (name,)) for other in inputs.get(name, []))
-        return totals[name]
-
     for name in own_seconds:
-        total(name, ())
+        closure = input_closure(name, inputs)
+        missing = [m for m in closure if m not in own_seconds]
+        if missing:
+            raise ValueError(f"no timing for method '{missing[0]}' (an input of {name})")
+        totals[name] = float(sum(own_seconds[m] for m in closure))
     return totals
 
 

@@ -48,7 +48,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from mcbench.figures import pyplot_agg, candidate_styles, error_curves, error_curves_figure, save_figure
+from mcbench.figures import (candidate_styles, combined_seconds, error_curves, error_curves_figure, input_closure,
+                             pyplot_agg, save_figure)
 
 __all__ = ["STUDY_FIGURES", "study_figure_paths", "paper_recommended", "curve_candidates", "score_curves",
            "average_scores", "candidate_sizes", "score_size_points", "score_size_summary", "input_closure", "closure_seconds", "own_seconds",
@@ -172,40 +173,18 @@ def score_size_summary(points: pd.DataFrame) -> pd.DataFrame:
 # --------------------------------------------------------------------------- costs
 
 
-def input_closure(name: str, inputs: dict[str, list[str]]) -> list[str]:
-    """``name`` and every method it takes, transitively, each once (depth-first order). A DC
-    variant's closure holds its base; an ensemble's holds its members and theirs. Raises
-    ``ValueError`` on a cycle."""
-    seen: list[str] = []
-
-    def visit(method: str, chain: tuple[str, ...]) -> None:
-        if method in chain:
-            raise ValueError(f"method '{method}' takes itself as an input ({' -> '.join(chain + (method,))})")
-        if method in seen:
-            return
-        seen.append(method)
-        for other in inputs.get(method, []):
-            visit(other, chain + (method,))
-
-    visit(name, ())
-    return seen
-
-
 def closure_seconds(own: dict[str, float], inputs: dict[str, list[str]], *,
                     names: list[str] | None = None) -> dict[str, float]:
-    """Total cost of each method (seconds per case): the sum of ``own`` seconds over its
-    :func:`input_closure`, each method counted once (a base shared by two members, as KPCN in
-    an ensemble of KPCN and KPCN-DC, is run once). Unlike :func:`mcbench.figures.combined_seconds`,
-    which adds an input once per path to it. ``names`` default: all of ``own``. Raises
-    ``ValueError`` naming a method without a timing."""
-    totals = {}
-    for name in (names if names is not None else list(own)):
-        closure = input_closure(name, inputs)
-        missing = [m for m in closure if m not in own]
-        if missing:
-            raise ValueError(f"no timing for method(s) {', '.join(missing)} (needed by '{name}')")
-        totals[name] = float(sum(own[m] for m in closure))
-    return totals
+    """Total cost of each method (seconds per case) of ``names`` (default: all of ``own``):
+    :func:`mcbench.figures.combined_seconds`, the sum of ``own`` seconds over its input closure,
+    each method counted once. Raises ``ValueError`` naming a method without a timing."""
+    chosen = names if names is not None else list(own)
+    needed = {m for name in chosen for m in input_closure(name, inputs)}
+    missing = sorted(needed - set(own))
+    if missing:
+        raise ValueError(f"no timing for method(s) {', '.join(missing)}")
+    totals = combined_seconds({m: own[m] for m in needed}, inputs)
+    return {name: totals[name] for name in chosen}
 
 
 def own_seconds(timings: pd.DataFrame) -> dict[str, float]:
