@@ -394,3 +394,20 @@ def test_training_prints_loss_and_time_per_interval_and_at_each_validation(tmp_p
     assert all(re.search(r"relMSE \d+\.\d{5} \(\d+\.\d s, elapsed \d+\.\d s\)$", m) for m in validations)
     # the printed validation loss is the record's
     assert f"{record['history'][-1]['validation_loss']:.5f}" in validations[-1]
+
+
+def test_deterministic_inference_sets_and_restores_the_flag_without_inductor():
+    """The flag is on inside and restored after; the process never imports torch._inductor (the
+    1-2 s import torch.use_deterministic_algorithms pays), checked in a fresh interpreter."""
+    import subprocess
+    import sys
+
+    code = ("import sys, torch\n"
+            "from mcbench.nn.inference import deterministic_inference\n"
+            "before = torch.are_deterministic_algorithms_enabled()\n"
+            "with deterministic_inference():\n"
+            "    inside = torch.are_deterministic_algorithms_enabled()\n"
+            "after = torch.are_deterministic_algorithms_enabled()\n"
+            "print(before, inside, after, 'torch._inductor' in sys.modules)\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split()
+    assert out == ["False", "True", "False", "False"]

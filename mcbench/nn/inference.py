@@ -12,6 +12,8 @@ Every function takes the learned method's *module* (``NETWORK``, ``TRAINING``,
 
 from __future__ import annotations
 
+import sys
+
 from contextlib import contextmanager
 from functools import lru_cache
 from pathlib import Path
@@ -59,16 +61,26 @@ def image_tensors(image: ImageBuffers) -> dict[str, torch.Tensor]:
             "depth": array_tensor(image.depth)}
 
 
+def set_deterministic_algorithms(mode: bool) -> None:
+    """``torch.use_deterministic_algorithms(mode)`` without its import of ``torch._inductor`` (1-2 s
+    per process, for a compiler mcbench never runs): torch 2.13's function sets the flag in
+    ``torch._C`` and inductor's copy of it; the copy is set too when inductor is loaded already."""
+    if "torch._inductor.config" in sys.modules:
+        torch.use_deterministic_algorithms(mode)
+    else:
+        torch._C._set_deterministic_algorithms(mode)
+
+
 @contextmanager
 def deterministic_inference():
     """``torch.inference_mode`` with deterministic algorithms (the previous setting restored)."""
     previous = torch.are_deterministic_algorithms_enabled()
-    torch.use_deterministic_algorithms(True)
+    set_deterministic_algorithms(True)
     try:
         with torch.inference_mode():
             yield
     finally:
-        torch.use_deterministic_algorithms(previous)
+        set_deterministic_algorithms(previous)
 
 
 def tensor_image(tensor: torch.Tensor) -> np.ndarray:
