@@ -298,3 +298,65 @@ def mitsuba_seed(seed: int, variant: str, width: int, height: int) -> int:
                          f"{width}x{height} with this seed/spp/chunk (pixel seeds would wrap "
                          f"around 2**32); use llvm_ad_rgb, a lower 'seed' or a smaller resolution")
     return index * stride
+
+
+# --------------------------------------------------------------------------- progressive-curve renders
+
+MAX_PROGRESSIVE_CURVE_LEVELS = 1 << 9     # spp levels of one consistency curve (9 bits)
+MAX_PROGRESSIVE_CURVE_PASSES = 1 << 10    # passes per bin of one level's render (10 bits)
+_CURVE_ZERO_BITS = 0x1F00                 # bits 12..8: 0 here, never 0 in a training seed
+
+
+def progressive_curve_seed(level_index: int, half: int, *, bin: int = 0, pass_index: int = 0,
+                           base_seed: int = 0) -> int:
+    """32-bit Mitsuba seed of one pass of a render of progressive denoising's consistency curve
+    (:mod:`mcbench.steps_progressive`: one scene rendered at many spp levels, level ``i`` of the
+    sorted levels seeded with ``level_index`` i)::
+
+        bit 31..29  7 (the training renders' base seed: the slot is a hole of their layout)
+        bit 28..26  base_seed   global seed from the config (key ``seed``), 0..6
+        bit 25      half        0 = A, 1 = B
+        bit 24      bin         sample bin within the half (0 or 1)
+        bit 23..15  level index 0..511
+        bit 14..13  pass index bits 9..8
+        bit 12..8   0
+        bit 7..0    pass index bits 7..0   (pass index 0..1023 in all)
+
+    Why there: with base seed 0..6 every seed value (and every scalar pixel-seed index
+    ``seed >> 15``) is a test render's, a reference chunk's or an oracle render's, except the
+    four indices of the one unused spp code (1024) -- too few for a curve's levels. A training
+    seed (base 7) has bit 12 set (target) or bits 11..8 = log2(spp) >= 1 (noisy, spp >= 2), so
+    bits 12..8 are never all 0 there: every seed of this slot differs from every training seed
+    and, having base 7, from every test, reference and oracle seed. In scalar variants (pass 0,
+    ``seed >> 15`` = ``(7 << 14) | (base_seed << 11) | (half << 10) | (bin << 9) | level``) the
+    pixel-seed indices are distinct per (base seed, level, half, bin) and above every test,
+    reference and oracle index (those have base <= 6); training renders refuse scalar variants,
+    so no scalar pixel range of theirs exists. The large index limits scalar curves to about
+    33,000 pixels per render (e.g. 128 x 128; :func:`mitsuba_seed` refuses more, naming
+    ``variant``); llvm_ad_rgb has no such limit. Like an oracle seed it holds neither scene nor
+    spp: two curves with the same levels reuse the same streams, never another kind's.
+    """
+    level_index, base_seed, pass_index = int(level_index), int(base_seed), int(pass_index)
+    if not 0 <= base_seed <= MAX_BASE_SEED:
+        raise BenchError(f"config key 'seed': must be in 0..{MAX_BASE_SEED} "
+                         f"({TRAINING_BASE_SEED} is reserved for training renders), got {base_seed}")
+    if not 0 <= level_index < MAX_PROGRESSIVE_CURVE_LEVELS:
+        raise BenchError(f"config key 'progressive_curve.spp': level {level_index} out of range "
+                         f"0..{MAX_PROGRESSIVE_CURVE_LEVELS - 1} (too many spp levels)")
+    _check_half_and_bin(half, bin)
+    if not 0 <= pass_index < MAX_PROGRESSIVE_CURVE_PASSES:
+        raise BenchError(f"config key 'progressive_curve.spp': pass index {pass_index} out of range "
+                         f"0..{MAX_PROGRESSIVE_CURVE_PASSES - 1} (lower the top spp level or the resolution)")
+    return ((TRAINING_BASE_SEED << 29) | (base_seed << 26) | (half << 25) | (int(bin) << 24)
+            | (level_index << 15) | ((pass_index >> 8) << 13) | (pass_index & 0xFF))
+
+
+def is_progressive_curve_seed(seed: int) -> bool:
+    """Whether ``seed`` lies in the progressive-curve slot (base 7, bits 12..8 all 0, config seed
+    0..6 in bits 28..26)."""
+    seed = int(seed)
+    return seed >> 29 == TRAINING_BASE_SEED and not seed & _CURVE_ZERO_BITS and (seed >> 26) & 7 <= MAX_BASE_SEED
+
+
+__all__ += ["MAX_PROGRESSIVE_CURVE_LEVELS", "MAX_PROGRESSIVE_CURVE_PASSES", "progressive_curve_seed",
+            "is_progressive_curve_seed"]
