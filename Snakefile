@@ -33,6 +33,7 @@ include: "workflow/rules/figures.smk"
 include: "workflow/rules/comparisons.smk"
 include: "workflow/rules/oracle.smk"
 include: "workflow/rules/study.smk"
+include: "workflow/rules/progressive.smk"
 
 
 rule all:
@@ -52,4 +53,5 @@ rule all:
         expand(rules.comparison_ranking.output, metric=config["metrics"]),
         expand(rules.oracle_study.output, scene=ORACLE_SCENE),
         study_targets(),
+        progressive_targets(),
     default_target: True

@@ -36,9 +36,8 @@ MEASURED_RENDER_THREADS = 1
 def planned_jobs(config: dict) -> list[dict]:
     """One dict per job: rule, pixels, entries, spp, threads."""
     methods = config_method_table(config, is_learned=is_learned_method)
-    learned = [n for n, s in methods.items() if s["kind"] == "denoiser" and s["learned"]] if config["batch_methods"] else []
-    combiners = [n for n, s in methods.items() if s["kind"] == "combiner"] if config["batch_methods"] else []
-    singles = [n for n in methods if n not in set(learned) | set(combiners)]
+    batched = list(methods) if config["batch_methods"] else []      # run_case_methods (methods.smk)
+    singles = [n for n in methods if n not in set(batched)]
     chunks = config["reference"]["chunks"]
     jobs = []
     for scene in config["scenes"]:
@@ -52,14 +51,19 @@ def planned_jobs(config: dict) -> list[dict]:
                          "threads": MEASURED_RENDER_THREADS})
             jobs += [{"rule": "run_method", "module": methods[name]["module"], "pixels": pixels, "entries": 1,
                       "spp": 0, "threads": 1} for name in singles]
-            for rule, batch in (("run_learned_denoisers", learned), ("run_combiners", combiners)):
-                if batch:
-                    jobs.append({"rule": rule, "pixels": pixels, "entries": len(batch), "spp": 0, "threads": 1})
+            if batched:
+                jobs.append({"rule": "run_case_methods", "pixels": pixels, "entries": len(batched), "spp": 0,
+                             "threads": 1})
             for rule in ("case_metrics", "viewer_case"):
                 jobs.append({"rule": rule, "pixels": pixels, "entries": len(methods) + 1, "spp": 0, "threads": 1})
     oracle_scene = config["oracle"]["scene"] or config["scenes"][0]
     width, height = config["resolution"] or load_scene(oracle_scene).RESOLUTION
     jobs.append({"rule": "oracle_study", "pixels": int(width) * int(height), "entries": 1, "spp": 0, "threads": 1})
+    if any(spec["module"] == "progressive" for spec in methods.values()):
+        curve_scene = config["progressive_curve"]["scene"] or config["scenes"][0]
+        width, height = config["resolution"] or load_scene(curve_scene).RESOLUTION
+        jobs.append({"rule": "progressive_curve", "pixels": int(width) * int(height), "entries": 1, "spp": 0,
+                     "threads": 1})
     return jobs
 
 
@@ -88,7 +92,7 @@ def main(argv=None) -> None:
         print(f"{rule:24s} {row['jobs']:6d} {row['cpu_s'] / 3600:8.2f} {row['max_s']:18.1f} {row['mem_mb']:11d} "
               f"{row['runtime']:9d} min")
     total = sum(r["cpu_s"] for r in per_rule.values())
-    renders = sum(per_rule[r]["cpu_s"] for r in ("render_noisy", "render_reference_chunk", "oracle_study") if r in per_rule)
+    renders = sum(per_rule[r]["cpu_s"] for r in ("render_noisy", "render_reference_chunk", "oracle_study", "progressive_curve") if r in per_rule)
     print(f"total {total / 3600:.1f} CPU-hours, of which renders {renders / 3600:.1f} "
           f"({renders / max(total, 1e-9):.0%}: what GPU renders would take over; GPU-hours not measured here)")
 

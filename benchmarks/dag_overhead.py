@@ -39,8 +39,9 @@ STAGES = {  # benchmark folder (and batch suffix) -> stage
     "render_noisy": "render (noisy)",
     "render_reference": "render (reference chunks)",
     "methods": "methods (one job each)",
-    "batches/combiners": "methods (combiner batches)",
-    "batches/learned_denoisers": "methods (learned batches)",
+    "batches/methods": "methods (one job per case)",
+    "batches/combiners": "methods (combiner batches)",             # runs before the case jobs
+    "batches/learned_denoisers": "methods (learned batches)",      # (records of older runs)
     "metrics": "metrics",
     "viewer": "viewer",
 }
@@ -59,8 +60,9 @@ def stage_of(record: Path, benchmarks: Path) -> str:
     relative = record.relative_to(benchmarks)
     folder = relative.parts[0] if len(relative.parts) > 1 else record.stem
     if folder == "batches":
-        kind = "combiners" if record.stem.endswith("_combiners") else "learned_denoisers"
-        return STAGES[f"batches/{kind}"]
+        kind = record.stem.rsplit("_", 1)[-1]
+        kind = "learned_denoisers" if kind == "denoisers" else kind
+        return STAGES.get(f"batches/{kind}", f"batches/{kind}")
     return STAGES.get(folder, folder)
 
 

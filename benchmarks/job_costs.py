@@ -8,8 +8,9 @@ constant ones). From each it reads:
 
 * every ``benchmark:`` record (``results/benchmarks/**.tsv``: wall ``s``, peak ``max_rss`` MB)
   and the rule that wrote it (by folder: ``render_noisy/``, ``render_reference/`` ->
-  ``render_reference_chunk``, ``methods/`` -> ``run_method``, ``batches/*_combiners`` ->
-  ``run_combiners``, ``batches/*_learned_denoisers`` -> ``run_learned_denoisers``, ``metrics/``
+  ``render_reference_chunk``, ``methods/`` -> ``run_method``, ``batches/*_methods`` ->
+  ``run_case_methods`` (``batches/*_combiners`` -> ``run_combiners`` and ``batches/*_learned_denoisers``
+  -> ``run_learned_denoisers`` in runs before it), ``metrics/``
   -> ``case_metrics``, ``viewer/`` -> ``viewer_case``, ``viewer.tsv`` -> ``viewer``, ``oracle/``
   -> ``oracle_study``, ``training/example_*`` -> ``training_example``, ``training/correlated_*``
   -> ``training_correlated``, ``training/train_*`` -> ``train_network``);
@@ -110,13 +111,18 @@ def job_rows(results: Path) -> list[dict]:
             key = (case["scene"], int(case["spp"]))
             rule = {"metrics": "case_metrics", "viewer": "viewer_case"}[folder]
             row = (rule, pixels.get(case["scene"]), counts[key]["all"] + 1, 0)      # + the noisy input
-        elif folder == "batches" and case and case["rest"] in ("combiners", "learned_denoisers"):
+        elif folder == "batches" and case and case["rest"] == "methods":
             key = (case["scene"], int(case["spp"]))
+            row = ("run_case_methods", pixels.get(case["scene"]), counts[key]["all"], 0)
+        elif folder == "batches" and case and case["rest"] in ("combiners", "learned_denoisers"):
+            key = (case["scene"], int(case["spp"]))      # records of runs before run_case_methods
             row = (f"run_{case['rest']}", pixels.get(case["scene"]), counts[key][case["rest"]], 0)
         elif folder == "" and stem == "viewer":
             row = ("viewer", max(pixels.values(), default=0), sum(c["all"] + 1 for c in counts.values()), 0)
         elif folder == "oracle":
             row = ("oracle_study", pixels.get(stem), 1, 0)
+        elif folder == "progressive":
+            row = ("progressive_curve", pixels.get(stem), 1, 0)
         elif folder == "training":
             rule = ("training_example" if stem.startswith("example_") else
                     "training_correlated" if stem.startswith("correlated_") else

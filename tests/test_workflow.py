@@ -39,7 +39,7 @@ def smoke_run(smoke_results):
 
 POOL_SLICE = ["kpcn", "nfor", "oidn", "rdfc", "ens10", "ens15"]   # study.ensembles [10, 15], in ID order
 EXTRAS = ["jbf", "ensemble", "ensemble_exact", "onehot_sbf", "onehot_nfor", "onehot_post", "naive",
-          "ensemble_unconstrained"]
+          "ensemble_unconstrained", "pd_oidn"]
 METRICS = ("relmse", "relmse_corrected", "smape", "dssim", "flip")
 
 
@@ -60,7 +60,7 @@ def test_tables_exist_and_ensemble_beats_noisy(smoke_run):
         extras = pd.read_csv(workdir / f"results/tables/extras_{metric}.csv")
         assert list(extras["candidate"]) == EXTRAS
     metrics = pd.read_csv(workdir / "results/metrics.csv")
-    assert len(metrics) == 3 * 2 * 15 * 5  # scenes × spp × (candidates + noisy) × metrics
+    assert len(metrics) == 3 * 2 * 16 * 5  # scenes × spp × (candidates + noisy) × metrics
     assert np.isfinite(metrics["value"]).all()
     relmse = metrics[metrics.metric == "relmse"].pivot_table(index=["scene", "spp"], columns="candidate", values="value")
     # At 32x32 the denoisers' blur of the Cornell box's light edge can cost more relMSE than
@@ -96,6 +96,18 @@ def test_tables_exist_and_ensemble_beats_noisy(smoke_run):
     for metric in METRICS:
         for key in ("error_curves", "score_curves", "score_size", "speed_score", "equal_time"):
             assert (workdir / f"results/figures/study/{key}_{metric}.png").stat().st_size > 1000
+    # progressive denoising: its exceptions recounted from metrics.csv, per-spp means, the curve
+    consistency = pd.read_csv(workdir / "results/tables/progressive/consistency.csv")
+    assert list(consistency["spp"]) == [4, 64] and set(consistency["entry"]) == {"pd_oidn"}
+    for _, row in consistency.iterrows():
+        case = relmse.xs(int(row["spp"]), level="spp")
+        assert row["worse"] == int((case["pd_oidn"] > case["noisy"]).sum())
+        assert row["value"] == pytest.approx(case["pd_oidn"].mean(), rel=1e-5)
+    per_spp = pd.read_csv(workdir / "results/tables/progressive/per_spp.csv")
+    assert set(per_spp["entry"]) >= {"noisy", "oidn", "pd_oidn"} and {"relmse", "smape", "seconds"} <= set(per_spp["quantity"])
+    curve = pd.read_csv(workdir / f"results/progressive/{config['scenes'][0]}/curve.csv")
+    assert sorted(set(curve["spp"])) == [4, 16] and np.isfinite(curve[["relmse", "smape"]].to_numpy()).all()
+    assert (workdir / f"results/progressive/{config['scenes'][0]}/curve.png").stat().st_size > 1000
     # the comparison methods: in metrics.csv and their own tables, not in the ranking pool
     relmse_all = metrics[metrics.metric == "relmse"].pivot_table(index=["scene", "spp"], columns="candidate",
                                                                  values="value")
@@ -112,7 +124,8 @@ def test_tables_exist_and_ensemble_beats_noisy(smoke_run):
     timings = pd.read_csv(workdir / "results/timings.csv")
     assert set(timings["method"]) == set(POOL_SLICE + EXTRAS)
     assert (timings["seconds"] > 0).all()
-    assert list((workdir / "results/benchmarks/methods").glob("*.tsv"))
+    # one job per case runs every method (batch_methods), with its benchmark record
+    assert len(list((workdir / "results/benchmarks/batches").glob("*_methods.tsv"))) == 3 * 2
 
 
 def test_rerun_has_nothing_to_do(smoke_run):
@@ -188,8 +201,7 @@ def test_killed_run_resumes_without_redoing_finished_jobs(tmp_path):
     snakemake(workdir, "--unlock")
     result = snakemake(workdir, "--rerun-incomplete")
     assert not re.search(r"^(local)?rule render_noisy:", result.stdout + result.stderr, re.MULTILINE)
-    assert re.search(r"^(local)?rule run_(method|combiners|learned_denoisers):", result.stdout + result.stderr,
-                     re.MULTILINE)
+    assert re.search(r"^(local)?rule run_(method|case_methods):", result.stdout + result.stderr, re.MULTILINE)
     for render, mtime in mtimes.items():
         assert (workdir / render).stat().st_mtime_ns == mtime, f"{render} was redone"
     assert (workdir / "results/tables/ranking_relmse.csv").exists()
@@ -215,8 +227,9 @@ def test_notebook_executes_headless_on_results(smoke_run, monkeypatch):
 def test_training_data_target_writes_reproducible_disjoint_crops(tmp_path):
     from mcbench.exr import read_layers, read_metadata
 
+    # the smoke config's learned combiner (progressive) trains on a subset of these scenes
     training = {"first_seed": 3, "count": 2, "fibre_count": 0, "resolution": [32, 24], "crop": 12, "crops": 2,
-                "spp": [4, 16], "target_spp": 64}
+                "spp": [4, 16], "target_spp": 64, "combiners": {"count": 2, "fibre_count": 0, "crops": 2}}
     workdir = tmp_path / "training"
     write_config(workdir, training=training)
     snakemake(workdir, "training_data")
@@ -262,11 +275,15 @@ def test_train_rule_trains_missing_weights_and_the_main_job_never_retrains(tmp_p
     training = {"first_seed": 6, "count": 2, "fibre_count": 0, "resolution": [32, 24], "crop": 12, "crops": 2,
                 "spp": [4, 16],
                 "target_spp": 64,
+                "combiners": {"count": 2, "fibre_count": 0, "crops": 2},   # the smoke config's progressive
                 "networks": {"wskpn": {"steps": 3, "batch_size": 2, "patch": 12, "validate_every": 3,
                                        "checkpoint_every": 3}}}
     workdir = tmp_path / "train"
     write_config(workdir, training=training, weights_dir=str(weights), denoisers=["oidn", "jbf", "wskpn"],
                  study={"pool": False})      # no pool: its learned bases have no weights in this folder
+    weights.mkdir(exist_ok=True)                   # the smoke config's progressive: the committed weights
+    for suffix in (".pt", ".json"):
+        shutil.copy(REPO / "methods/weights" / f"progressive{suffix}", weights / f"progressive{suffix}")
     snakemake(workdir, "train_wskpn")
     blob = torch.load(weights / "wskpn.pt", weights_only=True)
     assert set(blob) == {"arch", "state_dict"}
@@ -278,7 +295,7 @@ def test_train_rule_trains_missing_weights_and_the_main_job_never_retrains(tmp_p
     for crop in (workdir / "results/training").glob("*.exr"):
         os.utime(crop, (time.time() + 60, time.time() + 60))
     text = "".join(snakemake(workdir, "-n").stdout.splitlines(keepends=True))
-    assert "train_network" not in text and "run_learned_denoisers" in text
+    assert "train_network" not in text and "run_case_methods" in text
     snakemake(workdir, "results/outputs/cornell_box/spp4/wskpn.exr")
     timing = json.loads((workdir / "results/outputs/cornell_box/spp4/wskpn.json").read_text())
     assert timing["method"] == "wskpn" and timing["seconds"] > 0
@@ -286,13 +303,13 @@ def test_train_rule_trains_missing_weights_and_the_main_job_never_retrains(tmp_p
     # and an explicit train_<name> with the weights present has nothing to do.
     shutil.rmtree(workdir / "results/training")
     text = snakemake(workdir, "-n").stdout
-    assert "training_example" not in text and "train_network" not in text and "run_learned_denoisers" in text
+    assert "training_example" not in text and "train_network" not in text and "run_case_methods" in text
     assert "train_network" not in snakemake(workdir, "-n", "train_wskpn").stdout
     # New weights rerun the method (their digest is a parameter), still without training.
     torch.save(blob | {"state_dict": {k: v + 0.01 if v.is_floating_point() else v
                                       for k, v in blob["state_dict"].items()}}, weights / "wskpn.pt")
     text = snakemake(workdir, "-n", "results/outputs/cornell_box/spp4/wskpn.exr").stdout
-    assert "run_learned_denoisers" in text and "train_network" not in text
+    assert "run_case_methods" in text and "train_network" not in text
     # Without weights the main job stops, naming the folder (it never plans training itself);
     # train_<name> plans the training again.
     (weights / "wskpn.pt").unlink()
@@ -348,19 +365,16 @@ def _job_counts(result: subprocess.CompletedProcess) -> dict[str, int]:
 
 @pytest.mark.parametrize("batch", [True, False])
 def test_methods_of_a_case_share_jobs_unless_batching_is_off(tmp_path, batch):
-    """batch_methods: one job per case for the learned denoisers and one for the combiners, one job
-    per non-learned base denoiser; off: one job per method. The outputs planned are the same."""
+    """batch_methods: one job per case runs all its methods; off: one job per method. The outputs
+    planned are the same."""
     config = write_config(tmp_path, batch_methods=batch, study={"pool": False})   # the config's methods only
     result = _dry_run(tmp_path, "--configfile", str(tmp_path / "config.yaml"))
     counts, cases = _job_counts(result), len(config["scenes"]) * len(config["spp"])
-    learned = [d for d in config["denoisers"] if d == "kpcn"]
-    plain = [d for d in config["denoisers"] if d != "kpcn"]
     if batch:
-        assert counts["run_method"] == cases * len(plain)
-        assert counts["run_combiners"] == cases and counts["run_learned_denoisers"] == cases * bool(learned)
+        assert counts["run_case_methods"] == cases and "run_method" not in counts
     else:
         assert counts["run_method"] == cases * (len(config["denoisers"]) + len(config["combiners"]))
-        assert "run_combiners" not in counts and "run_learned_denoisers" not in counts
+        assert "run_case_methods" not in counts
     outputs = {line.strip() for line in (result.stdout + result.stderr).splitlines() if line.strip().startswith("output:")}
     planned = {p for line in outputs for p in line.removeprefix("output:").replace(",", " ").split()}
     for name in config["denoisers"] + [c["name"] for c in config["combiners"]]:

@@ -58,6 +58,9 @@ POOL_NOTE = ("" if not POOL_STUDY else
              "members the paper does not name (mcbench.pool)." if len(RANKED) == len(POOL) else
              f"Partial pool: {len(RANKED)} of the 39 candidates (study.ensembles), {len(RANKED) + 1} entries "
              f"with the noisy input, so the scores are on another scale than the paper's 40-entry Table 3.")
+# progressive denoising's entries (combiners of module progressive) -> the method each mixes with
+# the noisy render (progressive.smk)
+PROGRESSIVE = {name: spec["inputs"][0] for name, spec in METHODS.items() if spec["module"] == "progressive"}
 LABELS = {NOISY: NOISY_LABEL, **{name: spec["label"] for name, spec in METHODS.items()}}
 METRIC_NAMES = list(config["metrics"])
 REFERENCE_CHUNKS = config["reference"]["chunks"]
@@ -94,13 +97,15 @@ wildcard_constraints:
     metric="|".join(ALL_METRICS),
 
 
-# Which methods share a job (config batch_methods): the learned denoisers of a case in one job,
-# the combiners of a case in another (config order is dependency order); every other method,
-# and every method when batch_methods is false, in a job of its own (rule run_method).
-BATCHES = {"learned_denoisers": [], "combiners": []}
-if config["batch_methods"]:
-    BATCHES["learned_denoisers"] = [n for n, s in METHODS.items() if s["kind"] == "denoiser" and s["learned"]]
-    BATCHES["combiners"] = [n for n, s in METHODS.items() if s["kind"] == "combiner"]
+# Which methods share a job (config batch_methods): every method of a case in one job, in the
+# method table's order (denoisers, then combiners in config order: dependency order, checked
+# below); with batch_methods false, every method in a job of its own (rule run_method).
+BATCHES = {"methods": list(METHODS) if config["batch_methods"] else []}
+_position = {name: index for index, name in enumerate(METHODS)}
+for _name, _spec in METHODS.items():
+    for _input in _spec["inputs"]:
+        if _position[_input] > _position[_name]:
+            raise BenchError(f"method '{_name}' takes '{_input}', which comes after it in the method table")
 BATCHED = {name for names in BATCHES.values() for name in names}
 SINGLE_JOB_METHODS = [name for name in METHODS if name not in BATCHED]
 
@@ -326,8 +331,8 @@ def _job_size(rule_name, wildcards):
         return pixels, 1, int(wildcards.spp)
     if rule_name == "render_reference_chunk":
         return pixels, 1, reference_chunk_spp(wildcards)
-    if rule_name in ("run_learned_denoisers", "run_combiners"):
-        return pixels, len(BATCHES[rule_name[len("run_"):]]), 0
+    if rule_name == "run_case_methods":
+        return pixels, len(BATCHES["methods"]), 0
     if rule_name in ("case_metrics", "viewer_case"):
         return pixels, case_entries(), 0
     if rule_name == "viewer":
@@ -364,3 +369,11 @@ def study_targets(wildcards=None):
     if not POOL_STUDY:
         return []
     return [*rules.study_tables.output, *expand(rules.study_figures.output, metric=METRIC_NAMES)]
+
+
+def progressive_targets(wildcards=None):
+    """Progressive denoising's tables and its consistency curve (progressive.smk) when the config
+    has a combiner of module progressive, else nothing."""
+    if not PROGRESSIVE:
+        return []
+    return [*rules.progressive_tables.output, *expand(rules.progressive_curve.output, scene=PROGRESSIVE_SCENE)]

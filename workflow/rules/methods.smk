@@ -2,11 +2,13 @@
 # run; a combiner also reads its input methods' outputs; a learned method also reads its
 # weights. Every method writes its own output EXR and a timing record of its compute time.
 #
-# Jobs (config batch_methods, default true): each non-learned base denoiser gets a job per case
-# (rule run_method); the learned denoisers of a case share one job (torch is imported once) and
-# the combiners of a case share another, run in config order (rules run_learned_denoisers,
-# run_combiners): at 128x128 a job's process start, imports and EXR reads cost more than an
-# ensemble's compute. `snakemake -f <output EXR>` reruns the job that makes it.
+# Jobs (config batch_methods, default true): all methods of a case share one job (rule
+# run_case_methods), run in dependency order (denoisers, then combiners in config order), so the
+# process starts, imports (torch once) and reads the render and each output once: at 128x128 a
+# job's start, imports and reads cost more than most methods' compute (the default run had 432
+# method jobs with a job per base denoiser and per batch; it now has 72). batch_methods false: a
+# job per method (rule run_method, e.g. to spread methods over a cluster). `snakemake -f <output
+# EXR>` reruns the job that makes it.
 
 
 rule run_method:
@@ -36,54 +38,28 @@ rule run_method:
         "../scripts/run_method.py"
 
 
-if BATCHES["learned_denoisers"]:
+if BATCHES["methods"]:
 
-    rule run_learned_denoisers:
+    rule run_case_methods:
         input:
             render=rules.render_noisy.output[0],
-            weights=batch_weights("learned_denoisers"),
+            inputs=batch_inputs("methods"),
+            weights=batch_weights("methods"),
         output:
-            exr=batch_outputs("learned_denoisers", "exr"),
-            timing=batch_outputs("learned_denoisers", "timing"),
+            exr=batch_outputs("methods", "exr"),
+            timing=batch_outputs("methods", "timing"),
         params:
-            entries=batch_entries("learned_denoisers"),
+            entries=batch_entries("methods"),
             weights_dir=WEIGHTS_DIR,
-            weights_digests=batch_weights_digests("learned_denoisers"),
+            weights_digests=batch_weights_digests("methods"),
         threads: 1
         resources:
-            **job_resources("run_learned_denoisers"),
+            **job_resources("run_case_methods"),
         conda:
             "../envs/mcbench.yaml"
         log:
-            f"{RESULTS}/logs/methods/{{scene}}_spp{{spp}}_learned_denoisers.log",
+            f"{RESULTS}/logs/methods/{{scene}}_spp{{spp}}_methods.log",
         benchmark:
-            f"{RESULTS}/benchmarks/batches/{{scene}}_spp{{spp}}_learned_denoisers.tsv"
-        script:
-            "../scripts/run_methods.py"
-
-
-if BATCHES["combiners"]:
-
-    rule run_combiners:
-        input:
-            render=rules.render_noisy.output[0],
-            inputs=batch_inputs("combiners"),
-            weights=batch_weights("combiners"),
-        output:
-            exr=batch_outputs("combiners", "exr"),
-            timing=batch_outputs("combiners", "timing"),
-        params:
-            entries=batch_entries("combiners"),
-            weights_dir=WEIGHTS_DIR,
-            weights_digests=batch_weights_digests("combiners"),
-        threads: 1
-        resources:
-            **job_resources("run_combiners"),
-        conda:
-            "../envs/mcbench.yaml"
-        log:
-            f"{RESULTS}/logs/methods/{{scene}}_spp{{spp}}_combiners.log",
-        benchmark:
-            f"{RESULTS}/benchmarks/batches/{{scene}}_spp{{spp}}_combiners.tsv"
+            f"{RESULTS}/benchmarks/batches/{{scene}}_spp{{spp}}_methods.tsv"
         script:
             "../scripts/run_methods.py"

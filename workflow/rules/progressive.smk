@@ -1,0 +1,96 @@
+# Progressive denoising (Firmino et al. 2022; methods/progressive.py, mcbench.progressive_tables,
+# mcbench.steps_progressive): with at least one combiner of module `progressive` in the config,
+# its consistency over the test cases (each case's relMSE against the noisy input's, per spp),
+# per-spp errors and added time beside each entry's input, and one scene rendered up to
+# progressive_curve.spp (8192 by default) with its base, progressive and noisy curves.
+
+from mcbench.steps_oracle import usable_downscale  # noqa: E402
+
+PROGRESSIVE_DIR = f"{RESULTS}/tables/progressive"
+PROGRESSIVE_CURVE = config["progressive_curve"]
+# the curve's scene: progressive_curve.scene, or the config's first scene when null (cornell_box)
+PROGRESSIVE_SCENE = PROGRESSIVE_CURVE["scene"] or SCENES[0]
+if PROGRESSIVE and PROGRESSIVE_SCENE not in SCENES:
+    raise BenchError(f"progressive_curve.scene: '{PROGRESSIVE_SCENE}' is not one of the config's scenes "
+                     f"({', '.join(SCENES)}); its reference is rendered only for those")
+PROGRESSIVE_DOWNSCALE = usable_downscale(config["resolution"], load_scene(PROGRESSIVE_SCENE).RESOLUTION,
+                                         PROGRESSIVE_CURVE["downscale"])
+load_method(PROGRESSIVE_CURVE["base"], kind="denoiser", config_key="progressive_curve.base")
+
+
+rule progressive_tables:
+    localrule: True
+    input:
+        metrics=rules.gather_metrics.output[0],
+        timings=rules.gather_timings.output[0],
+    output:
+        consistency=report(
+            f"{PROGRESSIVE_DIR}/consistency.md",
+            caption="../report/progressive.rst",
+            category="Progressive denoising",
+            subcategory="Tables",
+            labels={"table": "consistency against the noisy input"},
+        ),
+        consistency_csv=f"{PROGRESSIVE_DIR}/consistency.csv",
+        per_spp=report(
+            f"{PROGRESSIVE_DIR}/per_spp.md",
+            caption="../report/progressive.rst",
+            category="Progressive denoising",
+            subcategory="Tables",
+            labels={"table": "errors and added time per spp"},
+        ),
+        per_spp_csv=f"{PROGRESSIVE_DIR}/per_spp.csv",
+    params:
+        pairs=PROGRESSIVE,
+        labels=LABELS,
+        metrics=[m for m in ("relmse", "smape") if m in METRIC_NAMES] or METRIC_NAMES[:1],
+    threads: 1
+    resources:
+        **job_resources("progressive_tables"),
+    conda:
+        "../envs/mcbench.yaml"
+    log:
+        f"{RESULTS}/logs/progressive_tables.log",
+    script:
+        "../scripts/progressive.py"
+
+
+rule progressive_curve:
+    input:
+        reference=rules.merge_reference.output[0],
+    output:
+        table=f"{RESULTS}/progressive/{{scene}}/curve.csv",
+        markdown=report(
+            f"{RESULTS}/progressive/{{scene}}/curve.md",
+            caption="../report/progressive_curve.rst",
+            category="Progressive denoising",
+            subcategory="Consistency up to high spp",
+            labels={"scene": "{scene}", "figure": "table"},
+        ),
+        figure=report(
+            f"{RESULTS}/progressive/{{scene}}/curve.png",
+            caption="../report/progressive_curve.rst",
+            category="Progressive denoising",
+            subcategory="Consistency up to high spp",
+            labels={"scene": "{scene}", "figure": "error against spp"},
+        ),
+    params:
+        spp=list(PROGRESSIVE_CURVE["spp"]),
+        base=PROGRESSIVE_CURVE["base"],
+        divergence=PROGRESSIVE_CURVE["divergence"],
+        downscale=PROGRESSIVE_DOWNSCALE,
+        resolution=config["resolution"],
+        variant=config["variant"],
+        seed=config["seed"],
+        weights_dir=WEIGHTS_DIR,
+    threads: 1
+    resources:
+        **job_resources("progressive_curve"),
+    conda:
+        "../envs/mcbench.yaml"
+    log:
+        f"{RESULTS}/logs/progressive/{{scene}}.log",
+    benchmark:
+        f"{RESULTS}/benchmarks/progressive/{{scene}}.tsv"
+    script:
+        "../scripts/progressive.py"

@@ -1,0 +1,22 @@
+import os
+
+# the two rules of workflow/rules/progressive.smk
+if snakemake.rule == "progressive_curve":
+    os.environ.setdefault("NUMBA_NUM_THREADS", str(snakemake.threads))
+    os.environ.setdefault("OMP_NUM_THREADS", str(snakemake.threads))
+    os.environ["MCBENCH_WEIGHTS_DIR"] = os.path.abspath(snakemake.params.weights_dir)
+
+from mcbench.logs import run_logged  # noqa: E402
+from mcbench.steps import write_progressive_curve, write_progressive_tables  # noqa: E402
+
+params = snakemake.params
+if snakemake.rule == "progressive_curve":
+    run_logged(snakemake.log[0], write_progressive_curve, snakemake.wildcards.scene, snakemake.input.reference,
+               table_csv=snakemake.output.table, table_md=snakemake.output.markdown,
+               figure_png=snakemake.output.figure, spp_levels=[int(s) for s in params.spp], base=params.base,
+               divergence=params.divergence, downscale=int(params.downscale), resolution=params.resolution,
+               variant=params.variant, seed=int(params.seed), threads=snakemake.threads)
+else:
+    run_logged(snakemake.log[0], write_progressive_tables, snakemake.input.metrics, snakemake.input.timings,
+               os.path.dirname(snakemake.output.consistency), pairs=dict(params.pairs),
+               labels=dict(params.labels), metrics=list(params.metrics))
