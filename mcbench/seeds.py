@@ -40,6 +40,12 @@ The repetition, half and bin sit above bit 15, so scalar variants (one pass per 
 neither scene nor spp (like a test render's, which holds no scene): two oracle studies of
 different spp reuse the same streams, never a test, reference or training render's.
 
+Renders of progressive denoising's consistency curve (:func:`progressive_curve_seed`: one scene
+at every level of ``progressive_curve.spp``) sit in a hole of the training layout: base 7 with
+bits 12..8 all zero, which no training seed has (its bit 12..8 hold the target flag or log2(spp)
+>= 1); the config seed, half, bin and the level index fill the bits below. Its docstring gives
+the layout and why it is disjoint from every other kind, scalar pixel ranges included.
+
 Why no two renders share a seed
 -------------------------------
 Within each layout every field has its own bits and every field value decodes back
@@ -99,6 +105,13 @@ SPP_STEP = 2048                 # above it, multiples of this up to SPP_STEP * 1
 # --------------------------------------------------------------------------- test renders
 
 
+def _check_base_seed(base_seed: int) -> None:
+    """BenchError naming config key ``seed`` unless ``base_seed`` is in 0..MAX_BASE_SEED."""
+    if not 0 <= base_seed <= MAX_BASE_SEED:
+        raise BenchError(f"config key 'seed': must be in 0..{MAX_BASE_SEED} "
+                         f"({TRAINING_BASE_SEED} is reserved for training renders), got {base_seed}")
+
+
 def _check_half_and_bin(half, bin) -> None:
     """ValueError unless ``half`` is 0 (A) or 1 (B) and ``bin`` is 0 or 1."""
     if half not in (0, 1):
@@ -128,9 +141,7 @@ def render_seed(kind: str, spp: int | None = None, half: int | None = None, chun
     for training renders). Distinct arguments give distinct seeds.
     """
     base_seed, pass_index = int(base_seed), int(pass_index)
-    if not 0 <= base_seed <= MAX_BASE_SEED:
-        raise BenchError(f"config key 'seed': must be in 0..{MAX_BASE_SEED} "
-                         f"({TRAINING_BASE_SEED} is reserved for training renders), got {base_seed}")
+    _check_base_seed(base_seed)
     if not 0 <= pass_index < 1 << 15:
         raise BenchError(f"pass index {pass_index} out of range 0..32767 (too many passes; "
                          f"lower the spp or the resolution)")
@@ -245,9 +256,7 @@ def oracle_render_seed(repetition: int, half: int, *, bin: int = 0, pass_index: 
     :func:`training_render_seed` value.
     """
     repetition, base_seed, pass_index = int(repetition), int(base_seed), int(pass_index)
-    if not 0 <= base_seed <= MAX_BASE_SEED:
-        raise BenchError(f"config key 'seed': must be in 0..{MAX_BASE_SEED} "
-                         f"({TRAINING_BASE_SEED} is reserved for training renders), got {base_seed}")
+    _check_base_seed(base_seed)
     if not 0 <= repetition < MAX_ORACLE_REPETITIONS:
         raise BenchError(f"config key 'oracle.repetitions': repetition {repetition} out of range "
                          f"0..{MAX_ORACLE_REPETITIONS - 1} (the held-out one included)")
@@ -337,9 +346,7 @@ def progressive_curve_seed(level_index: int, half: int, *, bin: int = 0, pass_in
     spp: two curves with the same levels reuse the same streams, never another kind's.
     """
     level_index, base_seed, pass_index = int(level_index), int(base_seed), int(pass_index)
-    if not 0 <= base_seed <= MAX_BASE_SEED:
-        raise BenchError(f"config key 'seed': must be in 0..{MAX_BASE_SEED} "
-                         f"({TRAINING_BASE_SEED} is reserved for training renders), got {base_seed}")
+    _check_base_seed(base_seed)
     if not 0 <= level_index < MAX_PROGRESSIVE_CURVE_LEVELS:
         raise BenchError(f"config key 'progressive_curve.spp': level {level_index} out of range "
                          f"0..{MAX_PROGRESSIVE_CURVE_LEVELS - 1} (too many spp levels)")
