@@ -112,6 +112,12 @@ def _check_base_seed(base_seed: int) -> None:
                          f"({TRAINING_BASE_SEED} is reserved for training renders), got {base_seed}")
 
 
+def _check_index(value: int, limit: int, message: str) -> None:
+    """BenchError ``message`` unless 0 <= ``value`` < ``limit``."""
+    if not 0 <= value < limit:
+        raise BenchError(message)
+
+
 def _check_half_and_bin(half, bin) -> None:
     """ValueError unless ``half`` is 0 (A) or 1 (B) and ``bin`` is 0 or 1."""
     if half not in (0, 1):
@@ -257,13 +263,11 @@ def oracle_render_seed(repetition: int, half: int, *, bin: int = 0, pass_index: 
     """
     repetition, base_seed, pass_index = int(repetition), int(base_seed), int(pass_index)
     _check_base_seed(base_seed)
-    if not 0 <= repetition < MAX_ORACLE_REPETITIONS:
-        raise BenchError(f"config key 'oracle.repetitions': repetition {repetition} out of range "
-                         f"0..{MAX_ORACLE_REPETITIONS - 1} (the held-out one included)")
+    _check_index(repetition, MAX_ORACLE_REPETITIONS, f"config key 'oracle.repetitions': repetition {repetition} "
+                 f"out of range 0..{MAX_ORACLE_REPETITIONS - 1} (the held-out one included)")
     _check_half_and_bin(half, bin)
-    if not 0 <= pass_index < 1 << 15:
-        raise BenchError(f"oracle pass index {pass_index} out of range 0..32767 (lower "
-                         f"oracle.spp or the resolution)")
+    _check_index(pass_index, 1 << 15, f"oracle pass index {pass_index} out of range 0..32767 (lower "
+                 f"oracle.spp or the resolution)")
     field = (repetition << 2) | (half << 1) | int(bin)
     return (base_seed << 29) | _ORACLE_MARK | (field << 16) | pass_index
 
@@ -347,13 +351,12 @@ def progressive_curve_seed(level_index: int, half: int, *, bin: int = 0, pass_in
     """
     level_index, base_seed, pass_index = int(level_index), int(base_seed), int(pass_index)
     _check_base_seed(base_seed)
-    if not 0 <= level_index < MAX_PROGRESSIVE_CURVE_LEVELS:
-        raise BenchError(f"config key 'progressive_curve.spp': level {level_index} out of range "
-                         f"0..{MAX_PROGRESSIVE_CURVE_LEVELS - 1} (too many spp levels)")
+    _check_index(level_index, MAX_PROGRESSIVE_CURVE_LEVELS, f"config key 'progressive_curve.spp': level "
+                 f"{level_index} out of range 0..{MAX_PROGRESSIVE_CURVE_LEVELS - 1} (too many spp levels)")
     _check_half_and_bin(half, bin)
-    if not 0 <= pass_index < MAX_PROGRESSIVE_CURVE_PASSES:
-        raise BenchError(f"config key 'progressive_curve.spp': pass index {pass_index} out of range "
-                         f"0..{MAX_PROGRESSIVE_CURVE_PASSES - 1} (lower the top spp level or the resolution)")
+    _check_index(pass_index, MAX_PROGRESSIVE_CURVE_PASSES, f"config key 'progressive_curve.spp': pass index "
+                 f"{pass_index} out of range 0..{MAX_PROGRESSIVE_CURVE_PASSES - 1} (lower the top spp level or "
+                 f"the resolution)")
     return ((TRAINING_BASE_SEED << 29) | (base_seed << 26) | (half << 25) | (int(bin) << 24)
             | (level_index << 15) | ((pass_index >> 8) << 13) | (pass_index & 0xFF))
 
