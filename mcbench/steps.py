@@ -722,15 +722,3 @@ def write_progressive_tables(metrics_csv: str, timings_csv: str, out_dir: str, *
     write_text(out / "per_spp.md", per_spp_markdown(errors, seconds, labels))
     return {"consistency": consistency, "summary": summary, "errors": errors, "seconds": seconds}
 
-
-def write_progressive_curve(scene: str, reference_path: str, *, table_csv: str, table_md: str, figure_png: str,
-                            spp_levels: list[int], base: str, divergence: str, downscale: int, resolution=None,
-                            variant: str = "auto", seed: int = 0, threads: int | None = None):
-    """Progressive denoising's consistency curve on one scene up to high spp
-    (:func:`mcbench.steps_progressive.run_consistency_curve`)."""
-    from mcbench.steps_progressive import run_consistency_curve
-
-    return run_consistency_curve(scene, reference_path, table_csv=table_csv, table_md=table_md,
-                                 figure_png=figure_png, spp_levels=list(spp_levels), base=base,
-                                 divergence=divergence, downscale=downscale, resolution=resolution,
-                                 variant=variant, seed=seed, threads=threads)

@@ -7,11 +7,12 @@ if snakemake.rule == "progressive_curve":
     os.environ["MCBENCH_WEIGHTS_DIR"] = os.path.abspath(snakemake.params.weights_dir)
 
 from mcbench.logs import run_logged  # noqa: E402
-from mcbench.steps import write_progressive_curve, write_progressive_tables  # noqa: E402
+from mcbench.steps import write_progressive_tables  # noqa: E402
+from mcbench.steps_progressive import run_consistency_curve  # noqa: E402
 
 params = snakemake.params
 if snakemake.rule == "progressive_curve":
-    run_logged(snakemake.log[0], write_progressive_curve, snakemake.wildcards.scene, snakemake.input.reference,
+    run_logged(snakemake.log[0], run_consistency_curve, snakemake.wildcards.scene, snakemake.input.reference,
                table_csv=snakemake.output.table, table_md=snakemake.output.markdown,
                figure_png=snakemake.output.figure, spp_levels=[int(s) for s in params.spp], base=params.base,
                divergence=params.divergence, downscale=int(params.downscale), resolution=params.resolution,
