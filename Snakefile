@@ -6,7 +6,7 @@
 #   snakemake --report results/report.zip      # the report (add the run's --configfile)
 #
 # A --configfile is the whole configuration: config.yaml is read only when none is given, and
-# what a config leaves out comes from the schema's defaults (mcbench.config), so the same command
+# what a config leaves out comes from the schema's defaults (mcbench.pipeline.config), so the same command
 # gives the same study from any folder.
 
 from snakemake.utils import min_version

@@ -2,7 +2,7 @@
 baseline in the benchmarks (no copy of the old code in the tree).
 
 ``load_baseline("methods/nfor.py", "9ec8741")`` reads the file as it was at that commit
-(``git show``), makes its ``mcbench.nlmeans`` import use :func:`mcbench.nlmeans.nl_means_filter_reference`
+(``git show``), makes its ``mcbench.filters.nlmeans`` import use :func:`mcbench.filters.nlmeans.nl_means_filter_reference`
 (the NumPy NL-means that module had at that commit, kept unchanged), and executes it as a
 module named ``baseline_<stem>``. Numba compiles such a module without a cache (see
 ``mcbench.jit``), so call it once on a small input before timing.
@@ -16,8 +16,8 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 BASELINE_COMMIT = "9ec8741"   # the last commit before the NFOR/RDFC speed-ups (issue 14 target 4)
-OLD_IMPORT = "from mcbench.nlmeans import nl_means_filter\n"
-NEW_IMPORT = "from mcbench.nlmeans import nl_means_filter_reference as nl_means_filter\n"
+OLD_IMPORT = "from mcbench.filters.nlmeans import nl_means_filter\n"
+NEW_IMPORT = "from mcbench.filters.nlmeans import nl_means_filter_reference as nl_means_filter\n"
 
 
 def load_baseline(path: str, commit: str = BASELINE_COMMIT, *, patches: dict | None = None,

@@ -51,7 +51,7 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))
 
-from mcbench.exr import write_layers  # noqa: E402
+from mcbench.io.exr import write_layers  # noqa: E402
 
 CPP_REFERENCE = {2: (9.0, 274.0), 4: (13.0, 395.0), 8: (20.4, 635.0)}  # N: (wall s, peak MiB)
 BASELINE_COMMIT = "cedab75"   # the last commit before the band-wise combine (issue 14 target 1)
@@ -144,7 +144,7 @@ def baseline_tree(commit: str, folder: Path) -> Path:
 def output_relmse(path: Path, reference: Path) -> float:
     """The largest relMSE (as the study's: mean (x - r)^2 / (r^2 + 1e-2)) over the layers of
     two EXRs with the same layers."""
-    from mcbench.exr import read_layers
+    from mcbench.io.exr import read_layers
 
     a, b = read_layers(path), read_layers(reference)
     if sorted(a) != sorted(b):
@@ -187,7 +187,7 @@ def numpy_weight_filter(weights, y_full, y_a, y_b, albedo, normal, *, radius=7, 
     """Eq. 32-34 in vectorised NumPy (float64), the baseline for the numba filter: for each window
     offset the kernel of every pixel at once on zero-padded shifted images (out-of-image
     neighbours get kappa 0); the colour distance is the channel mean of Eq. 33 (zero-variance
-    guard as :mod:`mcbench.bilateral`). weights, y_*: (N, H, W, C); returns (N, H, W, C)."""
+    guard as :mod:`mcbench.filters.bilateral`). weights, y_*: (N, H, W, C); returns (N, H, W, C)."""
     z = np.einsum("nhwc,nhwc->hwc", weights, y_full)
     var = 0.5 * (np.einsum("nhwc,nhwc->hwc", weights, y_a) - np.einsum("nhwc,nhwc->hwc", weights, y_b)) ** 2
     n, h, w, c = weights.shape

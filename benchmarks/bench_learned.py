@@ -20,9 +20,9 @@ sys.path.insert(0, str(ROOT))
 
 import torch  # noqa: E402
 
-from mcbench.buffers import RenderBuffers  # noqa: E402
+from mcbench.io.buffers import RenderBuffers  # noqa: E402
 from mcbench.nn.inference import load_network, run_network  # noqa: E402
-from mcbench.render import render_buffers  # noqa: E402
+from mcbench.render.renderer import render_buffers  # noqa: E402
 from methods import load_method, oidn  # noqa: E402
 from scenes import load_scene  # noqa: E402
 from timing import timed  # noqa: E402

@@ -1,4 +1,4 @@
-"""Time the compiled NL-means filter (mcbench.nlmeans.nl_means_filter) against its NumPy
+"""Time the compiled NL-means filter (mcbench.filters.nlmeans.nl_means_filter) against its NumPy
 reference path (nl_means_filter_reference) in the same run, for the two settings NFOR and RDFC
 use most: the feature prefilter (R = 5, F = 3, one channel guiding one channel) and NFOR's MSE
 filter (R = 9, F = 1, a 3-channel guide weighting 6 value channels). Random inputs; CPU seconds
@@ -19,7 +19,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from mcbench.nlmeans import nl_means_filter, nl_means_filter_reference  # noqa: E402
+from mcbench.filters.nlmeans import nl_means_filter, nl_means_filter_reference  # noqa: E402
 
 SETTINGS = {"prefilter R5 F3 1ch": (dict(radius=5, patch_radius=3, k=0.5), 1, 1),
             "MSE filter R9 F1 3ch K6": (dict(radius=9, patch_radius=1, k=1.0), 3, 6)}

@@ -7,7 +7,7 @@ item 4): each switch of ``methods.ensemble.combine`` (``guide_variance_blur``, `
 Reads ``renders/{scene}/spp{N}.exr`` (RenderBuffers), the base outputs
 ``outputs/{scene}/spp{N}/{method}.exr`` (Denoised) and ``references/{scene}.exr``; runs the
 ensemble (iterative solver, the paper's filter parameters) per variant and prints, per input set
-and variant, the mean over the cases of relMSE and DSSIM (``mcbench.metrics``), the change of mean
+and variant, the mean over the cases of relMSE and DSSIM (``mcbench.analysis.metrics``), the change of mean
 relMSE against today's default in percent, and the fraction of cases the variant improves.
 As a check of the harness it also prints the largest relMSE between our default and the run's
 own ``ens_*`` output where the run has one (it was written by the code of that run).
@@ -24,9 +24,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from mcbench.buffers import Denoised, RenderBuffers  # noqa: E402
-from mcbench.exr import read_layers  # noqa: E402
-from mcbench.metrics import dssim, relmse  # noqa: E402
+from mcbench.io.buffers import Denoised, RenderBuffers  # noqa: E402
+from mcbench.io.exr import read_layers  # noqa: E402
+from mcbench.analysis.metrics import dssim, relmse  # noqa: E402
 from methods import ensemble  # noqa: E402
 
 INPUT_SETS = {"ens_oidn_nfor_rdfc": ["oidn", "nfor", "rdfc"],

@@ -24,7 +24,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from mcbench.buffers import RenderBuffers  # noqa: E402
+from mcbench.io.buffers import RenderBuffers  # noqa: E402
 from methods import rdfc  # noqa: E402
 from baseline import load_baseline, print_comparison, time_denoisers  # noqa: E402
 from timing import timed  # noqa: E402

@@ -4,7 +4,7 @@
 
 Plans the config's jobs the way the rules do (one noisy render per scene and spp, the reference
 chunks, one job per non-batched method per case, the learned and combiner batches, metrics and
-viewer pages per case, the oracle study) and prices each with ``mcbench.resources``'
+viewer pages per case, the oracle study) and prices each with ``mcbench.pipeline.resources``'
 ``estimate_job`` and the costs of ``workflow/resources/job_costs.yaml`` (fitted by
 ``benchmarks/job_costs.py`` to measured runs): CPU-hours from the typical (mean) job's fit, the
 requests (memory, run time) from the largest job's. CPU-seconds are a job's estimated wall seconds
@@ -24,9 +24,9 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from mcbench.config import read_config_file  # noqa: E402
-from mcbench.resources import JobCost, estimate_job, job_request, load_job_costs  # noqa: E402
-from mcbench.weights import is_learned_method  # noqa: E402
+from mcbench.pipeline.config import read_config_file  # noqa: E402
+from mcbench.pipeline.resources import JobCost, estimate_job, job_request, load_job_costs  # noqa: E402
+from mcbench.io.weights import is_learned_method  # noqa: E402
 from methods import config_method_table  # noqa: E402
 from scenes import load_scene  # noqa: E402
 

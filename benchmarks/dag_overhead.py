@@ -33,7 +33,7 @@ import pandas as pd
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from mcbench.exr import read_metadata  # noqa: E402
+from mcbench.io.exr import read_metadata  # noqa: E402
 
 STAGES = {  # benchmark folder (and batch suffix) -> stage
     "render_noisy": "render (noisy)",

@@ -2,13 +2,13 @@
 
     python benchmarks/ensemble_job.py RENDER.exr OUT.exr INPUT1.exr ... [--eager] [--param key=value ...]
 
-Like :func:`mcbench.steps.run_methods` for a batch of ensembles: the render's ``RENDER_LAYERS``
+Like :func:`mcbench.pipeline.steps.run_methods` for a batch of ensembles: the render's ``RENDER_LAYERS``
 and each input's three images, ``methods.ensemble.combine``, write the output EXR
 (``write_layers``). Two ways to read them:
 
 * default (the job path proposed for ``run_methods``, issue 14): a combiner that declares
   ``READS_ROWS`` gets the render's layers and the inputs' images as
-  :class:`mcbench.exr.LayerRows` (:func:`mcbench.exr.layer_rows`: only headers are read here;
+  :class:`mcbench.io.exr.LayerRows` (:func:`mcbench.io.exr.layer_rows`: only headers are read here;
   combine reads rows as it goes, so no input is held whole);
 * ``--eager``: as ``run_methods`` reads today, every layer whole (``RenderBuffers.load`` of the
   ``RENDER_LAYERS``, ``Denoised.load``; the ensemble reads no extras).
@@ -28,8 +28,8 @@ from pathlib import Path
 START = time.perf_counter()
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from mcbench.buffers import Denoised, RenderBuffers  # noqa: E402
-from mcbench.exr import write_layers  # noqa: E402
+from mcbench.io.buffers import Denoised, RenderBuffers  # noqa: E402
+from mcbench.io.exr import write_layers  # noqa: E402
 from methods import ensemble  # noqa: E402
 
 
@@ -63,7 +63,7 @@ def main(argv):
         buffers = RenderBuffers.load(render, layers=ensemble.RENDER_LAYERS)  # as run_methods reads it
         denoised = [Denoised.load(path) for path in inputs]                    # combine() reads no extras
     else:
-        from mcbench.exr import layer_rows, read_metadata
+        from mcbench.io.exr import layer_rows, read_metadata
 
         buffers = RenderBuffers(layers=layer_rows(render, ["color", *ensemble.RENDER_LAYERS]),
                                 spp=int(read_metadata(render).get("spp", 0)), source=render)

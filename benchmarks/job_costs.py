@@ -1,4 +1,4 @@
-"""Fit the per-rule job costs of ``mcbench.resources`` to finished runs' ``benchmark:`` records.
+"""Fit the per-rule job costs of ``mcbench.pipeline.resources`` to finished runs' ``benchmark:`` records.
 
     python benchmarks/job_costs.py RESULTS [RESULTS ...] [--write workflow/resources/job_costs.yaml]
 
@@ -24,7 +24,7 @@ constant ones). From each it reads:
 measured (``--training-rss network=MiB``).
 
 Prints per rule the records, the measured maximum wall seconds and RSS, the fitted
-:class:`mcbench.resources.JobCost` and the request it gives at the measured sizes; with
+:class:`mcbench.pipeline.resources.JobCost` and the request it gives at the measured sizes; with
 ``--write`` stores the fit (atomically) with a header naming the command and the runs.
 """
 
@@ -41,9 +41,9 @@ import pandas as pd
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from mcbench.exr import read_metadata  # noqa: E402
-from mcbench.resources import estimate_job, fit_job_cost, job_request, write_job_costs  # noqa: E402
-from mcbench.weights import is_learned_method  # noqa: E402
+from mcbench.io.exr import read_metadata  # noqa: E402
+from mcbench.pipeline.resources import estimate_job, fit_job_cost, job_request, write_job_costs  # noqa: E402
+from mcbench.io.weights import is_learned_method  # noqa: E402
 from methods import load_method  # noqa: E402
 
 _CASE = re.compile(r"^(?P<scene>.+)_spp(?P<spp>\d+)(?:_(?P<rest>.+))?$")
@@ -181,7 +181,7 @@ def main(argv=None) -> None:
     if args.write:
         runs = ", ".join(f"{results} ({len(table[table.run == str(results)])} records)" for results in args.results)
         write_job_costs({"rules": costs, "typical": typical}, args.write, header=(
-            "Per-rule job costs (mcbench.resources: the model, the margins, the floors).\n"
+            "Per-rule job costs (mcbench.pipeline.resources: the model, the margins, the floors).\n"
             "Generated, do not edit: fitted to the benchmark: records of finished runs by\n"
             f"  python benchmarks/job_costs.py {' '.join(map(str, args.results))} --write {args.write}"
             + (f" --training-rss {' '.join(args.training_rss)}" if args.training_rss else "") + "\n"

@@ -17,8 +17,8 @@ import time
 import pandas as pd
 import yaml
 
-from mcbench.render import render_buffers
-from mcbench.variants import pick_variant, set_threads
+from mcbench.render.renderer import render_buffers
+from mcbench.render.variants import pick_variant, set_threads
 from scenes import load_scene
 
 

@@ -1,6 +1,6 @@
 """Progress lines of long jobs: reference chunks, training, NFOR and RDFC on large images.
 
-Lines go to stdout, flushed at once: inside a workflow step, :func:`mcbench.logs.run_logged`
+Lines go to stdout, flushed at once: inside a workflow step, :func:`mcbench.pipeline.logs.run_logged`
 sends stdout to the job's log file, so ``tail -f results/logs/...`` shows a running job's
 progress. Printing never changes what a job computes.
 """

@@ -11,7 +11,7 @@ A method module declares
 * a combiner: ``combine(buffers: RenderBuffers, inputs: list[Denoised], **params) -> Denoised``;
   its output may feed another combiner like any base denoiser output.
 * optionally ``RENDER_LAYERS``: the render layers the method reads (a tuple of names; absent:
-  all). A job whose methods all declare it reads only their union (``mcbench.steps``), which at
+  all). A job whose methods all declare it reads only their union (``mcbench.pipeline.steps``), which at
   1024^2 saves most of the render's ~340 MB.
 
 Config parameters are the keyword-only parameters of ``denoise``/``combine``, each annotated
@@ -40,8 +40,8 @@ from types import ModuleType
 from typing import Callable
 
 from mcbench import BenchError
-from mcbench.buffers import denoise_each_buffer  # re-exported: single-image methods call it
-from mcbench.pool import expand_methods
+from mcbench.io.buffers import denoise_each_buffer  # re-exported: single-image methods call it
+from mcbench.analysis.pool import expand_methods
 
 __all__ = ["KINDS", "NOISY", "NOISY_LABEL", "UnknownMethodError", "available_methods", "load_method",
            "denoise_each_buffer", "method_parameters", "check_params", "method_table", "config_method_table"]
@@ -169,7 +169,7 @@ def method_table(denoisers: list, combiners: list, *, is_learned: Callable[[Modu
 
     ``keys`` (one list for the denoisers, one for the combiners) names where each entry comes
     from in error messages; default ``denoisers[i]``/``combiners[i]`` (entries merged from the
-    candidate pool have keys of their own, ``mcbench.pool.expand_methods``).
+    candidate pool have keys of their own, ``mcbench.analysis.pool.expand_methods``).
     """
     table = {}
     if keys is None:
@@ -206,7 +206,7 @@ def method_table(denoisers: list, combiners: list, *, is_learned: Callable[[Modu
 
 def config_method_table(config: dict, *, is_learned: Callable[[ModuleType], bool]) -> dict:
     """:func:`method_table` of a resolved config: its ``denoisers`` and ``combiners`` with the
-    candidate pool merged in when ``study.pool`` is set (:func:`mcbench.pool.expand_methods`),
+    candidate pool merged in when ``study.pool`` is set (:func:`mcbench.analysis.pool.expand_methods`),
     errors naming the config key (or ``study.pool (#k name)``) of the entry at fault."""
     denoisers, combiners = expand_methods(config)
     return method_table([e for _, e in denoisers], [e for _, e in combiners], is_learned=is_learned,

@@ -95,7 +95,7 @@ def build_network(**arch):
 
 def combine(buffers, inputs):
     """The deep combiner on the full image and on each half buffer; ``inputs`` is exactly one
-    base's :class:`mcbench.buffers.Denoised`. Each image uses only its own noisy samples and the
+    base's :class:`mcbench.io.buffers.Denoised`. Each image uses only its own noisy samples and the
     base's result on that image (A never sees B's samples)."""
     if len(inputs) != INPUTS:
         raise BenchError(f"deep_combiner combines exactly {INPUTS} base denoiser, got {len(inputs)} inputs")

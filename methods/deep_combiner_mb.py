@@ -13,7 +13,7 @@ pixel. An outlier in one sub-buffer can be down-weighted even at the centre pixe
 single-buffer kernel cannot do (its w_c multiplies the whole y_c).
 
 Departure: B = 2 sub-buffers, not the paper's B = 4 bins. Every image we combine has exactly two
-disjoint sample subsets of its own (:data:`mcbench.buffers.SUB_BUFFERS`): the full image has the
+disjoint sample subsets of its own (:data:`mcbench.io.buffers.SUB_BUFFERS`): the full image has the
 half buffers A and B, A has bins 0 and 1, B has bins 2 and 3. So A's result uses only A's samples
 (as the ensemble's dual-buffer estimate needs) and one network with a fixed 2×225 output serves
 the full image and the halves. Renders without bins (spp not a multiple of 4) and bases without

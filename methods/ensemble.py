@@ -92,7 +92,7 @@ weights.
 
 Weight filter (Sec. 4.2): raw combined images z, z^A, z^B, Var[z] ~ (z^A - z^B)^2 / 2, and a
 cross-bilateral filter (Eq. 32-34) of all N x C weight maps with one kernel per pixel
-guided by z/Var[z], albedo and normal (``mcbench.bilateral``). A convex combination of
+guided by z/Var[z], albedo and normal (``mcbench.filters.bilateral``). A convex combination of
 simplex vectors stays on the simplex.
 
 Precision and memory (issue 14): the solvers' geometry is float64 throughout (Eq. 29's c1
@@ -100,7 +100,7 @@ and the hull tests subtract nearly equal radiance values). :func:`combine` makes
 the image in bands of rows (:data:`FILTER_BLOCK_PIXELS`): it solves blocks of rows
 (:data:`BLOCK_PIXELS`; float64 copies of one block's inputs only) as far as a band's halo needs,
 straight into the float32 raw weight maps it returns, keeping the guide z, Var[z] (float64: the
-filter's colour term needs it, see ``mcbench.bilateral``) of the rows a band still needs only;
+filter's colour term needs it, see ``mcbench.filters.bilateral``) of the rows a band still needs only;
 filters the band from its tile (the weight filter otherwise in float32: relative rounding
 1e-7, far below what a weight map shows; the blend equals the float64 code's to ~1e-15 relMSE,
 tests/test_ensemble.py) and blends it (Eq. 35, float64 accumulation). The iterative solver's
@@ -117,7 +117,7 @@ The public code's post-processing (LuisaGroup/Ensemble-Denoising, ``filter.h``/`
 rule, sigma = 1.7, borders reflected) before the filter; ``outlier_removal=True``: after the
 filter, each weight map's values further than 2.5 standard deviations from the mean of the
 other pixels of their 7 x 7 window are replaced by that mean
-(:func:`mcbench.bilateral.remove_outliers`), then the weights are projected back onto the
+(:func:`mcbench.filters.bilateral.remove_outliers`), then the weights are projected back onto the
 simplex (onto sum one when unconstrained; a pixel-channel left with all weights 0 keeps its
 filtered ones); ``colour_distance="sum"``: Eq. 33 summed over the channels instead of averaged.
 **Defaults, from the measurement**: ``combine`` blurs the guide variance and removes outliers
@@ -152,17 +152,17 @@ from typing import Literal
 import numpy as np
 from numba import prange
 
-from mcbench.bilateral import (COLOUR_DISTANCES, cross_bilateral_filter_vectors, gaussian_blur,
+from mcbench.filters.bilateral import (COLOUR_DISTANCES, cross_bilateral_filter_vectors, gaussian_blur,
                                remove_outliers)
 from mcbench.jit import cached_njit
-from mcbench.buffers import Denoised, RenderBuffers
+from mcbench.io.buffers import Denoised, RenderBuffers
 
 KIND = "combiner"
 LABEL = "Ensemble"
 # what combine() reads of the render: the noisy halves (Eq. 11-14) and the filter's features
 RENDER_LAYERS = ("color_a", "color_b", "albedo", "normal")
 # combine() only ever indexes the render's layers and the inputs' images by rows (x[y0:y1]), so a
-# job may hand it mcbench.exr.LayerRows (layers read from their files by rows) instead of arrays
+# job may hand it mcbench.io.exr.LayerRows (layers read from their files by rows) instead of arrays
 READS_ROWS = True
 
 SOLVERS = ("iterative", "exact", "qp")
@@ -1234,8 +1234,8 @@ def _filter_band(values, y0, y1, guide, guide_variance, v0, albedo, normal, *, r
     (N, y1 - y0, W, C) of ``dtype``.
 
     Each stage works on the rows it needs only; the filter and the blur give every row exactly
-    the whole image's result (:func:`mcbench.bilateral.cross_bilateral_filter_vectors`,
-    :func:`mcbench.bilateral.gaussian_blur`: same sums in the same order), the outlier pass's
+    the whole image's result (:func:`mcbench.filters.bilateral.cross_bilateral_filter_vectors`,
+    :func:`mcbench.filters.bilateral.gaussian_blur`: same sums in the same order), the outlier pass's
     window statistics start their running sums at the tile (float64; differences ~1e-16
     relative, tests/test_ensemble.py)."""
     height = values.shape[1]
@@ -1292,10 +1292,10 @@ def filter_weights(weights, denoised_full, denoised_a, denoised_b, albedo, norma
     N x C maps share one kernel per pixel. Defaults are the paper's (radius 7 px,
     sigma_s 3, sigma_z 2, sigma_albedo 0.25, sigma_normal 0.15). The public code's passes
     (:func:`combine`): ``guide_variance_blur="gaussian9"`` blurs Var[z] with
-    :func:`mcbench.bilateral.gaussian_blur` (9 x 9) first, ``outlier_removal=True`` runs
-    :func:`mcbench.bilateral.remove_outliers` (7 x 7, 2.5 sigma) on the filtered maps and
+    :func:`mcbench.filters.bilateral.gaussian_blur` (9 x 9) first, ``outlier_removal=True`` runs
+    :func:`mcbench.filters.bilateral.remove_outliers` (7 x 7, 2.5 sigma) on the filtered maps and
     re-projects them, ``colour_distance="sum"`` sums Eq. 33 over the channels. ``dtype`` is the
-    filter's working precision (:mod:`mcbench.bilateral`; :func:`combine` uses float32).
+    filter's working precision (:mod:`mcbench.filters.bilateral`; :func:`combine` uses float32).
     Returns (N, H, W, C) weights of ``dtype`` on the simplex; with ``nonnegative=False``
     (unconstrained weights, Sec. 5.2.1) weights summing to one, of any sign: no clipping,
     and the sum is restored against rounding by adding (1 - sum) / N to each weight.
@@ -1456,7 +1456,7 @@ def combine(buffers: RenderBuffers, inputs: list[Denoised], *,
     accumulation) into the float32 images. What stays whole is what is returned: the three
     images and the 2N weight maps. The render's layers and the inputs' images are only ever
     indexed by rows (``x[y0:y1]``), so they may be array-likes read from their files by rows
-    (:class:`mcbench.exr.LayerRows`, see :data:`READS_ROWS`): then no input is ever held whole.
+    (:class:`mcbench.io.exr.LayerRows`, see :data:`READS_ROWS`): then no input is ever held whole.
     Each input row is read twice (solve, blend).
 
     Returns Denoised(full, a, b, extras) with float32 images; ``extras`` holds

@@ -18,8 +18,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from mcbench.bilateral import cross_bilateral_filter
-from mcbench.buffers import ImageBuffers, RenderBuffers
+from mcbench.filters.bilateral import cross_bilateral_filter
+from mcbench.io.buffers import ImageBuffers, RenderBuffers
 from methods import denoise_each_buffer
 
 KIND = "denoiser"

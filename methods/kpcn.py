@@ -9,9 +9,9 @@ multiplied back.
 
 Sub-buffer results (for the multi-buffer deep combiner, Back et al. 2020 Sec. 5): KPCN exposes
 its kernel, so for renders with sample bins the kernel predicted from all of an image's samples
-is also applied to each of that image's two sub-buffers (:data:`mcbench.buffers.SUB_BUFFERS`:
+is also applied to each of that image's two sub-buffers (:data:`mcbench.io.buffers.SUB_BUFFERS`:
 full -> A, B; A -> bins 0, 1; B -> bins 2, 3), written as the extras of
-:data:`mcbench.buffers.SUB_OUTPUTS`. A's sub-buffer results use A's kernel, never B's samples.
+:data:`mcbench.io.buffers.SUB_OUTPUTS`. A's sub-buffer results use A's kernel, never B's samples.
 
 Inputs (31 channels): log(1 + irradiance) (3), its x/y gradients (6), the delta-method noise
 level of log irradiance (1), albedo (3), normal (3), normalised depth (1) and the x/y gradients of
@@ -104,7 +104,7 @@ def build_network(**arch):
 def denoise(buffers):
     """KPCN on the full buffer and on each half buffer (three inferences, as Zheng et al. ran it);
     for renders with sample bins also each image's kernel applied to its two sub-buffers."""
-    from mcbench.buffers import SUB_OUTPUTS, Denoised
+    from mcbench.io.buffers import SUB_OUTPUTS, Denoised
     from mcbench.nn.inference import (array_tensor, denoise_with_network, deterministic_inference, image_tensors,
                                       load_network, tensor_image)
 

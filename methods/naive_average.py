@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from mcbench.buffers import Denoised, RenderBuffers
-from mcbench.selection import check_finite_arrays
+from mcbench.io.buffers import Denoised, RenderBuffers
+from mcbench.combine.selection import check_finite_arrays
 
 KIND = "combiner"
 LABEL = "Naive average"

@@ -39,7 +39,7 @@ regression R = 9, F = 3, k = 1.0; NL-means alpha = 1 (Rousselle et al. 2012).
 
 Constants we had to choose (one-line reasons):
 
-* ``NLM_EPSILON = 1e-10``: same epsilon as :mod:`mcbench.nlmeans`, so zero-variance inputs give
+* ``NLM_EPSILON = 1e-10``: same epsilon as :mod:`mcbench.filters.nlmeans`, so zero-variance inputs give
   weight 1 for identical colours and 0 otherwise (noise-free input is returned unchanged).
 * ``DISTANCE_CLAMP = 1e4``: per-pixel distances are clipped before the patch mean (as Tungsten
   does); exp(-1e4 / 49) is already 0, it only keeps sums finite with 1e4-scale fireflies.
@@ -61,11 +61,11 @@ Constants we had to choose (one-line reasons):
 * Feature variance of a half buffer: the raw per-pixel (f_A - f_B)^2 / 2, not smoothed, because
   the paper derives it from the half-buffer difference and NL-means averages it over 7x7 patches.
 * Distances are averaged over colour channels (Rousselle et al. 2012 Eq. 5, as
-  :mod:`mcbench.nlmeans`), and patches replicate image edges like :mod:`mcbench.nlmeans`.
+  :mod:`mcbench.filters.nlmeans`), and patches replicate image edges like :mod:`mcbench.filters.nlmeans`.
 
-Implementation and speed. NL-means filters are :func:`mcbench.nlmeans.nl_means_filter`
+Implementation and speed. NL-means filters are :func:`mcbench.filters.nlmeans.nl_means_filter`
 (compiled). The regression computes, per chunk of rows, the NL-means weights of every window
-offset (:func:`mcbench.nlmeans.nl_means_distance_rows`), stores them pixel-major, then per pixel
+offset (:func:`mcbench.filters.nlmeans.nl_means_distance_rows`), stores them pixel-major, then per pixel
 gathers the neighbours with w > 0 into columns (design row and colour), forms the normal
 equations as dot products over the neighbours (float64, reassociated so they vectorise; the
 normal equations and the Cholesky solve stay float64 because the pivot test at 1e-9 needs
@@ -89,9 +89,9 @@ from __future__ import annotations
 import numpy as np
 from numba import prange
 
-from mcbench.buffers import Denoised, RenderBuffers
+from mcbench.io.buffers import Denoised, RenderBuffers
 from mcbench.jit import cached_njit
-from mcbench.nlmeans import nl_means_distance_rows, nl_means_filter
+from mcbench.filters.nlmeans import nl_means_distance_rows, nl_means_filter
 from mcbench.progress import StageLog
 
 KIND = "denoiser"
@@ -122,7 +122,7 @@ def _weights_into(guide, variance, y0, rows, radius, patch, k, alpha, eps, clamp
     """NL-means weights w(p, p + o) of the pixels p in rows [y0, y0 + rows), written to
     ``out[:rows, :, :]`` with shape (rows, W, n_offsets), pixel-major: offset index
     (dy + R) (2R + 1) + (dx + R). guide, variance: (C, H, W) float64 planes. Distances follow
-    Rousselle et al. 2012 Eq. 5-6 (:func:`mcbench.nlmeans.nl_means_distance_rows`, per-pixel
+    Rousselle et al. 2012 Eq. 5-6 (:func:`mcbench.filters.nlmeans.nl_means_distance_rows`, per-pixel
     distances clipped at ``clamp_d``); weight exp(-d) (1 for d <= 0), 0 where p + o leaves the
     image. dmap, hsum: scratch (rows + 2 patch, W); dist: scratch (rows, W).
     """

@@ -12,7 +12,7 @@ from typing import Literal
 
 import numpy as np
 
-from mcbench.buffers import ImageBuffers, RenderBuffers
+from mcbench.io.buffers import ImageBuffers, RenderBuffers
 from methods import denoise_each_buffer
 
 KIND = "denoiser"

@@ -1,6 +1,6 @@
 """One-hot selection among the combiner's inputs by estimated MSE (Zheng et al. 2021
 Sec. 5.2.6, the comparison method of their Tables 1-2; NFOR's bandwidth selection, Bitterli et
-al. 2016 Sec. 5.3). The functions live in :mod:`mcbench.selection`; see its docstring for the
+al. 2016 Sec. 5.3). The functions live in :mod:`mcbench.combine.selection`; see its docstring for the
 equations.
 
 Per pixel and channel (channel-wise, like the ensemble's weights and NFOR's selection map) the
@@ -21,9 +21,9 @@ own estimate gives, as Eq. 36 defines one per half.)
 * ``"sbf"``: the MSE maps are pre-filtered by SBF's cross-bilateral filter (Li et al. 2012)
   guided by the noisy full colour (variance-normalised, Eq. 33), albedo and normal, with the
   Sec. 4.2 numbers (radius 7, sigma_s 3, sigma_z 2, sigma_albedo 0.25, sigma_normal 0.15): the
-  papers give none for this use, so that is our choice (``mcbench.selection.SBF_MSE_FILTER``).
+  papers give none for this use, so that is our choice (``mcbench.combine.selection.SBF_MSE_FILTER``).
 * ``"nfor"``: the MSE maps are pre-filtered by NFOR's NL-means (guide: noisy full colour and its
-  variance; 19 x 19 window, 3 x 3 patches, k = 1; ``mcbench.selection.NFOR_MSE_FILTER``).
+  variance; 19 x 19 window, 3 x 3 patches, k = 1; ``mcbench.combine.selection.NFOR_MSE_FILTER``).
 * ``"post"``: raw MSE maps, and the one-hot maps are filtered by the ensemble's Sec. 4.2
   cross-bilateral weight filter (guided by the raw combined images z, z^A, z^B of that image's
   selection, Var[z] ~ (z^A - z^B)^2 / 2, albedo, normal; the paper's parameters), then blended
@@ -41,8 +41,8 @@ from typing import Literal
 
 import numpy as np
 
-from mcbench import selection as sel
-from mcbench.buffers import Denoised, RenderBuffers
+from mcbench.combine import selection as sel
+from mcbench.io.buffers import Denoised, RenderBuffers
 
 KIND = "combiner"
 LABEL = "One-hot selection"

@@ -8,13 +8,13 @@ bias. Weights: ``methods/weights/progressive.pt``, training record ``progressive
 Per image (full, A, B), each from its own samples and the input's result on that image (A never
 sees B's samples, as the deep combiner): x, σ² (the render's variance of the mean), y;
 
-1. the divergence term σ²f′ of SURE by Eq. 2 (:func:`mcbench.sure.mc_divergence`): the base
+1. the divergence term σ²f′ of SURE by Eq. 2 (:func:`mcbench.filters.sure.mc_divergence`): the base
    denoiser named by ``divergence`` re-run K times on x + ε b_k, b_k ~ N(0, diag σ²), ε = 1e-4
    (the paper's value), K = ``iterations`` (default 1; the paper: 1 or 4), plus once on x itself
    (F(x) recomputed in this process, so the difference sees only the perturbation);
 2. SURE = (y − x)² + 2σ²f′ − σ² (Eq. 1) and the network's 18 inputs
    (:mod:`mcbench.nn.progressive`), α = clip(f_act(x1, x2, x3), 0, 1) (Eq. 19);
-3. α′ = (1 − Φ(2(|t| − 4.2))) α (Eq. 18, :func:`mcbench.sure.t_test`), z = x + α′(y − x).
+3. α′ = (1 − Φ(2(|t| − 4.2))) α (Eq. 18, :func:`mcbench.filters.sure.t_test`), z = x + α′(y − x).
 
 **The divergence needs F on an arbitrary image.** A combiner receives only its input's three
 images, so ``divergence`` names the single-image denoiser to re-run (:func:`single_image_denoiser`:
@@ -68,7 +68,7 @@ training data          1348 crops 128², 2-4096 spp,       our procedural scenes
                        refs 32k-131k spp                  4-1024 spp (+ halves), 4096-spp targets
 base denoiser          OIDN (pre-trained) / their U-Nets  OIDN 2.x (pyoidn, albedo + normal)
 SURE                   K = 4 (their tool), ε = 1e-4       K = 1 (training data and default), ε = 1e-4
-t-test                 11×11, a = 2, c = 4.2              the same (choices: mcbench.sure)
+t-test                 11×11, a = 2, c = 4.2              the same (choices: mcbench.filters.sure)
 =====================  =================================  ====================================
 
 Ablation weights: ``sure_input=false`` and ``f_act=false`` are other networks (Table 4 retrains
@@ -100,8 +100,8 @@ from typing import Callable, Literal
 import numpy as np
 
 from mcbench import BenchError
-from mcbench import sure as sure_module
-from mcbench.buffers import BUFFER_SUFFIXES, Denoised, ImageBuffers, RenderBuffers
+from mcbench.filters import sure as sure_module
+from mcbench.io.buffers import BUFFER_SUFFIXES, Denoised, ImageBuffers, RenderBuffers
 
 KIND = "combiner"
 LABEL = "PD† progressive denoising (ours, scaled, trained on our scenes)"
@@ -112,7 +112,7 @@ TRAINING = {"steps": 1500, "batch_size": 8, "patch": 48, "learning_rate": 1e-3, 
             "validate_every": 500}
 # Tensors forward() needs beyond the render's: the base's result and its σ²f′ (Eq. 2).
 TRAINING_KEYS = {"correlated": 3, "divergence": 3}
-# Trained on OIDN's results with their divergence term ("+sure": mcbench.steps writes the
+# Trained on OIDN's results with their divergence term ("+sure": mcbench.pipeline.steps writes the
 # divergence layers too, into results/training/correlated/oidn+sure/).
 CORRELATED_BASES = ("oidn+sure",)
 RENDER_LAYERS = tuple(q + s for q in ("color", "variance", "albedo", "normal", "depth")
@@ -151,7 +151,7 @@ def single_image_denoiser(name: str) -> Callable[[ImageBuffers], np.ndarray]:
     its ``denoise_image`` (default params), or a learned denoiser's committed network. A
     :class:`BenchError` for a method without one (NFOR, RDFC, combiners)."""
     from methods import load_method
-    from mcbench.weights import is_learned_method
+    from mcbench.io.weights import is_learned_method
 
     module = load_method(name, kind="denoiser", config_key=f"divergence base '{name}'")
     if callable(getattr(module, "denoise_image", None)):
@@ -180,7 +180,7 @@ def divergence_map(denoise_image: Callable[[ImageBuffers], np.ndarray], image: I
 
 def ablation_weights_path(*, sure_input: bool, f_act: bool) -> Path:
     """The weights of the network variant (full model: ``progressive.pt``)."""
-    from mcbench.weights import weights_path
+    from mcbench.io.weights import weights_path
 
     suffix = "" if sure_input and f_act else "_no_sure" if f_act else "_no_fact" if sure_input else "_no_sure_no_fact"
     return Path(weights_path("progressive" + suffix))
@@ -285,8 +285,8 @@ def train_variant(variant: str, data: str = "results/training", steps: int | Non
     ``results/training/checkpoints/<name>.ckpt`` (a run resumes from it)."""
     from mcbench.nn.data import crop_paths
     from mcbench.nn.train import correlated_paths, train_network
-    from mcbench.steps import training_data
-    from mcbench.weights import record_path, weights_path
+    from mcbench.pipeline.steps import training_data
+    from mcbench.io.weights import record_path, weights_path
 
     import methods.progressive as this   # not __main__ under ``python -m``: the record names "progressive"
 

@@ -5,7 +5,7 @@ Pipeline (section numbers of the RDFC paper as we understand them from its publi
 descriptions; the paper text was not available, so "Sec." references are to its structure):
 
 1. **Feature prefiltering** (Sec. 4.1). Albedo, normal and depth of each half buffer are
-   NL-means filtered (:func:`mcbench.nlmeans.nl_means_filter`, RKZ12 Eq. 5-6) guided by
+   NL-means filtered (:func:`mcbench.filters.nlmeans.nl_means_filter`, RKZ12 Eq. 5-6) guided by
    themselves and their per-pixel variance. The residual variance of the prefiltered feature
    is re-estimated from the two half buffers, ``(f~_A - f~_B)^2 / 2``, box-smoothed.
 2. **Joint weights** (Sec. 4.2, 4.3). ``w(p, q) = min(w_c(p, q), w_f(p, q))`` with
@@ -43,7 +43,7 @@ Constants (published ones first, then ours with the reason):
   alpha = 1 (variance cancellation), prefilter r = 5, f = 3, k = 0.5: published values as
   reported in RDFC / NFOR descriptions (the prefilter triple is the one NFOR reuses from RDFC).
 * eps = 1e-10 in the colour-distance denominator: guards the zero-variance case (same value
-  as mcbench.nlmeans).
+  as mcbench.filters.nlmeans).
 * Feature gradient ``|Grad_j(p)|^2``: per axis the smaller of the two one-sided differences
   (so the normaliser is not inflated across an edge), summed over axes, mean over channels.
 * Prefiltered-feature variance smoothed with a 3x3 box: the raw dual-buffer squared
@@ -75,9 +75,9 @@ import numpy as np
 from numba import prange
 from scipy.ndimage import uniform_filter
 
-from mcbench.buffers import Denoised, RenderBuffers
+from mcbench.io.buffers import Denoised, RenderBuffers
 from mcbench.jit import cached_njit
-from mcbench.nlmeans import nl_means_filter
+from mcbench.filters.nlmeans import nl_means_filter
 from mcbench.progress import StageLog
 
 KIND = "denoiser"

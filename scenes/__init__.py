@@ -9,12 +9,12 @@ A scene module ``scenes/<name>.py`` exposes
   integrator (``path``, or ``volpath`` when a medium needs it, with a ``max_depth`` chosen
   for the scene) and a sensor whose film has the requested size.
 
-The renderer (:mod:`mcbench.render`) replaces the film's reconstruction filter by a box
+The renderer (:mod:`mcbench.render.renderer`) replaces the film's reconstruction filter by a box
 filter, replaces the sampler, and wraps the scene's integrator to get the sample moments and
 the auxiliary features; it takes the module itself (the caller resolves a name with
 :func:`load_scene`). ``build`` must be called after a Mitsuba variant has been set. Building
 blocks (sensors, quads, boxes, meshes, textures, skies, curves) are core modules:
-:mod:`mcbench.geometry` and :mod:`mcbench.curves`.
+:mod:`mcbench.render.geometry` and :mod:`mcbench.render.curves`.
 """
 
 from __future__ import annotations

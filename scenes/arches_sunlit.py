@@ -3,7 +3,7 @@ on three sides; sunlight enters only through the openings of the arcade on one s
 
 from __future__ import annotations
 
-from mcbench.geometry import perspective_sensor
+from mcbench.render.geometry import perspective_sensor
 
 DESCRIPTION = ("sunlit interior lit mostly indirectly: small sharp sun patches, the rest of the "
                "hall lit by multi-bounce diffuse light and sky light through the arcade")

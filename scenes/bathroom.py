@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from mcbench.geometry import perspective_sensor
+from mcbench.render.geometry import perspective_sensor
 
 DESCRIPTION = ("interior with a mirror and small bright bulbs: mirrored view of the room, glossy "
                "ceramic and chrome reflections, high-frequency tile texture and grout lines")

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from mcbench.geometry import bitmap_texture, gradient_sky, perspective_sensor, quad
+from mcbench.render.geometry import bitmap_texture, gradient_sky, perspective_sensor, quad
 
 DESCRIPTION = ("conductors from mirror-like (alpha 0.01) to rough (alpha 0.5): sharp reflections "
                "of the sky and the light, near-specular glints that stay noisy, and glossy "

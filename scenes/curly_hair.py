@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from mcbench.curves import bspline_polyline, curve_shape, hair_bsdf
-from mcbench.geometry import perspective_sensor
+from mcbench.render.curves import bspline_polyline, curve_shape, hair_bsdf
+from mcbench.render.geometry import perspective_sensor
 
 DESCRIPTION = ("curly blond hair: thin helical strands with glossy, anisotropic hair highlights "
                "and long transmissive multiple-scattering paths under env-map and area light")

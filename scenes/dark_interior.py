@@ -3,7 +3,7 @@ patches on the floor are thousands of times brighter than the dim corners."""
 
 from __future__ import annotations
 
-from mcbench.geometry import box, diffuse, gradient_sky, perspective_sensor, quad
+from mcbench.render.geometry import box, diffuse, gradient_sky, perspective_sensor, quad
 
 DESCRIPTION = ("high dynamic range interior: small windows admit a sun and sky that next-event "
                "estimation mostly misses, so the dim room is lit by rare, very bright paths "

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from mcbench.geometry import bitmap_texture, box, diffuse, gradient_sky, quad, thinlens_sensor
+from mcbench.render.geometry import bitmap_texture, box, diffuse, gradient_sky, quad, thinlens_sensor
 
 DESCRIPTION = ("strong defocus blur from a wide thin-lens aperture: out-of-focus regions are "
                "noisy in colour and in every feature (normals and depth average over the lens), "

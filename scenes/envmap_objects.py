@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from mcbench.geometry import perspective_sensor
+from mcbench.render.geometry import perspective_sensor
 
 DESCRIPTION = ("image-based lighting from a high-dynamic-range sky with a tiny sun: sharp sun "
                "shadows, sun glints on glossy and glass spheres, and textured floor detail")

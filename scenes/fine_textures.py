@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from mcbench.geometry import bitmap_texture, box, diffuse, perspective_sensor, quad
+from mcbench.render.geometry import bitmap_texture, box, diffuse, perspective_sensor, quad
 
 DESCRIPTION = ("texture detail at and below the pixel scale (checker, stripes, value noise): "
                "the albedo feature carries it but the noisy colour hides it, so denoisers that "

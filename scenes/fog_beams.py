@@ -3,7 +3,7 @@ window in the left wall: visible light beams (single and multiple scattering in 
 
 from __future__ import annotations
 
-from mcbench.geometry import perspective_sensor
+from mcbench.render.geometry import perspective_sensor
 
 DESCRIPTION = ("volumetric light beams through a window in a foggy room: participating-medium "
                "noise everywhere along camera rays, and a mostly indirectly lit interior")

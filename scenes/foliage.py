@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from mcbench.geometry import (bitmap_texture, diffuse, gradient_sky, mesh_from_arrays,
+from mcbench.render.geometry import (bitmap_texture, diffuse, gradient_sky, mesh_from_arrays,
                               perspective_sensor)
 
 DESCRIPTION = ("alpha-masked foliage backlit by the sun: leaf edges come from the opacity map, "

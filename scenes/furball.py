@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from mcbench.curves import curve_shape, hair_bsdf
-from mcbench.geometry import perspective_sensor
+from mcbench.render.curves import curve_shape, hair_bsdf
+from mcbench.render.geometry import perspective_sensor
 
 DESCRIPTION = ("sub-pixel fur fibres: thousands of thin strands with anisotropic hair "
                "scattering, heavy geometric aliasing and noisy multiple scattering inside the fur")

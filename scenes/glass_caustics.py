@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from mcbench.geometry import perspective_sensor
+from mcbench.render.geometry import perspective_sensor
 
 DESCRIPTION = ("caustics through a glass sphere and specular-diffuse-specular paths from a tiny "
                "bright light: heavy-tailed noise and fireflies that unidirectional path tracing "

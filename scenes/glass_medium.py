@@ -3,7 +3,7 @@ behind dielectric boundaries, on a floor lit by one area light."""
 
 from __future__ import annotations
 
-from mcbench.geometry import perspective_sensor
+from mcbench.render.geometry import perspective_sensor
 
 DESCRIPTION = ("dense scattering media inside glass (milk, juice): subsurface-like transport with "
                "long volumetric random walks behind refracting boundaries, caustics on the floor")

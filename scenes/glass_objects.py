@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from mcbench.geometry import box, diffuse, lathe, mesh_from_arrays, perspective_sensor, quad
+from mcbench.render.geometry import box, diffuse, lathe, mesh_from_arrays, perspective_sensor, quad
 
 DESCRIPTION = ("transparency: refraction through clear and rough glass, thin-pane reflections "
                "and caustics on the floor; the first-hit features describe the glass surface, "

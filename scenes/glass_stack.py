@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from mcbench.geometry import perspective_sensor
+from mcbench.render.geometry import perspective_sensor
 
 DESCRIPTION = ("long specular chains: a backdrop seen through up to ten refracting glass "
                "interfaces, with internal reflections, displaced and doubled texture edges")

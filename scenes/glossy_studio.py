@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from mcbench.curves import mesh_shape
-from mcbench.geometry import perspective_sensor
+from mcbench.render.curves import mesh_shape
+from mcbench.render.geometry import perspective_sensor
 
 DESCRIPTION = ("studio product shot: broad glossy highlights and reflections of large area lights "
                "on plastic, clear-coated and metallic surfaces over a smooth gradient backdrop")

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from mcbench.geometry import (bitmap_texture, box, diffuse, lathe, mesh_from_arrays,
+from mcbench.render.geometry import (bitmap_texture, box, diffuse, lathe, mesh_from_arrays,
                               perspective_sensor, quad)
 
 DESCRIPTION = ("a typical interior mixing diffuse walls and furniture with a glossy floor that "

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from mcbench.geometry import box, diffuse, perspective_sensor, quad
+from mcbench.render.geometry import box, diffuse, perspective_sensor, quad
 
 DESCRIPTION = ("many small emitters of different colours: next-event estimation picks one "
                "light per vertex, so each pixel sees a random subset, giving coloured noise, "

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from mcbench.curves import mesh_shape
-from mcbench.geometry import perspective_sensor
+from mcbench.render.curves import mesh_shape
+from mcbench.render.geometry import perspective_sensor
 
 DESCRIPTION = ("glossy meshes: faceted geometry with flat vs interpolated shading normals, "
                "glossy interreflections and highlights on curved tubes under an area light")

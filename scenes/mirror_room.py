@@ -3,7 +3,7 @@ ceiling panel."""
 
 from __future__ import annotations
 
-from mcbench.geometry import box, diffuse, perspective_sensor, quad
+from mcbench.render.geometry import box, diffuse, perspective_sensor, quad
 
 DESCRIPTION = ("specular paths: a mirror wall doubles the room, a glossy floor smears "
                "reflections; reflected objects have the mirror's features (normal, depth) but "

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from mcbench.geometry import perspective_sensor
+from mcbench.render.geometry import perspective_sensor
 
 DESCRIPTION = ("night scene: high dynamic range (bright lamp bulbs and windows, pools of lamp "
                "light) with most of the image dark and lit only by faint indirect light")

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from mcbench.geometry import bitmap_texture, diffuse, perspective_sensor, quad
+from mcbench.render.geometry import bitmap_texture, diffuse, perspective_sensor, quad
 
 DESCRIPTION = ("shading detail from bump and normal maps under grazing light: the geometric "
                "normal feature is flat, so the relief exists only in the noisy colour and "

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from mcbench.geometry import perspective_sensor
+from mcbench.render.geometry import perspective_sensor
 
 DESCRIPTION = ("heterogeneous smoke from a NumPy density grid: delta-tracking noise, wispy "
                "detail, self-shadowing and multiple scattering with sharp sun shadows")

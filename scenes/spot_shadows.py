@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from mcbench.geometry import bitmap_texture, box, diffuse, perspective_sensor, quad
+from mcbench.render.geometry import bitmap_texture, box, diffuse, perspective_sensor, quad
 
 DESCRIPTION = ("hard shadows from point-like spot lights next to soft penumbrae from an area "
                "light, and sharp spot-cone falloff edges: denoisers must keep crisp shadow and "

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from mcbench.geometry import box, diffuse, mesh_from_arrays, perspective_sensor
+from mcbench.render.geometry import box, diffuse, mesh_from_arrays, perspective_sensor
 
 DESCRIPTION = ("physically based sun and sky: a tiny, extremely bright sun disc gives hard "
                "shadows and bright glints next to soft blue skylight in the shadows, a "

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from mcbench.curves import grid_mesh, mesh_shape
-from mcbench.geometry import perspective_sensor
+from mcbench.render.curves import grid_mesh, mesh_shape
+from mcbench.render.geometry import perspective_sensor
 
 DESCRIPTION = ("fractal terrain under a low sun: fine geometric and texture detail, long sharp "
                "shadows and soft sky light in shadowed valleys")

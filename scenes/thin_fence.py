@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from mcbench.geometry import box, diffuse, gradient_sky, perspective_sensor
+from mcbench.render.geometry import box, diffuse, gradient_sky, perspective_sensor
 
 DESCRIPTION = ("sub-pixel thin geometry against a bright background: wires cover a fraction of "
                "a pixel, so colour and features are fractional mixtures that denoisers smear "

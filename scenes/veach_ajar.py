@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from mcbench.geometry import box, diffuse, lathe, mesh_from_arrays, perspective_sensor, quad, torus
+from mcbench.render.geometry import box, diffuse, lathe, mesh_from_arrays, perspective_sensor, quad, torus
 
 DESCRIPTION = ("light enters only through a narrow door gap: almost all of the room is lit by "
                "multi-bounce indirect light that next-event estimation cannot reach, giving "

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from mcbench.curves import grid_mesh, mesh_shape
-from mcbench.geometry import perspective_sensor
+from mcbench.render.curves import grid_mesh, mesh_shape
+from mcbench.render.geometry import perspective_sensor
 
 DESCRIPTION = ("refractive caustics: sunlight focused by a wavy water surface onto the pool "
                "floor (specular-diffuse-specular paths) seen through the refracting waves")

@@ -1,4 +1,4 @@
-"""Shared test fixtures: one builder of synthetic :class:`mcbench.buffers.RenderBuffers`.
+"""Shared test fixtures: one builder of synthetic :class:`mcbench.io.buffers.RenderBuffers`.
 
 Use it through the ``make_render_buffers`` fixture::
 
@@ -24,7 +24,7 @@ import numpy as np
 import pytest
 import yaml
 
-from mcbench.buffers import REQUIRED_LAYERS, RenderBuffers
+from mcbench.io.buffers import REQUIRED_LAYERS, RenderBuffers
 
 HALF_SUFFIXES = ("_a", "_b")
 ALL_SUFFIXES = ("",) + HALF_SUFFIXES
@@ -75,12 +75,12 @@ def build_render_buffers(truth=None, *, height: int = 16, width: int = 16, spp: 
     ``albedo``/``normal`` (H, W, 3), ``depth`` (H, W): features, identical (separate copies)
     in the full, A and B buffers; defaults from :func:`synthetic_features`.
 
-    ``bins``: also the four quarter-sample bins of :data:`mcbench.buffers.BIN_LAYERS` (noise
+    ``bins``: also the four quarter-sample bins of :data:`mcbench.io.buffers.BIN_LAYERS` (noise
     ``sqrt(2) * half_std`` each, drawn bin 0..3 after A and B are *replaced* by the means of bins
     0-1 and 2-3, so the layers keep the render identities; variance_bin = 2 × the half's).
 
     Layers: ``color = (color_a + color_b) / 2``; every layer float32; all of
-    :data:`mcbench.buffers.REQUIRED_LAYERS` present plus ``albedo_a/_b``, ``normal_a/_b``,
+    :data:`mcbench.io.buffers.REQUIRED_LAYERS` present plus ``albedo_a/_b``, ``normal_a/_b``,
     ``depth_a/_b``.
     """
     if truth is not None:

@@ -4,7 +4,7 @@ cycles hide), plus ``importlib.import_module("literal")``.
 
 * no import cycle among the modules of ``mcbench/``;
 * core never imports the plugins ``methods`` or ``scenes`` (only the step modules
-  ``mcbench/steps.py`` and ``mcbench/steps_*.py``, the rule bodies, may);
+  ``mcbench/pipeline/steps.py`` and ``mcbench/steps_*.py``, the rule bodies, may);
 * no module uses another module's private (``_name``) function or constant.
 
 A package's ``__init__`` is not counted as imported when one of its submodules is (Python runs
@@ -131,14 +131,14 @@ def test_cycle_finder_finds_a_known_cycle():
 
 def test_the_walk_sees_function_level_relative_and_importlib_imports():
     source = ("import numpy as np\nfrom . import buffers\nfrom .. import exr\n\n"
-              "def f():\n    from mcbench.render import _load\n    import methods.ensemble\n"
+              "def f():\n    from mcbench.render.renderer import _load\n    import methods.ensemble\n"
               "    return importlib.import_module('scenes.cornell_box')\n")
-    known = {"mcbench.nn.buffers", "mcbench.exr", "mcbench.render"}
+    known = {"mcbench.nn.buffers", "mcbench.io.exr", "mcbench.render.renderer"}
     found = {(target, tuple(names.items())) for target, _, names in
              imports_in(source, "mcbench.nn.probe", False, known)}
     assert ("mcbench.nn.buffers", (("buffers", ("mcbench.nn.buffers", True)),)) in found
-    assert ("mcbench.exr", (("exr", ("mcbench.exr", True)),)) in found
-    assert ("mcbench.render", (("_load", ("mcbench.render._load", False)),)) in found
+    assert ("mcbench.io.exr", (("exr", ("mcbench.io.exr", True)),)) in found
+    assert ("mcbench.render.renderer", (("_load", ("mcbench.render.renderer._load", False)),)) in found
     assert ("methods.ensemble", (("methods", ("methods", True)),)) in found
     assert ("scenes.cornell_box", ()) in found
 
@@ -151,7 +151,7 @@ def test_no_import_cycle_in_core():
 def test_core_does_not_import_plugins():
     offending = []
     for name, path in core_modules().items():
-        if name == "mcbench.steps" or name.startswith("mcbench.steps_"):
+        if name == "mcbench.pipeline.steps" or name.startswith("mcbench.steps_"):
             continue
         for target, line, _ in imports_of(path, project_modules()):
             if target.split(".")[0] in PLUGINS:
@@ -205,16 +205,16 @@ def private_uses(path: Path, known: set[str]) -> list[str]:
 
 
 PRIVATE_PROBE = """\
-import mcbench.render
-from mcbench import render as r
-from mcbench.exr import _open
+import mcbench.render.renderer
+from mcbench.render import renderer as r
+from mcbench.io.exr import _open
 from . import _helpers
 from mcbench._helpers import fine
 from mcbench.probe import _own
 from scenes import _geometry
 from scenes._curves import strands
 x = r._load
-y = mcbench.render._scene_cache
+y = mcbench.render.renderer._scene_cache
 z = r.__name__
 w = _helpers.public
 v = np._private
@@ -222,11 +222,11 @@ v = np._private
 
 
 def test_private_finder_finds_known_patterns():
-    known = {"mcbench.render", "mcbench.exr", "mcbench._helpers", "scenes._geometry", "scenes._curves"}
+    known = {"mcbench.render.renderer", "mcbench.io.exr", "mcbench._helpers", "scenes._geometry", "scenes._curves"}
     uses = private_uses_in(PRIVATE_PROBE, "mcbench.probe", "probe.py", known)
     assert sorted(use.split(" ", 1)[1] for use in uses) == [
         "imports from private module scenes._curves", "imports from private module scenes._geometry",
-        "imports mcbench.exr._open", "uses mcbench.render._load", "uses mcbench.render._scene_cache"]
+        "imports mcbench.io.exr._open", "uses mcbench.render.renderer._load", "uses mcbench.render.renderer._scene_cache"]
 
 
 def test_no_private_names_of_other_modules():

@@ -1,4 +1,4 @@
-"""Tests of mcbench.bilateral: the cross-bilateral filter (Zheng et al. 2021 Eq. 32-34) against a
+"""Tests of mcbench.filters.bilateral: the cross-bilateral filter (Zheng et al. 2021 Eq. 32-34) against a
 brute-force loop in float64 and float32, across its parallel bands and for vectors of channels;
 its exponential against math.exp; the "sum" colour distance against the "mean" one; and the
 public code's passes around it: the Gaussian blur against scipy.ndimage and the closed form of
@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from mcbench import bilateral
-from mcbench.bilateral import cross_bilateral_filter, cross_bilateral_filter_vectors
+from mcbench.filters import bilateral
+from mcbench.filters.bilateral import cross_bilateral_filter, cross_bilateral_filter_vectors
 
 
 # ---------------------------------------------------------------------------------------

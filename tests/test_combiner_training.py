@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 from mcbench import BenchError
-from mcbench.buffers import ALL_LAYERS, BIN_LAYERS, SUB_OUTPUTS, Denoised, RenderBuffers
-from mcbench.exr import read_layers, write_layers
+from mcbench.io.buffers import ALL_LAYERS, BIN_LAYERS, SUB_OUTPUTS, Denoised, RenderBuffers
+from mcbench.io.exr import read_layers, write_layers
 from mcbench.nn.data import BUFFER_KEYS, crop_render_layers, load_combiner_crops
-from mcbench.steps import write_correlated_training_inputs
+from mcbench.pipeline.steps import write_correlated_training_inputs
 from methods import load_method
 
 LEVELS = (4, 8)
@@ -118,8 +118,8 @@ COMBINERS = ["deep_combiner", "deep_combiner_mb"]
 
 @pytest.mark.parametrize("name", COMBINERS)
 def test_committed_combiner_weights_load_safely_and_match_their_record(name):
-    from mcbench.io import read_json
-    from mcbench.weights import COMMITTED_WEIGHTS, load_weights, record_path, weights_path
+    from mcbench.io.tables import read_json
+    from mcbench.io.weights import COMMITTED_WEIGHTS, load_weights, record_path, weights_path
 
     path = weights_path(name)
     assert path.parent == COMMITTED_WEIGHTS and path.exists(), f"{path} missing"
@@ -140,10 +140,10 @@ def test_committed_combiner_weights_load_safely_and_match_their_record(name):
 def combiner_validation_scene(tmp_path_factory):
     """The first validation scene of the deep combiner's record, rendered afresh with the
     training-data settings, and every base's results on its crops."""
-    from mcbench.io import read_json
+    from mcbench.io.tables import read_json
     from mcbench.training_data import training_example
-    from mcbench.variants import pick_variant
-    from mcbench.weights import record_path
+    from mcbench.render.variants import pick_variant
+    from mcbench.io.weights import record_path
 
     if pick_variant("auto") == "scalar_rgb":
         pytest.skip("training renders need an LLVM or CUDA variant (libLLVM 19 missing)")
@@ -168,11 +168,11 @@ def combiner_validation_scene(tmp_path_factory):
 
 @pytest.mark.parametrize("name", COMBINERS)
 def test_committed_combiner_weights_reproduce_their_validation_loss(name, combiner_validation_scene):
-    from mcbench.io import read_json
+    from mcbench.io.tables import read_json
     from mcbench.nn.inference import load_network
     from mcbench.nn.train import evaluate
-    from mcbench.steps import training_data
-    from mcbench.weights import record_path
+    from mcbench.pipeline.steps import training_data
+    from mcbench.io.weights import record_path
 
     seed, paths, correlated = combiner_validation_scene
     record = read_json(record_path(name))

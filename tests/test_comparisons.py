@@ -1,4 +1,4 @@
-"""Comparison tables (mcbench.comparisons): roles of methods, Tables 1-2, the ablation table and
+"""Comparison tables (mcbench.analysis.comparisons): roles of methods, Tables 1-2, the ablation table and
 the comparison ranking against tables computed by hand on a small synthetic study (2 scenes x
 2 spp, full ensembles of sizes 2 and 3), the incomplete-variant and missing-case paths, and the
 rule script run without Snakemake."""
@@ -13,7 +13,7 @@ import pandas as pd
 import pytest
 
 from mcbench import BenchError
-from mcbench.comparisons import (ablation_cases, ablation_table, beats_cases, beats_table, comparison_ranking,
+from mcbench.analysis.comparisons import (ablation_cases, ablation_table, beats_cases, beats_table, comparison_ranking,
                                  comparison_role, find_comparisons, write_ablation_table, write_comparison_ranking,
                                  write_onehot_tables)
 
@@ -268,7 +268,7 @@ def test_ensemble_defaults_are_the_ensembles_own():
     """ENSEMBLE_DEFAULTS repeats methods/ensemble.py's defaults (core may not import methods)."""
     import inspect
 
-    from mcbench.comparisons import ENSEMBLE_DEFAULTS
+    from mcbench.analysis.comparisons import ENSEMBLE_DEFAULTS
     from methods import load_method
 
     signature = inspect.signature(load_method("ensemble").combine)

@@ -11,8 +11,8 @@ import yaml
 
 import methods
 from mcbench import BenchError
-from mcbench.config import ConfigError, key_path, load_schema, resolve_config, schema_defaults
-from mcbench.metrics import ALL_METRICS, DSSIM_MIN_SIZE
+from mcbench.pipeline.config import ConfigError, key_path, load_schema, resolve_config, schema_defaults
+from mcbench.analysis.metrics import ALL_METRICS, DSSIM_MIN_SIZE
 
 REPO = Path(__file__).resolve().parents[1]
 CONFIGS = sorted((REPO / "workflow" / "configs").glob("*.yaml")) + [REPO / "config.yaml"]

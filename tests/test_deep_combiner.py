@@ -15,7 +15,7 @@ import torch
 import methods.deep_combiner as single_module
 import methods.deep_combiner_mb as multi_module
 from mcbench import BenchError
-from mcbench.buffers import Denoised, RenderBuffers
+from mcbench.io.buffers import Denoised, RenderBuffers
 from mcbench.nn.combination import (IMAGE_INPUT_CHANNELS, combination_weights, combine_multi, combine_single,
                                     image_inputs, window_neighbourhoods)
 from mcbench.nn.inference import combine_with_network, combiner_image_tensors

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 import qpsolvers
 
-from mcbench.buffers import Denoised
+from mcbench.io.buffers import Denoised
 from methods import ensemble as E
 
 
@@ -649,11 +649,10 @@ def test_solve_in_blocks_equals_whole_image(monkeypatch, make_render_buffers):
 # the band-wise pass (issue 14, memory): tiles with their halos equal the whole image
 # ---------------------------------------------------------------------------------------
 def test_gaussian_blur_kernel_and_tiles_equal_the_numpy_blur():
-    """mcbench.bilateral.gaussian_blur (numba) equals its NumPy formulation bit for bit, on
+    """mcbench.filters.bilateral.gaussian_blur (numba) equals its NumPy formulation bit for bit, on
     whole images (axes of length 1, 2, 3: NumPy's repeated reflection) and on tiles holding
     only the rows within 4 of the rows asked for (or the image's border)."""
-    from mcbench import bilateral
-
+    from mcbench.filters import bilateral
     rng = np.random.default_rng(3)
     for shape in [(1, 1, 3), (1, 6, 3), (2, 3, 3), (3, 9, 1), (5, 4, 3), (17, 2), (40, 33, 3)]:
         image = rng.normal(size=shape) * 10
@@ -673,8 +672,7 @@ def test_filter_rows_of_a_tile_equal_the_whole_filter():
     """cross_bilateral_filter_vectors(rows=...) on a tile holding radius rows around them (or
     the border) gives exactly those rows of the whole image's filter, for bands of the kernel
     that do not line up with the tile (BAND_ROWS 64 against rows cut at 5 and 23)."""
-    from mcbench import bilateral
-
+    from mcbench.filters import bilateral
     rng = np.random.default_rng(4)
     h, w, r = 41, 19, 7
     values = rng.dirichlet(np.ones(3), size=(h, w, 3)).transpose(3, 0, 1, 2).astype(np.float32)
@@ -742,11 +740,11 @@ def test_banded_combine_equals_the_whole_image_pass(passes, solver, monkeypatch,
 
 
 def test_combine_reads_layers_by_rows(tmp_path, monkeypatch, make_render_buffers):
-    """The render's layers and the inputs as mcbench.exr.LayerRows (read from their files by
+    """The render's layers and the inputs as mcbench.io.exr.LayerRows (read from their files by
     rows, E.READS_ROWS) give the same output, bit for bit, as the same files read whole; a NaN
     in a file is refused with the whole image's count, as for arrays."""
-    from mcbench.buffers import RenderBuffers
-    from mcbench.exr import layer_rows, write_layers
+    from mcbench.io.buffers import RenderBuffers
+    from mcbench.io.exr import layer_rows, write_layers
 
     buffers, inputs, _ = synthetic_scene(make_render_buffers, np.random.default_rng(22),
                                          H=30, W=17, n=3)

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 import qpsolvers
 
-from mcbench.buffers import Denoised
+from mcbench.io.buffers import Denoised
 from methods import ensemble as E
 
 

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from mcbench.buffers import REQUIRED_LAYERS, RenderBuffers
-from mcbench.exr import ExrError, NonFiniteError, read_layers, read_metadata, write_layers
+from mcbench.io.buffers import REQUIRED_LAYERS, RenderBuffers
+from mcbench.io.exr import ExrError, NonFiniteError, read_layers, read_metadata, write_layers
 from methods import UnknownMethodError, available_methods, load_method
 
 
@@ -94,11 +94,11 @@ def test_half_buffer_view_uses_its_own_features(render_layers):
 
 @pytest.mark.parametrize("compression", ["none", "zip"])
 def test_layer_rows_read_what_read_layers_reads(tmp_path, render_layers, compression):
-    """mcbench.exr.layer_rows: every layer (3-channel and the 1-channel depth), indexed by rows,
+    """mcbench.io.exr.layer_rows: every layer (3-channel and the 1-channel depth), indexed by rows,
     single rows (negative too), rows and columns, or whole, equals read_layers bit for bit; the
     layers of one file share reads, and a block handed out is the caller's own (writing to it
     changes no later read)."""
-    from mcbench.exr import layer_rows
+    from mcbench.io.exr import layer_rows
 
     path = tmp_path / "render.exr"
     write_layers(path, render_layers, metadata={"spp": 4}, compression=compression)

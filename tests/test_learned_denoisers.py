@@ -11,12 +11,12 @@ import numpy as np
 import pytest
 import torch
 
-from mcbench.buffers import RenderBuffers
-from mcbench.io import read_json
+from mcbench.io.buffers import RenderBuffers
+from mcbench.io.tables import read_json
 from mcbench.nn.data import CropSet, is_validation_seed
 from mcbench.nn.inference import image_tensors, load_network, run_network
 from mcbench.nn.train import evaluate
-from mcbench.weights import COMMITTED_WEIGHTS, is_learned_method, load_weights, record_path, weights_path
+from mcbench.io.weights import COMMITTED_WEIGHTS, is_learned_method, load_weights, record_path, weights_path
 from methods import available_methods, load_method
 
 LEARNED = ["kpcn", "mcgan", "optix_ae", "wskpn"]   # learned denoisers (the learned combiners: test_deep_combiner.py)
@@ -155,7 +155,7 @@ def test_inference_is_deterministic_and_finite_on_hard_cases(name, noisy_buffers
 @pytest.fixture(scope="module")
 def validation_scene():
     """A validation scene rendered afresh with the settings recorded with the weights."""
-    from mcbench.variants import pick_variant
+    from mcbench.render.variants import pick_variant
     from mcbench.training_data import training_example
 
     data = read_json(record_path("kpcn"))["data"]
@@ -182,7 +182,7 @@ def test_committed_weights_reproduce_their_validation_loss(name, validation_scen
 
 
 def test_no_test_scene_is_a_training_scene():
-    from mcbench.variants import pick_variant
+    from mcbench.render.variants import pick_variant
     from mcbench.training_data import scene_fingerprint, training_scene_fingerprint
     from scenes import available_scenes, load_scene
 

@@ -1,5 +1,5 @@
 """The contract every module in ``methods/`` must keep, so a new method is tested the moment its
-file exists: it loads through the registry, returns a :class:`mcbench.buffers.Denoised` whose
+file exists: it loads through the registry, returns a :class:`mcbench.io.buffers.Denoised` whose
 full, A and B images are finite float (H, W, 3) arrays, and the same input gives the same output.
 Hard cases: fireflies, black regions, a 1x1 image, and for combiners identical inputs and an
 input equal to the noisy image.
@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mcbench.buffers import SUB_OUTPUTS, Denoised, RenderBuffers
+from mcbench.io.buffers import SUB_OUTPUTS, Denoised, RenderBuffers
 from methods import available_methods, load_method
 
 HEIGHT, WIDTH = 12, 10
@@ -159,7 +159,7 @@ def test_loads_and_keeps_the_contract(name, make_render_buffers):
 @pytest.mark.parametrize("name", [n for n in available_methods() if hasattr(load_method(n), "RENDER_LAYERS")])
 def test_declared_render_layers_are_all_the_method_reads(name, make_render_buffers):
     """A method declaring RENDER_LAYERS gets only those (and colour) from a job
-    (mcbench.steps.render_layers): on such a render it must give exactly its full-render result."""
+    (mcbench.pipeline.steps.render_layers): on such a render it must give exactly its full-render result."""
     module = load_method(name)
     buffers = make_render_buffers(height=HEIGHT, width=WIDTH, seed=1, bins=True)
     inputs = synthetic_inputs(buffers)
@@ -182,8 +182,8 @@ def test_hard_case_gives_finite_output(name, case, make_render_buffers):
 def default_config_variants():
     """Distinct (module, params) of the default study's non-learned combiners that set params
     (the ablations and one-hot variants of Sec. 5.2): each keeps the contract on the hard cases."""
-    from mcbench.config import resolve_config
-    from mcbench.weights import is_learned_method
+    from mcbench.pipeline.config import resolve_config
+    from mcbench.io.weights import is_learned_method
 
     seen, params = set(), []
     for entry in resolve_config({})["combiners"]:

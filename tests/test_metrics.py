@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from mcbench.metrics import (FLIP_MIN_LUMINANCE, METRICS, aces_filmic, dssim, flip, flip_exposure_range, flip_map,
+from mcbench.analysis.metrics import (FLIP_MIN_LUMINANCE, METRICS, aces_filmic, dssim, flip, flip_exposure_range, flip_map,
                              relmse, relmse_map, smape, srgb_encode, tonemap)
 
 
@@ -242,7 +242,7 @@ def test_relmse_corrected_is_unbiased_where_the_raw_one_is_not():
     """Synthetic truth μ, a fixed image y, references r = μ + e with known per-pixel variance v:
     over many reference draws the corrected relMSE averages to the true relMSE (y vs μ), while
     the raw relMSE is off by about the reference's noise floor mean(v / (μ² + 0.01))."""
-    from mcbench.metrics import relmse_corrected
+    from mcbench.analysis.metrics import relmse_corrected
 
     rng = np.random.default_rng(7)
     mu = rng.uniform(0.2, 3.0, size=(16, 16, 3))
@@ -264,7 +264,7 @@ def test_relmse_corrected_is_unbiased_where_the_raw_one_is_not():
 
 
 def test_relmse_corrected_reduces_to_relmse_for_a_noiseless_reference_and_checks_its_input():
-    from mcbench.metrics import relmse_corrected, relmse_corrected_map
+    from mcbench.analysis.metrics import relmse_corrected, relmse_corrected_map
 
     rng = np.random.default_rng(3)
     r = rng.uniform(0.0, 2.0, size=(8, 8, 3))

@@ -4,9 +4,9 @@ with known noise, noise-free input, spp consistency on renders, degenerate input
 import numpy as np
 import pytest
 
-from mcbench.buffers import RenderBuffers
-from mcbench.metrics import relmse
-from mcbench.nlmeans import nl_means_weight_maps
+from mcbench.io.buffers import RenderBuffers
+from mcbench.analysis.metrics import relmse
+from mcbench.filters.nlmeans import nl_means_weight_maps
 from methods import load_method, nfor
 
 
@@ -125,7 +125,7 @@ def test_flat_black_and_fireflies_stay_finite(make_render_buffers):
 
 def test_consistency_on_renders():
     """relMSE against a high-spp reference falls as spp grows."""
-    from mcbench.render import merge_reference_chunks, render_buffers, render_reference_chunk
+    from mcbench.render.renderer import merge_reference_chunks, render_buffers, render_reference_chunk
     from scenes import load_scene
 
     resolution = (40, 40)

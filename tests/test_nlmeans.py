@@ -4,8 +4,8 @@ against the NumPy reference path."""
 import numpy as np
 import pytest
 
-from mcbench import nlmeans
-from mcbench.nlmeans import nl_means_filter, nl_means_filter_reference
+from mcbench.filters import nlmeans
+from mcbench.filters.nlmeans import nl_means_filter, nl_means_filter_reference
 
 
 def brute_force(values, guide, variance, radius, patch_radius, k, alpha, epsilon=1e-10):

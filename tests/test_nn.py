@@ -200,7 +200,7 @@ def test_dihedral_gives_eight_distinct_invertible_views():
 
 
 def test_load_crops_names_bad_files(tmp_path):
-    from mcbench.exr import write_layers
+    from mcbench.io.exr import write_layers
 
     layers, meta = synthetic_crops(seeds=(0,), crops_per_scene=1)[0]
     good = tmp_path / "example_0_0.exr"
@@ -222,7 +222,7 @@ def test_load_crops_names_bad_files(tmp_path):
 # ----------------------------------------------------------------------------- training loop
 
 def write_crops(folder, **kwargs):
-    from mcbench.exr import write_layers
+    from mcbench.io.exr import write_layers
 
     paths = []
     for layers, meta in synthetic_crops(**kwargs):
@@ -256,7 +256,7 @@ def test_training_writes_loadable_weights_and_a_faithful_record(tmp_path, crop_f
     assert [h["step"] for h in record["history"]] == [3, 6]
     _, validation = load_crops(crop_files).split()
     assert evaluate(network, validation, record["loss"])["loss"] == pytest.approx(record["validation"]["loss"], rel=1e-6)
-    from mcbench.io import read_json
+    from mcbench.io.tables import read_json
     assert read_json(tmp_path / "w.json")["validation"]["loss"] == record["validation"]["loss"]
 
 
@@ -348,7 +348,7 @@ def test_unknown_settings_and_non_learned_methods_are_refused(crop_files, tmp_pa
 
 @pytest.mark.parametrize("damage", ["hostile", "truncated"])
 def test_damaged_checkpoint_is_refused_naming_it(crop_files, tmp_path, damage):
-    """A checkpoint goes through mcbench.weights.load_weights: a corrupt or code-running file is
+    """A checkpoint goes through mcbench.io.weights.load_weights: a corrupt or code-running file is
     an error that names it and never suggests loading it unsafely; nothing of it runs."""
     import os
     import traceback

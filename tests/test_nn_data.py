@@ -12,7 +12,7 @@ import pytest
 import torch
 
 from mcbench import BenchError
-from mcbench.exr import write_layers
+from mcbench.io.exr import write_layers
 from mcbench.nn.data import (BUFFER_KEYS, CropSet, PlaneStore, dihedral, is_validation_seed, load_combiner_crops,
                              load_crops, sample_batch, validation_batches)
 

@@ -91,7 +91,7 @@ def test_only_the_canonical_import_of_a_file_caches(tmp_path, monkeypatch):
 
     ensemble_file = ROOT / "methods" / "ensemble.py"
     assert canonical_module_name(ensemble_file) == "methods.ensemble"
-    assert canonical_module_name(ROOT / "mcbench" / "bilateral.py") == "mcbench.bilateral"
+    assert canonical_module_name(ROOT / "mcbench" / "bilateral.py") == "mcbench.filters.bilateral"
     assert canonical_module_name(tmp_path / "loose.py") == "loose"            # no package around it
     import methods.ensemble
 

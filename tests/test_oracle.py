@@ -10,7 +10,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from mcbench.oracle import (MseMatrixAccumulator, block_average, one_hot_weights, quadratic_objective,
+from mcbench.combine.oracle import (MseMatrixAccumulator, block_average, one_hot_weights, quadratic_objective,
                             simplex_problem_weights, simplex_weights, unconstrained_problem_weights,
                             unconstrained_weights)
 
@@ -216,9 +216,9 @@ def test_oracle_step_end_to_end(tmp_path):
     """16x16 (32x32 reference averaged 2x2), 4 spp, R = 4 + 1 held out, oidn and jbf: the nine
     panels and the context rows are finite, the ground-truth simplex weights beat one-hot on the
     matrix they were solved from, the files exist."""
-    from mcbench.exr import write_layers
-    from mcbench.render import merge_reference_chunks, render_reference_chunk
-    from mcbench.steps_oracle import run_oracle_study
+    from mcbench.io.exr import write_layers
+    from mcbench.render.renderer import merge_reference_chunks, render_reference_chunk
+    from mcbench.pipeline.oracle import run_oracle_study
     from scenes import load_scene
 
     chunk = render_reference_chunk(load_scene("cornell_box"), 256, 0, resolution=(32, 32))
@@ -239,7 +239,7 @@ def test_oracle_step_end_to_end(tmp_path):
 
 def test_oracle_size_divides_the_harness_resolution_and_names_the_key():
     from mcbench import BenchError
-    from mcbench.steps_oracle import oracle_size
+    from mcbench.pipeline.oracle import oracle_size
 
     assert oracle_size(None, (128, 96), 2) == (64, 48)
     assert oracle_size([32, 32], (128, 128), 1) == (32, 32)

@@ -1,4 +1,4 @@
-"""The 39-candidate pool (mcbench.pool) against the shared study file and the paper's constraints,
+"""The 39-candidate pool (mcbench.analysis.pool) against the shared study file and the paper's constraints,
 and its expansion into a config's methods."""
 
 import re
@@ -6,8 +6,8 @@ from pathlib import Path
 
 import pytest
 
-from mcbench import pool
-from mcbench.config import resolve_config
+from mcbench.analysis import pool
+from mcbench.pipeline.config import resolve_config
 
 SHARED_POOL = Path(__file__).resolve().parents[2] / "shared" / "study" / "candidate-pool.md"
 

@@ -9,10 +9,7 @@ import math
 import numpy as np
 import pytest
 
-from mcbench import sure
-
-
-# --- a linear filter with a known Jacobian ----------------------------------------------------
+from mcbench.filters import sure
 
 KERNEL = np.array([[0.05, 0.1, 0.05], [0.1, 0.4, 0.1], [0.05, 0.1, 0.05]])   # sums to 1, centre 0.4
 
@@ -351,7 +348,7 @@ def test_combiner_is_finite_and_deterministic_on_hard_cases(make_render_buffers,
 def test_each_half_uses_only_its_own_samples_and_base_result(make_render_buffers):
     """Changing B's samples and B's base result leaves A's output unchanged (and vice versa)."""
     import methods.progressive as progressive
-    from mcbench.buffers import Denoised
+    from mcbench.io.buffers import Denoised
 
     net = random_network()
     buffers = make_render_buffers(height=12, width=10, seed=1, bins=True)
@@ -372,7 +369,7 @@ def test_t_test_only_mode_converges_to_the_noisy_image_when_the_base_is_biased(m
     """network=False: α = 1 then Eq. 18; a strongly biased base is rejected where the noise is
     small, kept where it is large."""
     import methods.progressive as progressive
-    from mcbench.buffers import Denoised
+    from mcbench.io.buffers import Denoised
 
     low = make_render_buffers(height=24, width=24, seed=5, half_std=1e-3)
     high = make_render_buffers(height=24, width=24, seed=5, half_std=0.5)
@@ -399,7 +396,7 @@ def test_importing_the_method_does_not_import_torch():
     import subprocess
     import sys
 
-    code = "import sys, methods.progressive, mcbench.sure; print('torch' in sys.modules)"
+    code = "import sys, methods.progressive, mcbench.filters.sure; print('torch' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
 

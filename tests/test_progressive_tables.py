@@ -1,4 +1,4 @@
-"""Progressive denoising's tables (mcbench.progressive_tables) on constructed metrics whose
+"""Progressive denoising's tables (mcbench.analysis.progressive_tables) on constructed metrics whose
 counts, ratios and gaps are known by construction."""
 
 import numpy as np
@@ -6,7 +6,7 @@ import pandas as pd
 import pytest
 
 from mcbench import BenchError
-from mcbench.progressive_tables import (added_seconds, consistency_summary, consistency_table, geometric_ratio,
+from mcbench.analysis.progressive_tables import (added_seconds, consistency_summary, consistency_table, geometric_ratio,
                                         per_spp_table, table_entries)
 
 SPPS = [4, 16, 64, 256]

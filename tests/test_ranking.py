@@ -3,7 +3,7 @@
 import pandas as pd
 import pytest
 
-from mcbench.ranking import case_scores, format_markdown, ranking_table
+from mcbench.analysis.ranking import case_scores, format_markdown, ranking_table
 
 
 def _tidy(rows):
@@ -62,7 +62,7 @@ def _full_case(scene="s", spp=4, candidates=("noisy", "a", "b"), metrics=("relms
 
 
 def test_a_case_missing_a_candidate_is_not_ranked_on_another_scale():
-    from mcbench.ranking import IncompleteMetricsError
+    from mcbench.analysis.ranking import IncompleteMetricsError
 
     rows = _full_case("x") + [r for r in _full_case("y") if r[2] != "b"]
     with pytest.raises(IncompleteMetricsError, match=r"scene y, spp 4 is incomplete: missing \[\('b', 'dssim'\)"):
@@ -70,7 +70,7 @@ def test_a_case_missing_a_candidate_is_not_ranked_on_another_scale():
 
 
 def test_non_finite_or_empty_values_stop_naming_the_case():
-    from mcbench.ranking import IncompleteMetricsError, check_complete
+    from mcbench.analysis.ranking import IncompleteMetricsError, check_complete
 
     rows = _full_case()
     rows[3] = rows[3][:4] + (float("nan"),)
@@ -79,7 +79,7 @@ def test_non_finite_or_empty_values_stop_naming_the_case():
 
 
 def test_check_complete_refuses_duplicates_extras_and_lost_cases():
-    from mcbench.ranking import IncompleteMetricsError, check_complete
+    from mcbench.analysis.ranking import IncompleteMetricsError, check_complete
 
     kwargs = dict(candidates=["noisy", "a", "b"], metric_names=["relmse", "dssim"])
     check_complete(_tidy(_full_case()), **kwargs, cases=[("s", 4)])
@@ -100,7 +100,7 @@ def test_gather_refuses_a_case_csv_cut_mid_row(tmp_path):
     """A per-case CSV cut in the middle of a row (an empty value, rows dropped) stops the gather
     with the file named, instead of moving scores."""
     from mcbench import BenchError
-    from mcbench.steps import gather_tables
+    from mcbench.pipeline.steps import gather_tables
 
     kwargs = dict(candidates=["noisy", "a", "b"], metric_names=["relmse", "dssim"])
     good = _write_case(tmp_path / "x.csv", _full_case("x"))
@@ -119,7 +119,7 @@ def test_gather_refuses_a_case_csv_cut_mid_row(tmp_path):
 
 def test_write_rankings_refuses_a_table_with_other_candidates(tmp_path):
     from mcbench import BenchError
-    from mcbench.steps import write_rankings
+    from mcbench.pipeline.steps import write_rankings
 
     path = _write_case(tmp_path / "metrics.csv", _full_case())
     write_rankings(path, "relmse", str(tmp_path / "r.csv"), str(tmp_path / "r.md"),
@@ -154,7 +154,7 @@ def _cells(row):
 
 
 def test_latex_table_is_booktabs_with_one_row_per_candidate_and_bold_at_each_column_max():
-    from mcbench.ranking import format_latex
+    from mcbench.analysis.ranking import format_latex
 
     table = _latex_toy_table()
     labels = {"a": "#1 KPCN† (ours; 50% & more)", "b_x": "Ensemble (oidn+jbf)"}
@@ -190,7 +190,7 @@ def test_latex_table_is_booktabs_with_one_row_per_candidate_and_bold_at_each_col
 
 
 def test_latex_escapes_and_refuses_a_bad_label():
-    from mcbench.ranking import format_latex, latex_escape
+    from mcbench.analysis.ranking import format_latex, latex_escape
 
     assert latex_escape("a_b & c% #1 $x$ {y} ~^\\ †+") == (r"a\_b \& c\% \#1 \$x\$ \{y\} \textasciitilde{}"
                                                           r"\textasciicircum{}\textbackslash{} \dag{}+")
@@ -200,7 +200,7 @@ def test_latex_escapes_and_refuses_a_bad_label():
 
 
 def test_write_rankings_writes_the_latex_table(tmp_path):
-    from mcbench.steps import write_rankings
+    from mcbench.pipeline.steps import write_rankings
 
     path = _write_case(tmp_path / "metrics.csv", _full_case())
     table = write_rankings(path, "dssim", str(tmp_path / "r.csv"), str(tmp_path / "r.md"),
@@ -224,7 +224,7 @@ def test_extras_are_scored_each_alone_in_the_pool_by_hand():
         ("t", 4, "a", "relmse", 2.0), ("t", 4, "b", "relmse", 1.0), ("t", 4, "noisy", "relmse", 9.0),
         ("t", 4, "x", "relmse", 9.0), ("t", 4, "y", "relmse", 1.0),
     ])
-    from mcbench.ranking import extras_table
+    from mcbench.analysis.ranking import extras_table
 
     table = extras_table(metrics, "relmse", pool=["a", "b", "noisy"], extras=["y", "x"])
     assert list(table.index) == ["y", "x"]

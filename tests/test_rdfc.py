@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mcbench.buffers import Denoised, RenderBuffers
+from mcbench.io.buffers import Denoised, RenderBuffers
 from methods import load_method, rdfc
 
 SMALL_RADIUS = 4   # window radius for the kernel-level tests (fast; the math is radius-independent)
@@ -127,7 +127,7 @@ def test_flat_black_and_fireflies_stay_finite(make_render_buffers):
 
 @pytest.fixture(scope="module")
 def cornell_series():
-    from mcbench.render import merge_reference_chunks, render_buffers, render_reference_chunk
+    from mcbench.render.renderer import merge_reference_chunks, render_buffers, render_reference_chunk
     from scenes import load_scene
     resolution = (48, 48)
     reference, _ = merge_reference_chunks([render_reference_chunk(load_scene("cornell_box"), 4096, chunk, resolution=resolution)
@@ -138,7 +138,7 @@ def cornell_series():
 
 
 def test_consistency_relmse_decreases_with_spp(cornell_series):
-    from mcbench.metrics import relmse
+    from mcbench.analysis.metrics import relmse
     reference, renders = cornell_series
     errors = {spp: relmse(rdfc.denoise(b).full, reference) for spp, b in renders.items()}
     noisy = {spp: relmse(b.color, reference) for spp, b in renders.items()}

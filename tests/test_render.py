@@ -1,4 +1,4 @@
-"""Fast tests of the scene registry and mcbench.render (tiny images, low spp)."""
+"""Fast tests of the scene registry and mcbench.render.renderer (tiny images, low spp)."""
 
 from __future__ import annotations
 
@@ -8,14 +8,14 @@ import numpy as np
 import pytest
 
 from mcbench import BenchError
-from mcbench.buffers import ALL_LAYERS, BIN_LAYERS, RenderBuffers
-from mcbench.render import (MAX_WAVEFRONT, film_size, forget_scene, load_scene_dict,
+from mcbench.io.buffers import ALL_LAYERS, BIN_LAYERS, RenderBuffers
+from mcbench.render.renderer import (MAX_WAVEFRONT, film_size, forget_scene, load_scene_dict,
                             merge_reference_chunks, passes_for, render_buffers, render_dict_buffers,
                             render_reference_chunk, render_scene_sums)
-from mcbench.seeds import (FIBRE_SEED_BASE, MAX_BASE_SEED, MAX_TRAINING_SEED, TRAINING_BASE_SEED,
+from mcbench.render.seeds import (FIBRE_SEED_BASE, MAX_BASE_SEED, MAX_TRAINING_SEED, TRAINING_BASE_SEED,
                            decode_seed, decode_training_seed, mitsuba_seed, render_seed,
                            scalar_seed_stride, training_render_seed)
-from mcbench.variants import pick_variant
+from mcbench.render.variants import pick_variant
 from scenes import UnknownSceneError, available_scenes, load_scene
 
 TINY = (16, 16)
@@ -161,7 +161,7 @@ def test_multi_pass_render_matches_its_pass_seeds(variant, monkeypatch):
     """Forcing several passes per half buffer still gives finite, sensible buffers."""
     if variant.startswith("scalar"):
         pytest.skip("scalar variants render in one pass")
-    import mcbench.render as render
+    import mcbench.render.renderer as render
     monkeypatch.setattr(render, "MAX_WAVEFRONT", 16 * 16 * 3)   # 3 spp per pass
     layers, meta = render_buffers(CORNELL, 16, resolution=TINY, seed=2)
     # each half: two bins of 4 spp, each in passes of 3 + 1 spp
@@ -415,7 +415,7 @@ def test_merge_is_the_spp_weighted_closed_form():
 
 
 def test_nan_from_mitsuba_raises_naming_scene_and_spp(variant, monkeypatch):
-    import mcbench.render as render
+    import mcbench.render.renderer as render
 
     real_pass = render._render_pass
 
@@ -446,7 +446,7 @@ def test_a_reference_chunk_prints_its_passes_with_elapsed_time_and_eta(variant, 
     the job log), passes and samples counted up, the last pass with nothing left (eta 0)."""
     import re
 
-    import mcbench.render as render
+    import mcbench.render.renderer as render
 
     monkeypatch.setattr(render, "MAX_WAVEFRONT", 8 * 8 * 2)     # 2 spp per pass at 8x8
     expected = passes_for(7, 8, 8, variant)

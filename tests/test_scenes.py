@@ -7,9 +7,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from mcbench.config import read_config_file
-from mcbench.render import render_buffers
-from mcbench.variants import pick_variant
+from mcbench.pipeline.config import read_config_file
+from mcbench.render.renderer import render_buffers
+from mcbench.render.variants import pick_variant
 from scenes import available_scenes, load_scene
 
 REPO = Path(__file__).resolve().parents[1]
@@ -26,7 +26,7 @@ def test_scene_declares_contract(scene):
 
 
 def test_scenes_import_only_core_building_blocks():
-    """Scene modules build on core (mcbench.geometry, mcbench.curves), never on scenes/ helpers
+    """Scene modules build on core (mcbench.render.geometry, mcbench.render.curves), never on scenes/ helpers
     or on each other."""
     for path in sorted((REPO / "scenes").glob("[!_]*.py")):
         tree = ast.parse(path.read_text())
@@ -34,7 +34,7 @@ def test_scenes_import_only_core_building_blocks():
         imported |= {alias.name for node in ast.walk(tree) if isinstance(node, ast.Import)
                      for alias in node.names}
         assert not {name for name in imported if name.split(".")[0] == "scenes"}, path.name
-        assert "mcbench.geometry" in imported or path.stem == "cornell_box", path.name
+        assert "mcbench.render.geometry" in imported or path.stem == "cornell_box", path.name
     assert not list((REPO / "scenes").glob("_[!_]*.py"))     # no private helper modules left
 
 

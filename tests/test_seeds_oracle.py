@@ -1,4 +1,4 @@
-"""The oracle seed slot of mcbench.seeds: injective, decoded, and disjoint from every test,
+"""The oracle seed slot of mcbench.render.seeds: injective, decoded, and disjoint from every test,
 reference and training render seed (also as scalar-variant pixel-seed ranges)."""
 
 from __future__ import annotations
@@ -8,7 +8,7 @@ import itertools
 import pytest
 
 from mcbench import BenchError
-from mcbench.seeds import (MAX_BASE_SEED, MAX_ORACLE_REPETITIONS, decode_oracle_seed, decode_seed,
+from mcbench.render.seeds import (MAX_BASE_SEED, MAX_ORACLE_REPETITIONS, decode_oracle_seed, decode_seed,
                            is_oracle_seed, mitsuba_seed, oracle_render_seed, render_seed,
                            scalar_seed_stride, training_render_seed)
 

@@ -1,5 +1,5 @@
 """One-hot selection (Zheng et al. 2021 Sec. 5.2.6, Eq. 36-37) and naive averaging (Sec. 5.2.5):
-mcbench.selection, methods/one_hot.py and methods/naive_average.py against independent truth
+mcbench.combine.selection, methods/one_hot.py and methods/naive_average.py against independent truth
 (the equations written out per element, brute-force argmin loops, synthetic data with a known
 best input)."""
 
@@ -8,10 +8,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mcbench import selection
-from mcbench.bilateral import cross_bilateral_filter
-from mcbench.buffers import Denoised
-from mcbench.nlmeans import nl_means_filter
+from mcbench.combine import selection
+from mcbench.filters.bilateral import cross_bilateral_filter
+from mcbench.io.buffers import Denoised
+from mcbench.filters.nlmeans import nl_means_filter
 from methods import check_params, load_method
 
 PREFILTERS = ("none", "sbf", "nfor", "post")

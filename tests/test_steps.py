@@ -1,4 +1,4 @@
-"""Fast tests of the rule bodies in ``mcbench.steps`` on tiny synthetic EXRs: each step's files
+"""Fast tests of the rule bodies in ``mcbench.pipeline.steps`` on tiny synthetic EXRs: each step's files
 against the project functions (or closed forms) recomputed here from the same inputs."""
 
 from __future__ import annotations
@@ -9,10 +9,12 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from mcbench import BenchError, steps
-from mcbench.buffers import Denoised, RenderBuffers
-from mcbench.exr import read_layers, read_metadata, write_layers
-from mcbench.metrics import METRICS
+from mcbench import BenchError
+
+from mcbench.pipeline import steps
+from mcbench.io.buffers import Denoised, RenderBuffers
+from mcbench.io.exr import read_layers, read_metadata, write_layers
+from mcbench.analysis.metrics import METRICS
 from methods import load_method
 
 SCENE, SPP = "box", 8
@@ -137,7 +139,7 @@ def test_case_metrics_write_the_flip_maps_the_viewer_uses(case_files, tmp_path):
     """One FLIP evaluation per entry: the maps file holds each entry's per-pixel FLIP, whose
     package mean is the table's flip value, and the viewer's FLIP images from it equal those it
     evaluates itself."""
-    from mcbench.metrics import flip_map
+    from mcbench.analysis.metrics import flip_map
 
     render, reference = case_files
     output, _ = run("jbf", render, tmp_path, module_name="jbf")
@@ -240,13 +242,13 @@ def test_a_job_of_row_reading_methods_never_reads_an_input_whole(case_files, tmp
     assert steps.reads_rows([load_method("ensemble")])
     assert not steps.reads_rows([load_method("ensemble"), load_method("naive_average")])
     expected = load_method("ensemble").combine(RenderBuffers.load(render), [Denoised.load(p) for p in inputs])
-    import mcbench.buffers
-    import mcbench.exr
+    import mcbench.io.buffers
+    import mcbench.io.exr
 
     def refuse(path, *args, **kwargs):
         raise AssertionError(f"read whole: {path}")
-    monkeypatch.setattr(mcbench.buffers, "read_layers", refuse)
-    monkeypatch.setattr(mcbench.exr, "read_layers", refuse)
+    monkeypatch.setattr(mcbench.io.buffers, "read_layers", refuse)
+    monkeypatch.setattr(mcbench.io.exr, "read_layers", refuse)
     output = tmp_path / "ens_rows.exr"
     steps.run_methods([{"name": "ens", "module": "ensemble", "params": {}, "input_paths": [str(p) for p in inputs],
                         "exr": str(output), "timing": str(tmp_path / "ens_rows.json")}], str(render))

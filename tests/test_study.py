@@ -1,4 +1,4 @@
-"""The 39-candidate study (mcbench.study; Zheng et al. 2021 Sec. 5.3) against independent truth:
+"""The 39-candidate study (mcbench.analysis.study; Zheng et al. 2021 Sec. 5.3) against independent truth:
 hand-made tables whose answers are known, the paper's numbers typed from its Table 3, a normal
 sample of known sd for the bootstrap, brute-force pair counts for Kendall's tau."""
 
@@ -12,8 +12,12 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from mcbench import BenchError, pool, study
-from mcbench.ranking import ranking_table
+from mcbench import BenchError
+
+from mcbench.analysis import pool
+
+from mcbench.analysis import study
+from mcbench.analysis.ranking import ranking_table
 
 ALL = [c.name for c in pool.POOL]
 # Everything below the top lists: ensembles by descending ID, then the bases, then the noisy input.

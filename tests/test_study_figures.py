@@ -1,4 +1,4 @@
-"""mcbench.study_figures: the 39-candidate study's figures, checked against independent truth
+"""mcbench.analysis.study_figures: the 39-candidate study's figures, checked against independent truth
 (brute-force Pareto fronts, closed-form equal-time power laws, hand-computed means, a toy DAG)
 and the PNGs they write for a tiny synthetic study."""
 
@@ -10,9 +10,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from mcbench.exr import write_layers
-from mcbench.ranking import case_scores
-from mcbench.study_figures import (STUDY_FIGURES, average_scores, closure_seconds, equal_time_curves,
+from mcbench.io.exr import write_layers
+from mcbench.analysis.ranking import case_scores
+from mcbench.analysis.study_figures import (STUDY_FIGURES, average_scores, closure_seconds, equal_time_curves,
                                    equal_time_table, input_closure, loglog_interp, own_seconds, pareto_front,
                                    read_render_seconds, score_curves, score_size_points, score_size_summary,
                                    speed_score_points, study_figure_paths, write_study_figures)
@@ -268,7 +268,7 @@ def test_write_study_figures_refuses_an_unknown_figure(tmp_path):
 
 
 def test_paper_recommended_and_curve_candidates():
-    from mcbench.study_figures import curve_candidates, paper_recommended
+    from mcbench.analysis.study_figures import curve_candidates, paper_recommended
 
     assert paper_recommended() == ["ens27", "ens20", "ens10", "ens18"]
     assert curve_candidates(["ens20", "kpcn", "ens20"]) == ["kpcn", "nfor_dc", "mcgan", "nfor", "kpcn_dc", "oidn",

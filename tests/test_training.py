@@ -8,13 +8,13 @@ import numpy as np
 import pytest
 
 from mcbench import BenchError
-from mcbench.buffers import ALL_LAYERS, BIN_LAYERS
-from mcbench.config import read_config_file
-from mcbench.seeds import (FIBRE_SEED_BASE, TRAINING_BASE_SEED, decode_seed, decode_training_seed,
+from mcbench.io.buffers import ALL_LAYERS, BIN_LAYERS
+from mcbench.pipeline.config import read_config_file
+from mcbench.render.seeds import (FIBRE_SEED_BASE, TRAINING_BASE_SEED, decode_seed, decode_training_seed,
                            is_fibre_seed, render_seed, training_render_seed, training_seeds)
 from mcbench.training_data import (crop_boxes, random_scene, render_target, scene_fingerprint,
                                    training_example, training_scene_fingerprint)
-from mcbench.variants import pick_variant
+from mcbench.render.variants import pick_variant
 from scenes import available_scenes, load_scene
 
 REPO = Path(__file__).resolve().parents[1]
@@ -92,7 +92,7 @@ def test_target_is_the_mean_of_its_samples_with_the_variance_of_that_mean():
         means.append(mean.astype(np.float64))
         variances.append(variance.astype(np.float64))
     big, big_variance, _ = render_target(desc, 256, lambda p: 9000 + p, key="test-target")
-    from mcbench.render import forget_scene
+    from mcbench.render.renderer import forget_scene
     forget_scene("test-target")
     spread = np.var(np.stack(means), axis=0, ddof=1)                  # of one 64-spp mean
     predicted = np.mean(np.stack(variances), axis=0)
@@ -114,7 +114,7 @@ def test_fingerprint_same_in_another_process():
     import subprocess
     import sys
 
-    code = ("from mcbench.variants import pick_variant; pick_variant('auto'); "
+    code = ("from mcbench.render.variants import pick_variant; pick_variant('auto'); "
             "from mcbench.training_data import training_scene_fingerprint as f; print(f(32784))")
     runs = {subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True,
                            check=True).stdout.strip() for _ in range(2)}
@@ -172,7 +172,7 @@ def test_fibre_scenes_add_thin_curves_to_an_object_scene():
 
 
 def test_training_data_imports_no_scene_module():
-    """Training data is core: it builds on mcbench.geometry / mcbench.curves, never on scenes/."""
+    """Training data is core: it builds on mcbench.render.geometry / mcbench.render.curves, never on scenes/."""
     import ast
 
     package = REPO / "mcbench" / "training_data"
@@ -182,8 +182,8 @@ def test_training_data_imports_no_scene_module():
         imported |= {alias.name for node in ast.walk(tree) if isinstance(node, ast.Import)
                      for alias in node.names}
         assert not {m for m in imported if m.split(".")[0] in ("scenes", "methods")}, path.name
-        assert "mcbench.render" not in imported or path.name == "examples.py", path.name
-    assert "mcbench.geometry" in {node.module for node in
+        assert "mcbench.render.renderer" not in imported or path.name == "examples.py", path.name
+    assert "mcbench.render.geometry" in {node.module for node in
                                   ast.walk(ast.parse((package / "generator.py").read_text()))
                                   if isinstance(node, ast.ImportFrom)}
 

@@ -1,4 +1,4 @@
-"""Fast tests of the static image viewer (mcbench.viewer, the viewer steps and the page's DOM
+"""Fast tests of the static image viewer (mcbench.analysis.viewer, the viewer steps and the page's DOM
 contract) on synthetic arrays and tiny EXRs written here; the browser test is in test_report.py.
 
 Independent truths: the ACES + sRGB closed form written out below, the relMSE formula, NVIDIA's
@@ -17,8 +17,12 @@ import pandas as pd
 import pytest
 from PIL import Image
 
-from mcbench import BenchError, steps, viewer
-from mcbench.exr import write_layers
+from mcbench import BenchError
+
+from mcbench.pipeline import steps
+
+from mcbench.analysis import viewer
+from mcbench.io.exr import write_layers
 
 PAGE = Path(__file__).resolve().parents[1] / "workflow" / "report" / "viewer"
 
@@ -187,9 +191,8 @@ def test_error_maps_are_relmse_and_hdr_flip_of_the_pair():
 
 def stand_in_maps(monkeypatch):
     """Error maps with known values (pixel index scaled into each scale), so files can be checked
-    without FLIP's cost; error_maps must call mcbench.metrics' functions for this to take."""
-    from mcbench import metrics
-
+    without FLIP's cost; error_maps must call mcbench.analysis.metrics' functions for this to take."""
+    from mcbench.analysis import metrics
     def ramp(image, reference, low, high):
         h, w = np.asarray(image).shape[:2]
         return low + (high - low) * np.arange(h * w).reshape(h, w) / (h * w - 1)

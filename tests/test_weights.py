@@ -1,4 +1,4 @@
-"""mcbench.weights (location, format, safe loading of learned weights) and the import structure
+"""mcbench.io.weights (location, format, safe loading of learned weights) and the import structure
 it enables: importing the learned methods does not import torch, core never imports the method
 or scene plugins, and no module of mcbench imports one that imports it back."""
 
@@ -14,13 +14,12 @@ from types import SimpleNamespace
 import pytest
 
 from mcbench import BenchError
-from mcbench import weights
-
+from mcbench.io import weights
 ROOT = Path(__file__).resolve().parents[1]
 
 
 def test_importing_learned_methods_does_not_import_torch():
-    code = ("import sys, methods.kpcn, methods.wskpn, methods.mcgan, methods.optix_ae, mcbench.weights, mcbench.nn\n"
+    code = ("import sys, methods.kpcn, methods.wskpn, methods.mcgan, methods.optix_ae, mcbench.io.weights, mcbench.nn\n"
             "import methods\n"
             "assert all(methods.load_method(n).NETWORK for n in ('kpcn', 'wskpn', 'mcgan', 'optix_ae'))\n"
             "print(sorted(m for m in sys.modules if m == 'torch' or m.startswith('torch.')))\n")

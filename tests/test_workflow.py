@@ -150,7 +150,7 @@ def test_corrupt_render_stops_with_file_name_and_keeps_outputs(smoke_run, tmp_pa
 
 
 def test_nan_render_is_refused_naming_file_and_count(smoke_run, tmp_path):
-    from mcbench.exr import read_layers, write_layers
+    from mcbench.io.exr import read_layers, write_layers
 
     workdir = tmp_path / "nan"
     shutil.copytree(smoke_run[0], workdir, ignore=shutil.ignore_patterns(".snakemake"))
@@ -225,7 +225,7 @@ def test_notebook_executes_headless_on_results(smoke_run, monkeypatch):
 
 
 def test_training_data_target_writes_reproducible_disjoint_crops(tmp_path):
-    from mcbench.exr import read_layers, read_metadata
+    from mcbench.io.exr import read_layers, read_metadata
 
     # the smoke config's learned combiner (progressive) trains on a subset of these scenes
     training = {"first_seed": 3, "count": 2, "fibre_count": 0, "resolution": [32, 24], "crop": 12, "crops": 2,
@@ -345,7 +345,7 @@ def test_the_same_command_plans_the_same_study_from_any_folder(tmp_path):
     from_root = _planned(_dry_run(REPO, "--configfile", str(SMOKE)))
     from_other = _planned(_dry_run(other, "--configfile", str(SMOKE)))
     assert from_root == from_other and len(from_root[0]) > 40
-    from mcbench.config import config_digest, resolve_config
+    from mcbench.pipeline.config import config_digest, resolve_config
 
     assert from_root[1] == config_digest(resolve_config(yaml.safe_load(SMOKE.read_text())))
     # without --configfile the default study (config.yaml) is read from the checkout, not the folder

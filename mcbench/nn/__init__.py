@@ -12,8 +12,8 @@
 * :mod:`mcbench.nn.inference` -- loading committed weights and running a network on one image,
   deterministically.
 
-The weights' location and file format, the safe loader and :func:`mcbench.weights.is_learned_method`
-are in the torch-free :mod:`mcbench.weights`.
+The weights' location and file format, the safe loader and :func:`mcbench.io.weights.is_learned_method`
+are in the torch-free :mod:`mcbench.io.weights`.
 
 A learned method is one module in ``methods/`` that declares ``NETWORK`` (architecture
 hyperparameters), ``TRAINING`` (training settings) and ``build_network(**NETWORK)``; the network's

@@ -22,14 +22,14 @@ are the validation set; all crops of a scene go to the same side.
 
 Combiners (the deep combiner, Back et al. 2020) also need a base denoiser's result on each
 training input: :func:`load_combiner_crops` reads the crops together with the base outputs written
-by :func:`mcbench.steps.write_correlated_training_inputs` (``correlated/<base>/example_<seed>_<k>.exr``,
+by :func:`mcbench.pipeline.steps.write_correlated_training_inputs` (``correlated/<base>/example_<seed>_<k>.exr``,
 layers ``correlated<half>_spp<N>`` and, for bases that expose a kernel, ``correlated<half>_sub<j>_spp<N>``),
 one item per (crop, base), with the extra input keys the combiner declares (``TRAINING_KEYS``):
 render layers by name (e.g. ``albedo_variance``), ``correlated`` (the base's result on that image),
-``color_sub``/``variance_sub`` (the image's two sample subsets, :data:`mcbench.buffers.SUB_BUFFERS`,
+``color_sub``/``variance_sub`` (the image's two sample subsets, :data:`mcbench.io.buffers.SUB_BUFFERS`,
 concatenated), ``correlated_sub`` (the base's result on each) and ``divergence`` (layers
 ``divergence<half>_spp<N>``: the base's SURE divergence term, written for a base named
-``<base>+sure``, :func:`mcbench.steps.write_correlated_training_inputs`).
+``<base>+sure``, :func:`mcbench.pipeline.steps.write_correlated_training_inputs`).
 
 Batches: step ``s`` of a run seeded ``seed`` draws from ``numpy.random.default_rng([seed, s])``
 item, level, buffer, patch position and one of the 8 rotations/flips of the square patch, so a
@@ -51,7 +51,7 @@ import numpy as np
 import torch
 
 from mcbench import BenchError
-from mcbench.exr import check_finite, read_layers, read_metadata
+from mcbench.io.exr import check_finite, read_layers, read_metadata
 
 # Raw buffers a network receives: name -> channels (layout of the (13, H, W) input arrays).
 BUFFER_KEYS = {"color": 3, "variance": 3, "albedo": 3, "normal": 3, "depth": 1}
@@ -202,7 +202,7 @@ def validation_batches(crops: CropSet, batch_size: int = 16, buffer: int = 0):
 def input_layers(key: str, half: str, level: int) -> tuple[str, list[str]]:
     """Where input ``key`` of one (level, buffer ``half`` in :data:`HALVES`) comes from:
     ``("crop" | "correlated", layer names)``, the layers' channels concatenated in that order."""
-    from mcbench.buffers import SUB_BUFFERS
+    from mcbench.io.buffers import SUB_BUFFERS
 
     if key == "correlated":
         return "correlated", [f"correlated{half}_spp{level}"]
@@ -398,8 +398,8 @@ def assemble_items(crops: Iterable[tuple[dict, dict, str, dict[str, tuple[dict, 
 
 def crop_render_layers(layers: dict[str, np.ndarray], level: int) -> dict[str, np.ndarray]:
     """The render layers of one noisy level of a training crop (names without ``_spp<N>``): every
-    layer of :data:`mcbench.buffers.ALL_LAYERS` and, when present, the sample bins."""
-    from mcbench.buffers import ALL_LAYERS, BIN_LAYERS
+    layer of :data:`mcbench.io.buffers.ALL_LAYERS` and, when present, the sample bins."""
+    from mcbench.io.buffers import ALL_LAYERS, BIN_LAYERS
 
     suffix = f"_spp{level}"
     out = {name: layers[name + suffix] for name in ALL_LAYERS if name + suffix in layers}

@@ -1,7 +1,7 @@
 """Input transforms of the learned denoisers, as pure functions of (N, C, H, W) tensors.
 
 All radiance is linear HDR (the renders' units); ``variance`` is the per-pixel, per-channel
-variance of the pixel mean (:mod:`mcbench.buffers`).
+variance of the pixel mean (:mod:`mcbench.io.buffers`).
 
 * :func:`log_radiance` -- ``log(1 + x)``, the range compression of KPCN's specular branch
   (Bako et al. 2017, Sec. 4.1) and of Chaitanya et al. 2017 (Sec. 5.1).

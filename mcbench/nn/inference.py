@@ -1,6 +1,6 @@
 """Running a learned method's committed weights on render buffers.
 
-Weights load through :func:`mcbench.weights.load_weights` (``torch.load(..., weights_only=True)``:
+Weights load through :func:`mcbench.io.weights.load_weights` (``torch.load(..., weights_only=True)``:
 plain tensors and the architecture dict, no pickled code; any failure names the file). Inference
 runs in float32 with ``torch.use_deterministic_algorithms(True)`` under ``torch.inference_mode``;
 with the same thread count the same input gives bit-identical output (tested). A network that
@@ -23,13 +23,13 @@ import numpy as np
 import torch
 
 from mcbench import BenchError
-from mcbench.buffers import BUFFER_SUFFIXES, Denoised, ImageBuffers, RenderBuffers, denoise_each_buffer
-from mcbench.weights import check_learned_method, load_weights, method_name, weights_path
+from mcbench.io.buffers import BUFFER_SUFFIXES, Denoised, ImageBuffers, RenderBuffers, denoise_each_buffer
+from mcbench.io.weights import check_learned_method, load_weights, method_name, weights_path
 
 
 def load_network(module: ModuleType, path: str | Path | None = None) -> torch.nn.Module:
     """The network of learned method ``module`` with the weights in ``path`` (default
-    :func:`mcbench.weights.weights_path` of its name), in eval mode; cached per process, module
+    :func:`mcbench.io.weights.weights_path` of its name), in eval mode; cached per process, module
     and weights file (path and modification time)."""
     check_learned_method(module)
     path = Path(path) if path is not None else weights_path(method_name(module))
@@ -158,7 +158,7 @@ def _combiner_arrays(buffers: RenderBuffers, inputs: list[Denoised], which: str,
         layer = key + BUFFER_SUFFIXES[which]
         if layer not in buffers.layers:
             raise BenchError(f"{buffers.source}: no layer '{layer}' (feature variances are written by "
-                             f"mcbench.render; re-render this file)")
+                             f"mcbench.render.renderer; re-render this file)")
         return [buffers.layers[layer]], buffers.source
     if key in ("color_sub", "variance_sub"):
         part = 0 if key == "color_sub" else 1

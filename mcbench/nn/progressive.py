@@ -1,6 +1,6 @@
 """The mixing network h_NN of progressive denoising (Firmino et al. 2022, Sec. 4.3) in torch: its
 inputs, the swap augmentation, f_act and the network itself (``methods/progressive.py`` builds it
-through a cached ``network_classes()``; the NumPy reference of every formula is :mod:`mcbench.sure`).
+through a cached ``network_classes()``; the NumPy reference of every formula is :mod:`mcbench.filters.sure`).
 
 Inputs (Sec. 4.3), per pixel, (N, 18, H, W): ``log(1 + ·)`` of the MC render x (HDR) and of the
 denoised y (DEN), and ``arctan(·)`` of VAR = σ² (the variance of x's mean), SURE (Eq. 1), the
@@ -35,7 +35,7 @@ PAIRS = ((0, 1), (2, 3))  # input blocks exchanged by the swap: (HDR, DEN), (VAR
 
 def sure_maps(x: torch.Tensor, y: torch.Tensor, variance: torch.Tensor, divergence: torch.Tensor
               ) -> tuple[torch.Tensor, torch.Tensor]:
-    """``(SURE, (y − x)²)`` per pixel and channel (Eq. 1, :func:`mcbench.sure.sure_terms`)."""
+    """``(SURE, (y − x)²)`` per pixel and channel (Eq. 1, :func:`mcbench.filters.sure.sure_terms`)."""
     residual_sq = (y - x) ** 2
     return residual_sq + 2.0 * divergence - torch.clamp(variance, min=0.0), residual_sq
 

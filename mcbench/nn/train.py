@@ -5,7 +5,7 @@ network of a learned method module (``methods/<name>.py``, resolved from its nam
 core code never imports ``methods``) on training crops (:mod:`mcbench.nn.data`) and writes
 
 * ``weights_path`` -- ``{"arch": NETWORK, "state_dict": ...}`` (format and location:
-  :mod:`mcbench.weights`), loadable with ``torch.load(..., weights_only=True)``;
+  :mod:`mcbench.io.weights`), loadable with ``torch.load(..., weights_only=True)``;
 * ``record_path`` -- JSON: data, settings, loss, validation loss (overall and per validation
   scene), loss history, wall time, machine, torch version.
 
@@ -26,7 +26,7 @@ generator seeded ``(seed, s)``; the learning rate is a function of the step. A c
 the network, critic and optimiser states and the history, written atomically every
 ``checkpoint_every`` steps, so a killed run resumes from its last checkpoint and continues with
 the batches an uninterrupted run would have drawn. Checkpoints load through
-:func:`mcbench.weights.load_weights` (tensors only; a corrupt or hostile file is an error naming it).
+:func:`mcbench.io.weights.load_weights` (tensors only; a corrupt or hostile file is an error naming it).
 
 Adversarial training (MCGAN, Xu et al. 2019) uses a WGAN-GP critic (Gulrajani et al. 2017):
 critic loss ``D(fake) - D(real) + λ_GP (‖∇D(mix)‖ - 1)²``, generator loss
@@ -52,11 +52,11 @@ import numpy as np
 import torch
 
 from mcbench import BenchError
-from mcbench.io import read_json, write_json
+from mcbench.io.tables import read_json, write_json
 from mcbench.nn.data import CropSet, crop_paths, load_crops, sample_batch, validation_batches
 from mcbench.nn.losses import LOSSES
 from mcbench.progress import eta_seconds, progress_line
-from mcbench.weights import CHECKPOINT_KEYS, check_learned_method, load_weights, method_name, record_path, weights_path
+from mcbench.io.weights import CHECKPOINT_KEYS, check_learned_method, load_weights, method_name, record_path, weights_path
 
 DEFAULT_SETTINGS = {
     "steps": 4000,
@@ -347,7 +347,7 @@ def main(argv: list[str] | None = None, *, load_method: Callable[[str], ModuleTy
     name to its module (the caller's, e.g. ``methods.load_method``: core never imports ``methods``);
     ``load_data(name, crop_files, correlated_files)`` builds a learned combiner's training data
     (the crops with results of its ``CORRELATED_BASES`` under ``<data>/correlated/<base>/``)."""
-    parser = argparse.ArgumentParser(prog="python -m mcbench.steps",
+    parser = argparse.ArgumentParser(prog="python -m mcbench.pipeline.steps",
                                      description="Train a learned denoiser, or evaluate its committed weights.")
     parser.add_argument("command", choices=["train", "evaluate"])
     parser.add_argument("name", help="method module in methods/ (kpcn, mcgan, optix_ae, wskpn, ...)")
@@ -375,6 +375,6 @@ def main(argv: list[str] | None = None, *, load_method: Callable[[str], ModuleTy
             print(f"{args.name}: validation loss {result['loss']:.6f} (recorded {recorded:.6f}, "
                   f"ratio {result['loss'] / recorded:.4f}), relMSE {result['relmse']:.6f}")
     except BenchError as exc:
-        print(f"mcbench.steps: {exc}", file=sys.stderr)
+        print(f"mcbench.pipeline.steps: {exc}", file=sys.stderr)
         return 1
     return 0

@@ -11,15 +11,15 @@ Modules
 * :mod:`~mcbench.training_data.generator` -- :func:`random_scene`, the seeded scene generator
   (settings, objects, lights, camera), with :mod:`~mcbench.training_data.materials` (random
   BSDFs, NumPy textures) and :mod:`~mcbench.training_data.fibres` (hair/fur clumps of the fibre
-  family, seeds from :data:`mcbench.seeds.FIBRE_SEED_BASE`);
+  family, seeds from :data:`mcbench.render.seeds.FIBRE_SEED_BASE`);
 * :mod:`~mcbench.training_data.fingerprints` -- :func:`scene_fingerprint`, to test that no
   training scene is a test scene;
 * :mod:`~mcbench.training_data.examples` -- :func:`training_example`: renders (through the
-  public scene-dict API of :mod:`mcbench.render`) and disjoint crops (:func:`crop_boxes`).
+  public scene-dict API of :mod:`mcbench.render.renderer`) and disjoint crops (:func:`crop_boxes`).
 
 Render seeds (base seed 7, disjoint from every test render seed) and the scene seed families
-(:func:`mcbench.seeds.training_seeds`) are laid out in :mod:`mcbench.seeds`. The generator uses only the core
-building blocks :mod:`mcbench.geometry` and :mod:`mcbench.curves`, never ``scenes/``.
+(:func:`mcbench.render.seeds.training_seeds`) are laid out in :mod:`mcbench.render.seeds`. The generator uses only the core
+building blocks :mod:`mcbench.render.geometry` and :mod:`mcbench.render.curves`, never ``scenes/``.
 ``snakemake --cores 2 training_data`` renders the crops of the config's ``training:`` section
 (defaults in ``workflow/schemas/config.schema.yaml``).
 """

@@ -3,16 +3,16 @@
 Renders
 -------
 :func:`training_example` renders each noisy spp level with exactly the conventions of the test
-renders (:func:`mcbench.render.render_dict_buffers`: box filter, independent sampler,
+renders (:func:`mcbench.render.renderer.render_dict_buffers`: box filter, independent sampler,
 ``moment(aov(albedo, sh_normal, depth, path))``, the same pass splitting and float64 moment
 sums), plus a ``target_spp`` target (:func:`render_target`: mean colour and variance of that
 mean).
 
 Seeds
 -----
-Every pass gets a training render seed (:func:`mcbench.seeds.training_render_seed`; both bit
-layouts and why they are disjoint are in :mod:`mcbench.seeds`): base seed 7
-(:data:`mcbench.seeds.TRAINING_BASE_SEED`), which no config may use, so no training render
+Every pass gets a training render seed (:func:`mcbench.render.seeds.training_render_seed`; both bit
+layouts and why they are disjoint are in :mod:`mcbench.render.seeds`): base seed 7
+(:data:`mcbench.render.seeds.TRAINING_BASE_SEED`), which no config may use, so no training render
 shares a seed with a test render, nor with another training render. Within an example the
 noisy levels, their halves and the target are mutually independent. The scalar variant is
 refused (:func:`require_vector_variant`): its pixel seeds ``seed * W * H + ...`` wrap around
@@ -25,11 +25,11 @@ Crops
 -----
 ``crops_per_image`` crops of ``crop_size`` x ``crop_size`` pixels at seeded random positions,
 pairwise disjoint (:func:`crop_boxes`: rejection sampling, falling back to random cells of a
-tiling). Each crop holds ``<layer>_spp<N>`` for every layer of :data:`mcbench.buffers.ALL_LAYERS`
-(and of :data:`mcbench.buffers.BIN_LAYERS`, the four sample bins, for levels that are multiples
+tiling). Each crop holds ``<layer>_spp<N>`` for every layer of :data:`mcbench.io.buffers.ALL_LAYERS`
+(and of :data:`mcbench.io.buffers.BIN_LAYERS`, the four sample bins, for levels that are multiples
 of 4) and noisy level ``N``, plus ``target`` (H, W, 3) and ``target_variance`` (H, W, 3).
 ``snakemake training_data`` writes them as ``results/training/example_<seed>_<k>.exr``
-(:func:`mcbench.steps.write_training_example`).
+(:func:`mcbench.pipeline.steps.write_training_example`).
 """
 
 from __future__ import annotations
@@ -39,12 +39,12 @@ import time
 import numpy as np
 
 from mcbench import BenchError
-from mcbench.render import (forget_scene, moments_to_mean_variance, render_dict_buffers,
+from mcbench.render.renderer import (forget_scene, moments_to_mean_variance, render_dict_buffers,
                             render_scene_sums)
-from mcbench.seeds import training_render_seed
+from mcbench.render.seeds import training_render_seed
 from mcbench.training_data.fingerprints import scene_fingerprint
 from mcbench.training_data.generator import random_scene
-from mcbench.variants import pick_variant
+from mcbench.render.variants import pick_variant
 
 __all__ = ["CROP_SALT", "require_vector_variant", "render_target", "crop_boxes", "training_example"]
 
@@ -52,7 +52,7 @@ CROP_SALT = 0x0C509B0C          # mixed into the crop RNG so crop positions are 
 
 
 def require_vector_variant(variant: str = "auto") -> str:
-    """Set the Mitsuba variant (:func:`mcbench.variants.pick_variant`) and return it; raises
+    """Set the Mitsuba variant (:func:`mcbench.render.variants.pick_variant`) and return it; raises
     :class:`BenchError` (config key ``variant``) for scalar variants, whose pixel seeds cannot
     keep training renders disjoint from test renders."""
     variant = pick_variant(variant)
@@ -66,7 +66,7 @@ def render_target(desc: dict, spp: int, seed_of, *, key: str, variant: str = "au
                   ) -> tuple[np.ndarray, np.ndarray, list[int]]:
     """High-spp target of a scene dict: float32 mean colour (H, W, 3), variance of that mean
     (H, W, 3) and the seeds used (pass ``p`` seeded with ``seed_of(p)``; ``key`` as in
-    :func:`mcbench.render.render_scene_sums`)."""
+    :func:`mcbench.render.renderer.render_scene_sums`)."""
     sums, seeds = render_scene_sums(desc, int(spp), seed_of, key=key, variant=variant)
     mean, variance = moments_to_mean_variance(*sums["color"], int(spp))
     return mean.astype(np.float32), variance.astype(np.float32), seeds
@@ -110,10 +110,10 @@ def training_example(seed: int, spp_levels, target_spp: int, resolution, crop_si
     """Render training scene ``seed`` and cut it into crops.
 
     ``spp_levels``: noisy spp levels (powers of two >= 2), each rendered as full + half buffers
-    with every layer of :data:`mcbench.buffers.ALL_LAYERS` (render_buffers' conventions); ``target_spp``: spp of
+    with every layer of :data:`mcbench.io.buffers.ALL_LAYERS` (render_buffers' conventions); ``target_spp``: spp of
     the target (mean colour ``target`` and ``target_variance``, the variance of that mean);
     ``resolution``: ``(width, height)``. Render seeds come from :func:`training_render_seed`
-    (base seed 7, disjoint from all test render seeds -- see :mod:`mcbench.seeds`).
+    (base seed 7, disjoint from all test render seeds -- see :mod:`mcbench.render.seeds`).
 
     Returns ``crops_per_image`` pairs ``(layers, metadata)``: layers ``<layer>_spp<N>`` for
     every layer and level plus ``target`` and ``target_variance``, each cropped to

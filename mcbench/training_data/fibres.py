@@ -1,6 +1,6 @@
 """Clumps of thin fibres added to the fibre family of training scenes.
 
-Fibre scenes (seeds from :data:`mcbench.seeds.FIBRE_SEED_BASE`, 32768, on) draw the same kind
+Fibre scenes (seeds from :data:`mcbench.render.seeds.FIBRE_SEED_BASE`, 32768, on) draw the same kind
 of scene as the object family and then add 1-2 clumps of thin fibres
 (:func:`add_fibre_clumps`, from a second stream ``default_rng((FIBRE_SALT, seed))``): a fur
 ball (strands radiating from a core sphere), a tuft (strands growing up from a disc) or a
@@ -18,8 +18,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from mcbench.curves import curve_shape, hair_bsdf
-from mcbench.geometry import rgb
+from mcbench.render.curves import curve_shape, hair_bsdf
+from mcbench.render.geometry import rgb
 from mcbench.training_data.materials import random_material
 
 __all__ = ["FIBRE_SALT", "FIBRE_REFERENCE_WIDTH", "add_fibre_clumps"]

@@ -14,10 +14,10 @@
   lens with random aperture focused on one object in 30 % of the scenes;
 * a ``path`` integrator with ``max_depth`` in 4..16.
 
-Seeds from :data:`mcbench.seeds.FIBRE_SEED_BASE` on are fibre scenes: the same draw plus
+Seeds from :data:`mcbench.render.seeds.FIBRE_SEED_BASE` on are fibre scenes: the same draw plus
 clumps of thin fibres (:mod:`mcbench.training_data.fibres`).
 
-Only the core building blocks :mod:`mcbench.geometry` and :mod:`mcbench.curves` are used, never
+Only the core building blocks :mod:`mcbench.render.geometry` and :mod:`mcbench.render.curves` are used, never
 a test scene of ``scenes/``.
 """
 
@@ -26,13 +26,13 @@ from __future__ import annotations
 import numpy as np
 
 from mcbench import BenchError
-from mcbench.geometry import (gradient_sky, lathe, mesh_from_arrays, perspective_sensor, quad,
+from mcbench.render.geometry import (gradient_sky, lathe, mesh_from_arrays, perspective_sensor, quad,
                               thinlens_sensor, torus)
-from mcbench.seeds import MAX_TRAINING_SEED, is_fibre_seed
+from mcbench.render.seeds import MAX_TRAINING_SEED, is_fibre_seed
 from mcbench.training_data.fibres import FIBRE_SALT, add_fibre_clumps
 from mcbench.training_data.materials import (color_or_texture, light_color, random_material,
                                              two_sided)
-from mcbench.variants import pick_variant
+from mcbench.render.variants import pick_variant
 
 __all__ = ["SCENE_SALT", "random_scene"]
 

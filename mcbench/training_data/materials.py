@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from mcbench.geometry import bitmap_texture, rgb
+from mcbench.render.geometry import bitmap_texture, rgb
 
 __all__ = ["METALS", "texture_array", "color_or_texture", "random_material", "two_sided",
            "light_color"]

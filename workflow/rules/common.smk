@@ -11,14 +11,14 @@ from pathlib import Path
 sys.path.insert(0, str(Path(workflow.basedir)))  # methods/, scenes/, mcbench/ from a checkout
 
 from mcbench import BenchError  # noqa: E402
-from mcbench.comparisons import comparison_role  # noqa: E402
-from mcbench.config import config_digest, resolve_config  # noqa: E402
-from mcbench.metrics import ALL_METRICS  # noqa: E402
-from mcbench.pool import POOL  # noqa: E402
-from mcbench.study_figures import STUDY_FIGURES as STUDY_FIGURE_KEYS, curve_candidates, paper_recommended  # noqa: E402
-from mcbench.resources import JobCost, estimate_job, job_request, load_job_costs  # noqa: E402
-from mcbench.seeds import training_seeds  # noqa: E402
-from mcbench.weights import COMMITTED_WEIGHTS, is_learned_method  # noqa: E402
+from mcbench.analysis.comparisons import comparison_role  # noqa: E402
+from mcbench.pipeline.config import config_digest, resolve_config  # noqa: E402
+from mcbench.analysis.metrics import ALL_METRICS  # noqa: E402
+from mcbench.analysis.pool import POOL  # noqa: E402
+from mcbench.analysis.study_figures import STUDY_FIGURES as STUDY_FIGURE_KEYS, curve_candidates, paper_recommended  # noqa: E402
+from mcbench.pipeline.resources import JobCost, estimate_job, job_request, load_job_costs  # noqa: E402
+from mcbench.render.seeds import training_seeds  # noqa: E402
+from mcbench.io.weights import COMMITTED_WEIGHTS, is_learned_method  # noqa: E402
 from methods import NOISY, NOISY_LABEL, config_method_table, load_method  # noqa: E402
 from scenes import available_scenes, load_scene  # noqa: E402
 
@@ -43,7 +43,7 @@ SCENES = list(config["scenes"])
 SPPS = sorted(config["spp"])
 CANDIDATES = list(METHODS)
 # The ranking pool. With study.pool: exactly the 39 candidates of Zheng et al. Sec. 5.3.1 the
-# config runs (mcbench.pool), in ID order; otherwise every candidate but the comparison methods
+# config runs (mcbench.analysis.pool), in ID order; otherwise every candidate but the comparison methods
 # of Sec. 5.2 (one-hot selection, naive averages, ablations; ranked in comparisons.smk). Every
 # other method is an extra, scored in a pool that adds it alone (rule extras_table).
 POOL_STUDY = config["study"]["pool"]
@@ -55,7 +55,7 @@ EXTRAS = [name for name in CANDIDATES if name not in RANKED]
 POOL_NOTE = ("" if not POOL_STUDY else
              "Rows: the 39 candidates of Zheng et al. 2021 Sec. 5.3.1 in ID order (40 entries with the noisy "
              "input, as the paper's Table 3); ensembles marked (filled) or (forced) are our choice of the "
-             "members the paper does not name (mcbench.pool)." if len(RANKED) == len(POOL) else
+             "members the paper does not name (mcbench.analysis.pool)." if len(RANKED) == len(POOL) else
              f"Partial pool: {len(RANKED)} of the 39 candidates (study.ensembles), {len(RANKED) + 1} entries "
              f"with the noisy input, so the scores are on another scale than the paper's 40-entry Table 3.")
 # progressive denoising's entries (combiners of module progressive) -> the method each mixes with
@@ -131,7 +131,7 @@ def batch_inputs(batch):
 
 
 def batch_entries(batch):
-    """Params function: the ``mcbench.steps.run_methods`` entries of a batch's methods in one case."""
+    """Params function: the ``mcbench.pipeline.steps.run_methods`` entries of a batch's methods in one case."""
 
     def entries(wildcards):
         return [{"name": name, "module": METHODS[name]["module"], "params": METHODS[name]["params"],
@@ -298,7 +298,7 @@ def training_crop_files():
     return expand(rules.training_example.output, seed=TRAINING_SEEDS)
 
 
-# Cluster resources (mcbench.resources): every rule's jobs declare mem_mb and runtime (minutes)
+# Cluster resources (mcbench.pipeline.resources): every rule's jobs declare mem_mb and runtime (minutes)
 # from the costs fitted to measured benchmark records (workflow/resources/job_costs.yaml, by
 # `python benchmarks/job_costs.py`), scaled with the job's pixels, methods and samples; a local
 # run ignores them unless --resources limits them. A retry (--retries) asks for `attempt` times
@@ -324,7 +324,7 @@ def case_entries(wildcards=None):
 
 
 def _job_size(rule_name, wildcards):
-    """``(pixels, entries, spp)`` of one job of rule ``rule_name`` (mcbench.resources' cost model)."""
+    """``(pixels, entries, spp)`` of one job of rule ``rule_name`` (mcbench.pipeline.resources' cost model)."""
     scene = getattr(wildcards, "scene", None)
     pixels = scene_pixels(scene) if scene else 0
     if rule_name == "render_noisy":

@@ -27,7 +27,7 @@ rule case_metrics:
 
 
 # One table of every error; every case must hold every candidate and metric with a finite value
-# (mcbench.ranking.check_complete), or the run stops naming the case file.
+# (mcbench.analysis.ranking.check_complete), or the run stops naming the case file.
 rule gather_metrics:
     localrule: True
     input:

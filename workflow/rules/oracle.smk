@@ -1,9 +1,9 @@
 # Weights from ground-truth statistics (Zheng et al. 2021 Sec. 5.2.7, Fig. 11): one configured
-# scene rendered oracle.repetitions + 1 times at oracle.spp (mcbench.steps_oracle), its base
+# scene rendered oracle.repetitions + 1 times at oracle.spp (mcbench.pipeline.oracle), its base
 # denoisers' true MSE matrices against the harness's reference, the weights solved from them
 # next to the dual-buffer estimate's.
 
-from mcbench.steps_oracle import oracle_size, usable_downscale  # noqa: E402
+from mcbench.pipeline.oracle import oracle_size, usable_downscale  # noqa: E402
 
 ORACLE = config["oracle"]
 # the scene: oracle.scene, or the config's first scene when null (the default)

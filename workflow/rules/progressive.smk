@@ -1,10 +1,10 @@
-# Progressive denoising (Firmino et al. 2022; methods/progressive.py, mcbench.progressive_tables,
-# mcbench.steps_progressive): with at least one combiner of module `progressive` in the config,
+# Progressive denoising (Firmino et al. 2022; methods/progressive.py, mcbench.analysis.progressive_tables,
+# mcbench.pipeline.progressive): with at least one combiner of module `progressive` in the config,
 # its consistency over the test cases (each case's relMSE against the noisy input's, per spp),
 # per-spp errors and added time beside each entry's input, and one scene rendered up to
 # progressive_curve.spp (8192 by default) with its base, progressive and noisy curves.
 
-from mcbench.steps_oracle import usable_downscale  # noqa: E402
+from mcbench.pipeline.oracle import usable_downscale  # noqa: E402
 
 PROGRESSIVE_DIR = f"{RESULTS}/tables/progressive"
 PROGRESSIVE_CURVE = config["progressive_curve"]

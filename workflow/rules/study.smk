@@ -1,4 +1,4 @@
-# The 39-candidate study of Zheng et al. 2021 Sec. 5.3 (mcbench.study, mcbench.study_figures):
+# The 39-candidate study of Zheng et al. 2021 Sec. 5.3 (mcbench.analysis.study, mcbench.analysis.study_figures):
 # the pool's scores beside the paper's Table 3, recommendations derived from the data with their
 # stability under scene resampling, the paper's findings with verdicts, bootstrap intervals, and
 # the study's figures (error and score curves, score against size, speed against score, equal

@@ -4,8 +4,8 @@ os.environ.setdefault("NUMBA_NUM_THREADS", str(snakemake.threads))
 os.environ.setdefault("OMP_NUM_THREADS", str(snakemake.threads))
 os.environ["MCBENCH_WEIGHTS_DIR"] = os.path.abspath(snakemake.params.weights_dir)
 
-from mcbench.logs import run_logged  # noqa: E402
-from mcbench.steps_oracle import run_oracle_study  # noqa: E402
+from mcbench.pipeline.logs import run_logged  # noqa: E402
+from mcbench.pipeline.oracle import run_oracle_study  # noqa: E402
 
 params = snakemake.params
 run_logged(snakemake.log[0], run_oracle_study, snakemake.wildcards.scene, snakemake.input.reference,

@@ -6,9 +6,9 @@ if snakemake.rule == "progressive_curve":
     os.environ.setdefault("OMP_NUM_THREADS", str(snakemake.threads))
     os.environ["MCBENCH_WEIGHTS_DIR"] = os.path.abspath(snakemake.params.weights_dir)
 
-from mcbench.logs import run_logged  # noqa: E402
-from mcbench.steps import write_progressive_tables  # noqa: E402
-from mcbench.steps_progressive import run_consistency_curve  # noqa: E402
+from mcbench.pipeline.logs import run_logged  # noqa: E402
+from mcbench.pipeline.steps import write_progressive_tables  # noqa: E402
+from mcbench.pipeline.progressive import run_consistency_curve  # noqa: E402
 
 params = snakemake.params
 if snakemake.rule == "progressive_curve":

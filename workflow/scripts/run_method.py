@@ -4,8 +4,8 @@ os.environ.setdefault("NUMBA_NUM_THREADS", str(snakemake.threads))
 os.environ.setdefault("OMP_NUM_THREADS", str(snakemake.threads))          # PyTorch's intra-op threads
 os.environ["MCBENCH_WEIGHTS_DIR"] = os.path.abspath(snakemake.params.weights_dir)
 
-from mcbench.logs import run_logged  # noqa: E402
-from mcbench.steps import run_method  # noqa: E402
+from mcbench.pipeline.logs import run_logged  # noqa: E402
+from mcbench.pipeline.steps import run_method  # noqa: E402
 
 spec = snakemake.params.spec
 run_logged(snakemake.log[0], run_method, snakemake.wildcards.method, snakemake.input.render,

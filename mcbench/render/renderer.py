@@ -13,7 +13,7 @@ from pooled sums ``S1, S2`` over ``N`` samples
 
 (the unbiased sample variance divided by ``N``). Tiny negative values from rounding are set to 0.
 Each buffer or chunk is split into passes of at most :data:`MAX_WAVEFRONT` samples
-(:func:`passes_for`); every pass has its own 32-bit seed, laid out in :mod:`mcbench.seeds`
+(:func:`passes_for`); every pass has its own 32-bit seed, laid out in :mod:`mcbench.render.seeds`
 (which also maps a seed to the one handed to Mitsuba in scalar variants).
 
 What is rendered
@@ -22,7 +22,7 @@ The renderer never looks up a scene by name (core does not import ``scenes/``): 
 
 * a scene *module* (``DESCRIPTION``, ``CATEGORY``, ``RESOLUTION``, ``build(width, height)``, see
   ``scenes/__init__.py``) to :func:`render_buffers` and :func:`render_reference_chunk`, which
-  use the test render seeds of :func:`mcbench.seeds.render_seed`; or
+  use the test render seeds of :func:`mcbench.render.seeds.render_seed`; or
 * a Mitsuba scene *dict* (integrator and sensor included) with a caller-chosen ``key`` and
   seeds to :func:`render_dict_buffers` (noisy full/A/B buffers) or :func:`render_scene_sums`
   (float64 moment sums of one run of passes); the training data uses these.
@@ -43,10 +43,10 @@ from typing import Callable
 import numpy as np
 
 from mcbench import BenchError
-from mcbench.buffers import ALL_LAYERS, BINS
+from mcbench.io.buffers import ALL_LAYERS, BINS
 from mcbench.progress import eta_seconds, progress_line
-from mcbench.seeds import SCALAR_BLOCK_SIZE, mitsuba_seed, render_seed
-from mcbench.variants import pick_variant, set_threads
+from mcbench.render.seeds import SCALAR_BLOCK_SIZE, mitsuba_seed, render_seed
+from mcbench.render.variants import pick_variant, set_threads
 
 __all__ = ["RenderError", "MAX_WAVEFRONT", "passes_for", "load_scene_dict", "forget_scene",
            "render_scene_sums", "render_dict_buffers", "render_buffers", "render_reference_chunk",
@@ -242,7 +242,7 @@ def render_scene_sums(desc: dict, spp: int, seed_of: SeedOfPass, *, key: str,
 def _half_buffers(label: str, scene_object, spp: int, seed_of: SeedOfBinPass, variant: str,
                   width: int, height: int) -> tuple[dict[str, np.ndarray], list[int], list[int]]:
     """Layers of :data:`ALL_LAYERS` from half buffers A and B of ``spp/2`` samples each (plus
-    :data:`mcbench.buffers.BIN_LAYERS` when ``spp`` is a multiple of 4: each half is then rendered as two bins of
+    :data:`mcbench.io.buffers.BIN_LAYERS` when ``spp`` is a multiple of 4: each half is then rendered as two bins of
     ``spp/4`` samples, bin ``j`` of half ``h`` seeded ``seed_of(h, j, p)``), and the seeds of A and
     of B."""
     half_spp = spp // 2
@@ -267,7 +267,7 @@ def render_dict_buffers(desc: dict, spp: int, seed_of: SeedOfHalfPass, *, key: s
     the 32-bit seed of each pass of bin 0/1 of half 0 (A) and 1 (B) (bin 0 only when spp is not a
     multiple of 4); ``key`` names the scene in errors and in the scene cache
     (:func:`forget_scene`). Returns the float32 layers of :data:`ALL_LAYERS` and, for spp a
-    multiple of 4, :data:`mcbench.buffers.BIN_LAYERS` (see :func:`buffers_from_bin_sums`), and the seeds used
+    multiple of 4, :data:`mcbench.io.buffers.BIN_LAYERS` (see :func:`buffers_from_bin_sums`), and the seeds used
     (A's, then B's).
     """
     spp = _even_spp(spp, key)
@@ -331,11 +331,11 @@ def render_buffers(scene_module: ModuleType, spp: int, *, resolution: tuple[int,
 
     ``scene_module``: the scene module (``scenes.load_scene(name)``; its name is the module's last
     component); ``resolution``: ``(width, height)``, default the module's ``RESOLUTION``;
-    ``seed``: the config's global seed (:func:`mcbench.seeds.render_seed`).
+    ``seed``: the config's global seed (:func:`mcbench.render.seeds.render_seed`).
 
     For spp a multiple of 4 each half is rendered as two sample bins of spp/4 (layers
-    :data:`mcbench.buffers.BIN_LAYERS`; A = bins 0-1, B = bins 2-3). Returns float32 layers for
-    every name in :data:`mcbench.buffers.ALL_LAYERS` (and the bins): ``color*``
+    :data:`mcbench.io.buffers.BIN_LAYERS`; A = bins 0-1, B = bins 2-3). Returns float32 layers for
+    every name in :data:`mcbench.io.buffers.ALL_LAYERS` (and the bins): ``color*``
     (H, W, 3) linear radiance, ``variance*`` (H, W, 3) variance of the mean, ``albedo*``,
     ``normal*`` (H, W, 3), ``depth*`` (H, W) and their ``*_variance`` layers; the full-image
     versions are ``(A + B) / 2`` and the variances from the pooled moments of all spp samples.
@@ -408,7 +408,7 @@ def _pooled(first: dict, second: dict) -> dict:
 
 
 def buffers_from_bin_sums(bin_sums: list[dict], bin_spp: int) -> dict[str, np.ndarray]:
-    """Float32 layers of :data:`ALL_LAYERS` and :data:`mcbench.buffers.BIN_LAYERS` from the moment sums of four
+    """Float32 layers of :data:`ALL_LAYERS` and :data:`mcbench.io.buffers.BIN_LAYERS` from the moment sums of four
     sample bins of ``bin_spp`` samples each (bins 0-1 make half buffer A, bins 2-3 make B).
 
     ``color_bin{j}`` is the bin's mean and ``variance_bin{j}`` the variance of that mean; with one

@@ -1,12 +1,12 @@
 """The oracle study's step (Zheng et al. 2021 Sec. 5.2.7, Fig. 11): weights from ground-truth
-statistics next to the dual-buffer estimate. Like :mod:`mcbench.steps` it resolves scene and
-method names (plugins); the maths is :mod:`mcbench.oracle`.
+statistics next to the dual-buffer estimate. Like :mod:`mcbench.pipeline.steps` it resolves scene and
+method names (plugins); the maths is :mod:`mcbench.combine.oracle`.
 
 One test scene is rendered ``repetitions + 1`` times at ``spp`` with the oracle seeds of
-:func:`mcbench.seeds.oracle_render_seed` (repetition r, halves A and B as every render: the
+:func:`mcbench.render.seeds.oracle_render_seed` (repetition r, halves A and B as every render: the
 dual-buffer estimate needs them), at the harness's resolution divided by ``downscale``; the
 ground truth is the harness's reference averaged over ``downscale`` x ``downscale`` blocks
-(:func:`mcbench.oracle.block_average`). The base denoisers run on every repetition; the first
+(:func:`mcbench.combine.oracle.block_average`). The base denoisers run on every repetition; the first
 ``repetitions`` feed the MSE matrices M (full-buffer outputs, Eq. 7) and M^half (half-buffer
 outputs, Eq. 15, two samples per repetition), the last one is held out: the weights solved
 from M and M^half and the three dual-buffer combiners run on it give the nine panels of
@@ -26,14 +26,15 @@ import numpy as np
 import pandas as pd
 
 from mcbench import BenchError
-from mcbench.buffers import Denoised, RenderBuffers
-from mcbench.exr import check_finite, read_layers
-from mcbench.io import write_csv, write_text
-from mcbench.oracle import (MseMatrixAccumulator, block_average, error_table, one_hot_weights, simplex_weights,
-                            table_markdown, unconstrained_weights, weight_maps_figure)
+from mcbench.io.buffers import Denoised, RenderBuffers
+from mcbench.io.exr import check_finite, read_layers
+from mcbench.io.tables import write_csv, write_text
+from mcbench.analysis.oracle_tables import error_table, table_markdown, weight_maps_figure
+from mcbench.combine.oracle import (MseMatrixAccumulator, block_average, one_hot_weights, simplex_weights,
+                                    unconstrained_weights)
 from mcbench.progress import eta_seconds, progress_line
-from mcbench.seeds import oracle_render_seed
-from mcbench.selection import blend
+from mcbench.render.seeds import oracle_render_seed
+from mcbench.combine.selection import blend
 
 NOISY = "noisy"
 GROUND_TRUTH = {"full": "M (full buffers, Eq. 7)", "half": "M^half (half buffers, Eq. 15)"}
@@ -93,8 +94,8 @@ def run_oracle_study(scene: str, reference_path: str, *, table_csv: str, table_m
     render and each base denoiser (panel ``-``), errors against the block-averaged reference.
     """
     from methods import load_method
-    from mcbench.render import render_dict_buffers
-    from mcbench.variants import pick_variant, set_threads
+    from mcbench.render.renderer import render_dict_buffers
+    from mcbench.render.variants import pick_variant, set_threads
     from scenes import load_scene
 
     started = time.perf_counter()

@@ -186,7 +186,7 @@ def format_latex(table: pd.DataFrame, labels: dict[str, str] | None = None, *, c
             cells.append(rf"\textbf{{{number}}}" if best.loc[candidate, column] else number)
         rows.append("    " + " & ".join(cells) + r" \\")
     lines = [
-        r"% Requires \usepackage{booktabs}. Written by mcbench (mcbench.ranking.format_latex).",
+        r"% Requires \usepackage{booktabs}. Written by mcbench (mcbench.analysis.ranking.format_latex).",
         r"\begin{table}",
         r"  \centering",
         rf"  \caption{{{latex_escape(caption)}}}",

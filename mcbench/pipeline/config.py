@@ -26,7 +26,7 @@ from mcbench import BenchError
 __all__ = ["SCHEMA_PATH", "ConfigError", "load_schema", "schema_defaults", "resolve_config",
            "read_config_file", "key_path", "config_digest"]
 
-SCHEMA_PATH = Path(__file__).resolve().parents[1] / "workflow" / "schemas" / "config.schema.yaml"
+SCHEMA_PATH = Path(__file__).resolve().parents[2] / "workflow" / "schemas" / "config.schema.yaml"
 
 
 class ConfigError(BenchError):

@@ -39,9 +39,9 @@ import numpy as np
 import pandas as pd
 
 from mcbench import BenchError
-from mcbench.io import read_table, write_csv, write_text
-from mcbench.metrics import METRIC_LABELS
-from mcbench.ranking import format_markdown, ranking_table
+from mcbench.io.tables import read_table, write_csv, write_text
+from mcbench.analysis.metrics import METRIC_LABELS
+from mcbench.analysis.ranking import format_markdown, ranking_table
 
 __all__ = ["ENSEMBLE_DEFAULTS", "ABLATIONS", "ONE_HOT_VARIANTS", "PAPER_AVG", "CLAIMS", "ensemble_changes",
            "comparison_role", "find_comparisons", "metric_values", "beats_cases", "beats_table",
@@ -355,7 +355,7 @@ def ablation_markdown(table: pd.DataFrame, cases: pd.DataFrame, *, labels: dict[
 
 def comparison_ranking(metrics: pd.DataFrame, methods: dict[str, dict], metric: str, *, noisy: str | None = "noisy",
                        source: str = "metrics") -> pd.DataFrame:
-    """Score-and-rank table (:func:`mcbench.ranking.ranking_table`) of every comparison method
+    """Score-and-rank table (:func:`mcbench.analysis.ranking.ranking_table`) of every comparison method
     (:func:`comparison_role` not None), the full ensembles of their input sets and the noisy
     input, with columns role and compared_with (the full ensembles of the same input set) first.
     Empty (no rows) when the config has no comparison method."""

@@ -30,7 +30,7 @@ from typing import Callable
 import numpy as np
 
 from mcbench import BenchError
-from mcbench.exr import check_finite, read_layers, read_metadata
+from mcbench.io.exr import check_finite, read_layers, read_metadata
 
 BUFFER_SUFFIXES = {"full": "", "a": "_a", "b": "_b"}
 QUANTITIES = ("color", "variance", "albedo", "normal", "depth",
@@ -130,7 +130,7 @@ class RenderBuffers:
         layers = read_layers(path)
         missing = [n for n in REQUIRED_LAYERS if n not in layers]
         if missing:
-            from mcbench.exr import ExrError
+            from mcbench.io.exr import ExrError
             raise ExrError(f"{path}: not a render file, missing layer(s) {missing}")
         check_finite(path, layers)
         meta = read_metadata(path)
@@ -177,7 +177,7 @@ class Denoised:
         layers = read_layers(path) if extras else read_layers(path, ["color", "color_a", "color_b"])
         missing = [n for n in ("color", "color_a", "color_b") if n not in layers]
         if missing:
-            from mcbench.exr import ExrError
+            from mcbench.io.exr import ExrError
             raise ExrError(f"{path}: not a method output, missing layer(s) {missing}")
         check_finite(path, layers)
         extras = {k: v for k, v in layers.items() if k not in ("color", "color_a", "color_b")}

@@ -27,10 +27,10 @@ differs per candidate and does matter in Eq. 37.
 Pre-filters of the MSE maps (optional)
 --------------------------------------
 * :func:`prefilter_mse_nl_means` -- NFOR's MSE filter (Bitterli et al. 2016 Sec. 5.3): NL-means
-  of :mod:`mcbench.nlmeans` guided by the noisy full colour and its variance, 19 x 19 window,
+  of :mod:`mcbench.filters.nlmeans` guided by the noisy full colour and its variance, 19 x 19 window,
   3 x 3 patches, k = 1, alpha = 1 (:data:`NFOR_MSE_FILTER`, the constants of ``methods/nfor.py``).
 * :func:`prefilter_mse_bilateral` -- the cross-bilateral filter of SBF (Li et al. 2012): the
-  kernel of :mod:`mcbench.bilateral` (spatial x variance-normalised colour distance, Eq. 33,
+  kernel of :mod:`mcbench.filters.bilateral` (spatial x variance-normalised colour distance, Eq. 33,
   which Zheng et al. take from Li et al., x features) guided by the *noisy* full colour with its
   variance and the albedo and normal. Neither Zheng et al. nor our reading of SBF give numbers
   for filtering MSE maps, so :data:`SBF_MSE_FILTER` takes the Sec. 4.2 values (radius 7,
@@ -51,8 +51,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from mcbench.bilateral import cross_bilateral_filter
-from mcbench.nlmeans import nl_means_filter
+from mcbench.filters.bilateral import cross_bilateral_filter
+from mcbench.filters.nlmeans import nl_means_filter
 
 __all__ = ["NFOR_MSE_FILTER", "SBF_MSE_FILTER", "POST_FILTER", "half_buffer_mse", "full_buffer_mse",
            "estimate_mse_maps", "prefilter_mse_nl_means", "prefilter_mse_bilateral",
@@ -147,7 +147,7 @@ def prefilter_mse_nl_means(maps: list, color, variance, *, radius: int = NFOR_MS
                            patch_radius: int = NFOR_MSE_FILTER["patch_radius"],
                            k: float = NFOR_MSE_FILTER["k"], alpha: float = NFOR_MSE_FILTER["alpha"],
                            epsilon: float = NFOR_MSE_FILTER["epsilon"]) -> list[np.ndarray]:
-    """NFOR's MSE pre-filter: NL-means (:func:`mcbench.nlmeans.nl_means_filter`) of every map in
+    """NFOR's MSE pre-filter: NL-means (:func:`mcbench.filters.nlmeans.nl_means_filter`) of every map in
     ``maps`` (each (N, H, W, C)) with one set of weights from ``color`` (H, W, C) and its
     ``variance``. Defaults: :data:`NFOR_MSE_FILTER`. Returns the filtered maps, float64."""
     stacked, shapes = _as_channels(list(maps))
@@ -163,7 +163,7 @@ def prefilter_mse_bilateral(maps: list, color, variance, albedo, normal, *,
                             sigma_albedo: float = SBF_MSE_FILTER["sigma_albedo"],
                             sigma_normal: float = SBF_MSE_FILTER["sigma_normal"]) -> list[np.ndarray]:
     """SBF-style MSE pre-filter: one cross-bilateral kernel per pixel
-    (:func:`mcbench.bilateral.cross_bilateral_filter`, Eq. 32-33) guided by the noisy ``color``
+    (:func:`mcbench.filters.bilateral.cross_bilateral_filter`, Eq. 32-33) guided by the noisy ``color``
     (H, W, C) with its ``variance`` and by ``albedo``, ``normal`` (H, W, 3), applied to every map
     in ``maps`` (each (N, H, W, C)). Defaults: :data:`SBF_MSE_FILTER`. Returns float64 maps."""
     stacked, shapes = _as_channels(list(maps))

@@ -3,7 +3,7 @@ the authors' public code puts around it (a Gaussian blur of the guide variance, 
 removal: :func:`gaussian_blur`, :func:`remove_outliers`).
 
 Used by the ensemble's weight-map filter (``methods/ensemble.py``), the one-hot selection's
-filters (``mcbench/selection.py``) and the joint-bilateral base denoiser. All maps share one
+filters (``mcbench/combine/selection.py``) and the joint-bilateral base denoiser. All maps share one
 kernel per pixel:
 
     kappa(p, q) = exp(-|p - q|^2 / (2 sigma_s^2))                       (spatial)

@@ -3,8 +3,8 @@ levels up to high spp (8192 by default), the errors of the noisy render, of the 
 of progressive denoising (PD, ``methods/progressive.py``) over that base and of the base bounded
 by the t-test alone, against spp. PD is built to be *consistent*: its error converges to the noisy
 render's as spp grows and is never much worse, whatever the base's bias. Like
-:mod:`mcbench.steps_oracle` it resolves scene and method names (plugins); the maths is in
-``methods/progressive.py`` and :mod:`mcbench.sure`.
+:mod:`mcbench.pipeline.oracle` it resolves scene and method names (plugins); the maths is in
+``methods/progressive.py`` and :mod:`mcbench.filters.sure`.
 
 Choices:
 
@@ -12,16 +12,16 @@ Choices:
   scene's ``RESOLUTION``) divided by ``downscale`` (config ``progressive_curve.downscale``, 2 by
   default), as the oracle study does: four times fewer pixels make the 8192-spp render affordable.
   The ground truth is the harness's reference averaged over ``downscale`` x ``downscale`` blocks
-  (:func:`mcbench.oracle.block_average`: with the box pixel filter the block mean is the reference
+  (:func:`mcbench.combine.oracle.block_average`: with the box pixel filter the block mean is the reference
   of the same camera at the lower resolution). The reference must be much less noisy than the
   top level, or the top of the curve measures the reference's noise: cornell_box's 65536-spp
   reference of an earlier 128x128 run, averaged 2 x 2, is worth 262144 spp at the curve's 64x64,
   32x the top level (the default config's 16384-spp references are worth 65536 spp, 8x). The
   reference's own noise floor (:func:`reference_floor`, the relMSE a perfect image would show)
   is written in the Markdown and drawn dashed in the figure, and ``relmse_corrected`` removes it
-  (:func:`mcbench.metrics.relmse_corrected` with the block mean's variance, see
+  (:func:`mcbench.analysis.metrics.relmse_corrected` with the block mean's variance, see
   :func:`block_reference`).
-* **Seeds.** Every level has its own seed stream, :func:`mcbench.seeds.progressive_curve_seed`
+* **Seeds.** Every level has its own seed stream, :func:`mcbench.render.seeds.progressive_curve_seed`
   (level ``i`` of the sorted levels; halves A and B and their sample bins as every render),
   disjoint from the test renders', reference chunks', oracle renders' and training renders'.
   Each level is an independent render (not the first samples of the next level's), so the
@@ -58,16 +58,17 @@ import numpy as np
 import pandas as pd
 
 from mcbench import BenchError
-from mcbench.buffers import RenderBuffers
-from mcbench.exr import ExrError, check_finite, read_layers
-from mcbench.figures import pyplot_agg, save_figure
-from mcbench.io import write_csv, write_text
-from mcbench.metrics import relmse, relmse_corrected, smape
-from mcbench.oracle import block_average, table_markdown
+from mcbench.io.buffers import RenderBuffers
+from mcbench.io.exr import ExrError, check_finite, read_layers
+from mcbench.analysis.figures import pyplot_agg, save_figure
+from mcbench.io.tables import write_csv, write_text
+from mcbench.analysis.metrics import relmse, relmse_corrected, smape
+from mcbench.analysis.oracle_tables import table_markdown
+from mcbench.combine.oracle import block_average
 from mcbench.progress import eta_seconds, progress_line
-from mcbench.reports import reference_relmse_floor
-from mcbench.seeds import MAX_PROGRESSIVE_CURVE_LEVELS, MAX_PROGRESSIVE_CURVE_PASSES, progressive_curve_seed
-from mcbench.steps_oracle import oracle_size
+from mcbench.analysis.reports import reference_relmse_floor
+from mcbench.render.seeds import MAX_PROGRESSIVE_CURVE_LEVELS, MAX_PROGRESSIVE_CURVE_PASSES, progressive_curve_seed
+from mcbench.pipeline.oracle import oracle_size
 
 NOISY = "noisy"
 COLUMNS = ("spp", "entry", "label", "relmse", "relmse_corrected", "smape", "seconds")
@@ -102,7 +103,7 @@ def check_spp_levels(spp_levels) -> list[int]:
 
 
 def curve_size(resolution, scene_resolution, downscale: int) -> tuple[int, int]:
-    """``(width, height)`` of the curve's renders (:func:`mcbench.steps_oracle.oracle_size`, the
+    """``(width, height)`` of the curve's renders (:func:`mcbench.pipeline.oracle.oracle_size`, the
     error naming ``progressive_curve.downscale``)."""
     try:
         return oracle_size(resolution, scene_resolution, downscale)
@@ -117,7 +118,7 @@ def block_reference(reference_path: str, width: int, height: int, downscale: int
 
     The reference must have the harness's resolution ``(width * downscale, height * downscale)``
     and finite ``color`` (and ``variance``) layers. Its ``variance`` layer holds each pixel's
-    variance of the mean v_i (as :func:`mcbench.steps.compute_case_metrics` reads it for
+    variance of the mean v_i (as :func:`mcbench.pipeline.steps.compute_case_metrics` reads it for
     ``relmse_corrected``). The pixels of a block are independent estimates (their samples are), so
     the variance of the block mean m = (1/f²) Σ r_i over the f² pixels (f = ``downscale``) is
 
@@ -147,7 +148,7 @@ def block_reference(reference_path: str, width: int, height: int, downscale: int
 
 
 def reference_floor(mu: np.ndarray, variance: np.ndarray | None) -> float | None:
-    """The reference's relMSE noise floor, mean of Var / (μ² + 0.01) (:func:`mcbench.reports.reference_relmse_floor`):
+    """The reference's relMSE noise floor, mean of Var / (μ² + 0.01) (:func:`mcbench.analysis.reports.reference_relmse_floor`):
     the relMSE a perfect image would show against it; None without a variance."""
     return None if variance is None else reference_relmse_floor(mu, variance)
 
@@ -256,8 +257,8 @@ def run_consistency_curve(scene: str, reference_path: str, *, table_csv: str, ta
     ``smape``, ``seconds``; entries :func:`entry_names` (module docstring).
     """
     from methods import NOISY_LABEL, load_method
-    from mcbench.render import load_scene_dict, passes_for, render_dict_buffers
-    from mcbench.variants import pick_variant, set_threads
+    from mcbench.render.renderer import load_scene_dict, passes_for, render_dict_buffers
+    from mcbench.render.variants import pick_variant, set_threads
     from scenes import load_scene
 
     started = time.perf_counter()

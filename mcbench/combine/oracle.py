@@ -15,7 +15,7 @@ From a matrix (any PSD N x N per pixel-channel, not the 2-D geometry of the ense
 dual-buffer problems) three weight maps are solved:
 
 * :func:`one_hot_weights` -- 1 for the output of least MSE (the diagonal), ties to the lowest
-  index (:func:`mcbench.selection.one_hot_selection`);
+  index (:func:`mcbench.combine.selection.one_hot_selection`);
 * :func:`unconstrained_weights` -- min w^T M w subject to sum w = 1 (Eq. 5-6 without w >= 0;
   Eq. 19's M^-1 1 / 1^T M^-1 1 when M is non-singular): with Q an orthonormal basis of the
   plane sum w = 0 and w = 1/N + Q v, the minimisers are v = -(Q^T M Q)^+ Q^T M 1/N; we return
@@ -32,21 +32,18 @@ dual-buffer problems) three weight maps are solved:
 
 Layouts: outputs and weights (N, H, W, C) like the ensemble's; matrices (H, W, C, N, N), one
 problem per pixel-channel; the per-problem solvers take (P, N, N). The table and figure
-helpers at the end write the Fig. 11-like outputs. Core module: imports neither ``methods``
-nor ``scenes``.
+tables and figure of the study are in :mod:`mcbench.analysis.oracle_tables`.
 """
 
 from __future__ import annotations
 
 import numpy as np
-import pandas as pd
 
-from mcbench.metrics import dssim, relmse
-from mcbench.selection import check_finite_arrays, one_hot_selection
+from mcbench.combine.selection import check_finite_arrays, one_hot_selection
 
 __all__ = ["MAX_SIMPLEX_N", "MseMatrixAccumulator", "quadratic_objective", "unconstrained_problem_weights",
            "simplex_problem_weights", "one_hot_weights", "unconstrained_weights", "simplex_weights",
-           "block_average", "error_table", "table_markdown", "weight_maps_figure"]
+           "block_average", "UNCONSTRAINED_RANGE"]
 
 MAX_SIMPLEX_N = 10
 EIGEN_REL_TOL = 1e-10     # pseudo-inverse: eigenvalues relative to the largest ...
@@ -214,69 +211,3 @@ def block_average(image, factor: int) -> np.ndarray:
         raise ValueError(f"cannot average {x.shape[:2]} pixels in {factor} x {factor} blocks")
     h, w, c = x.shape
     return x.reshape(h // f, f, w // f, f, c).mean(axis=(1, 3))
-
-
-# --------------------------------------------------------------------------- outputs
-
-def error_table(images: dict[str, np.ndarray], reference, *, rows: dict[str, dict]) -> pd.DataFrame:
-    """relMSE and DSSIM (:mod:`mcbench.metrics`) of each image against ``reference``.
-
-    ``images``: {name: (H, W, 3)}; ``rows``: {name: {column: value}} extra columns per image
-    (e.g. panel, statistics, weights), in the table's row order. Returns a DataFrame with
-    columns ``name``, the extra columns, ``relmse``, ``dssim``."""
-    records = []
-    for name, extra in rows.items():
-        image = images[name]
-        records.append({"name": name, **extra, "relmse": relmse(image, reference), "dssim": dssim(image, reference)})
-    return pd.DataFrame.from_records(records)
-
-
-def table_markdown(table: pd.DataFrame, *, title: str, digits: int = 5) -> str:
-    """A pipe table of ``table`` (floats with ``digits`` significant digits) under ``title``."""
-    def cell(value):
-        return f"{value:.{digits}g}" if isinstance(value, float) else str(value)
-
-    lines = [f"**{title}**", "", "| " + " | ".join(table.columns) + " |",
-             "| " + " | ".join("---" for _ in table.columns) + " |"]
-    lines += ["| " + " | ".join(cell(v) for v in row) + " |" for row in table.itertuples(index=False)]
-    return "\n".join(lines) + "\n"
-
-
-def weight_maps_figure(maps: dict[str, np.ndarray], path, *, denoisers: list[str], title: str) -> None:
-    """PNG of weight maps (channels averaged): one row per denoiser, one column per variant.
-
-    ``maps``: {column title: (N, H, W, C) weights}, N = len(``denoisers``). Columns whose weights
-    all lie in [0, 1] (one-hot, simplex) share a [0, 1] colour scale; the others (unconstrained)
-    share a diverging one centred at 0.5 on [-1, 2] (:data:`UNCONSTRAINED_RANGE`; values beyond
-    are clipped, so broken weights saturate). Written atomically."""
-    import textwrap
-
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from mcbench.figures import save_figure
-
-    averaged = {name: np.asarray(w, np.float64).mean(axis=-1) for name, w in maps.items()}
-    bounded = {name: bool(a.min() >= -1e-9 and a.max() <= 1.0 + 1e-9) for name, a in averaged.items()}
-    low, high = UNCONSTRAINED_RANGE
-    scales = {True: dict(cmap="viridis", vmin=0.0, vmax=1.0), False: dict(cmap="RdBu_r", vmin=low, vmax=high)}
-    rows, cols = len(denoisers), len(maps)
-    figure, axes = plt.subplots(rows, cols, figsize=(1.7 * cols + 1.6, 1.7 * rows + 1.2), squeeze=False)
-    shown = {}
-    for j, (name, weights) in enumerate(averaged.items()):
-        for i, denoiser in enumerate(denoisers):
-            axis = axes[i, j]
-            shown[bounded[name]] = axis.imshow(weights[i], interpolation="nearest", **scales[bounded[name]])
-            axis.set_xticks([])
-            axis.set_yticks([])
-            if i == 0:
-                axis.set_title("\n".join(textwrap.wrap(name, 18)), fontsize=7)
-            if j == 0:
-                axis.set_ylabel(denoiser, fontsize=8)
-    for is_bounded, image in shown.items():
-        figure.colorbar(image, ax=axes, shrink=0.7, pad=0.02,
-                        label="weight in [0, 1]" if is_bounded else f"unconstrained weight (clipped to [{low:g}, {high:g}])")
-    figure.suptitle("\n".join(textwrap.wrap(title, 120)), fontsize=8)
-    save_figure(figure, path)

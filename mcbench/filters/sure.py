@@ -3,7 +3,7 @@ f_act and the t-test safeguard, as pure NumPy functions (float64 inside, never N
 
 Notation of the paper (Sec. 4): ``x`` the MC render (the noisy image, (H, W, 3) linear HDR
 radiance), ``σ²`` its per-pixel, per-channel variance *of the mean* (the renders' ``variance``
-layers, :mod:`mcbench.buffers`), ``y = f(x)`` the denoised image, ``α`` the per-pixel,
+layers, :mod:`mcbench.io.buffers`), ``y = f(x)`` the denoised image, ``α`` the per-pixel,
 per-channel mixing parameter, ``z = x + α (y − x)`` (Eq. 11).
 
 * :func:`mc_divergence` -- Eq. 2, the Monte Carlo estimate of ``tr(J_F(x) Σ)`` per pixel and

@@ -1,14 +1,14 @@
 """Images and manifest of the static image viewer (issue 17): pure functions over arrays plus
-small writers. No Snakemake here; :mod:`mcbench.steps` reads the EXRs and calls these.
+small writers. No Snakemake here; :mod:`mcbench.pipeline.steps` reads the EXRs and calls these.
 
 What the viewer shows, per test case (scene, spp):
 
 * every entry (the reference, the noisy input, each candidate) tone-mapped with the same ACES +
-  sRGB curve as DSSIM (:func:`mcbench.metrics.tonemap`) at the exposures :data:`EXPOSURES_EV`:
+  sRGB curve as DSSIM (:func:`mcbench.analysis.metrics.tonemap`) at the exposures :data:`EXPOSURES_EV`:
   exposure ``k`` EV multiplies linear radiance by ``2**k`` before tone mapping (Eq. E1 below),
   written as JPEG at full resolution;
 * per-pixel error maps of the noisy input and every candidate against the reference, relMSE
-  (:func:`mcbench.metrics.relmse_map`) and HDR-FLIP (:func:`mcbench.metrics.flip_map`), and the
+  (:func:`mcbench.analysis.metrics.relmse_map`) and HDR-FLIP (:func:`mcbench.analysis.metrics.flip_map`), and the
   filtered weight maps of ensembles (``weights_filtered_{i}``, mean over RGB), each quantised to
   :data:`LEVELS` levels of a fixed :class:`ColourScale` and written as an indexed PNG whose palette is the
   scale's colour map, so a pixel's index gives its value back (:func:`index_values`); the same
@@ -37,8 +37,8 @@ from pathlib import Path
 import numpy as np
 
 from mcbench import BenchError
-from mcbench import metrics as error_metrics
-from mcbench.io import write_atomically
+from mcbench.analysis import metrics as error_metrics
+from mcbench.io.tables import write_atomically
 
 __all__ = ["EXPOSURES_EV", "JPEG_QUALITY", "LEVELS", "REFERENCE", "REFERENCE_LABEL", "CASE_RECORD",
            "ColourScale", "RELMSE_SCALE", "FLIP_SCALE", "WEIGHT_SCALE", "ERROR_SCALES",
@@ -176,7 +176,7 @@ def weight_map(layer) -> np.ndarray:
 
 def error_maps(image, reference) -> dict[str, np.ndarray]:
     """Per-pixel errors (H, W) of ``image`` against ``reference`` (both (H, W, 3) linear):
-    ``relmse`` (:func:`mcbench.metrics.relmse_map`) and ``flip`` (:func:`mcbench.metrics.flip_map`)."""
+    ``relmse`` (:func:`mcbench.analysis.metrics.relmse_map`) and ``flip`` (:func:`mcbench.analysis.metrics.flip_map`)."""
     return {"relmse": error_metrics.relmse_map(image, reference),
             "flip": error_metrics.flip_map(image, reference)}
 
@@ -220,7 +220,7 @@ def write_case_images(case_dir, *, reference, images: dict, weights: dict | None
     ``reference`` (H, W, 3) and ``images`` {entry name: (H, W, 3)} (the noisy input and the
     candidates): linear radiance. ``weights`` {entry name: [(input name, weights_filtered layer
     (H, W, 3)), ...]} for ensembles. ``flip_maps`` {entry name: (H, W)}: per-pixel HDR-FLIP
-    computed already (:func:`mcbench.metrics.flip_with_map`); missing entries are evaluated here.
+    computed already (:func:`mcbench.analysis.metrics.flip_with_map`); missing entries are evaluated here.
     Returns (file names relative to ``case_dir``)::
 
         {"width": W, "height": H,

@@ -83,7 +83,7 @@ def pick_variant(requested: str = "auto") -> str:
             else:
                 reason = f"Dr.Jit cannot use the LLVM backend with {library}"
         if variant == "scalar_rgb":
-            print(f"mcbench.variants: using scalar_rgb (3-4x slower): {reason}", file=sys.stderr)
+            print(f"mcbench.render.variants: using scalar_rgb (3-4x slower): {reason}", file=sys.stderr)
     else:
         variant = requested
         if variant not in mi.variants():

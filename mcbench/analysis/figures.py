@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from mcbench.io import write_atomically
+from mcbench.io.tables import write_atomically
 
 MEAN_PANEL = "all scenes (mean)"
 

@@ -148,7 +148,7 @@ def consistency_markdown(table: pd.DataFrame, summary: pd.DataFrame, labels: dic
              "Per spp, over the test scenes: `worse` counts the cases whose error is above the noisy "
              "input's (exceptions), `ratio` is the geometric mean of error / noisy error (1: no gain), "
              "`gap` the mean |error - noisy error|; the `input_` columns are the same for the entry's "
-             "input (mcbench.progressive_tables).", "", "## Summary", ""]
+             "input (mcbench.analysis.progressive_tables).", "", "## Summary", ""]
     shown = summary.copy()
     shown.insert(0, "label", [_label(n, labels) for n in shown["entry"]])
     lines += [shown.to_markdown(index=False, floatfmt=".4g"), "", "## Per spp", ""]

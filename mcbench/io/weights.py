@@ -27,7 +27,7 @@ from types import ModuleType
 from mcbench import BenchError
 
 WEIGHTS_DIR_ENV = "MCBENCH_WEIGHTS_DIR"
-COMMITTED_WEIGHTS = Path(__file__).resolve().parents[1] / "methods" / "weights"
+COMMITTED_WEIGHTS = Path(__file__).resolve().parents[2] / "methods" / "weights"
 WEIGHTS_SUFFIX = ".pt"
 RECORD_SUFFIX = ".json"
 WEIGHTS_KEYS = ("arch", "state_dict")

@@ -15,10 +15,10 @@ from pathlib import Path
 import numpy as np
 
 from mcbench import BenchError
-from mcbench.buffers import Denoised, RenderBuffers
-from mcbench.exr import check_finite, read_layers, read_metadata, write_layers
-from mcbench.io import read_json, read_table, write_csv, write_json, write_text
-from mcbench.metrics import METRICS, REFERENCE_METRICS
+from mcbench.io.buffers import Denoised, RenderBuffers
+from mcbench.io.exr import check_finite, read_layers, read_metadata, write_layers
+from mcbench.io.tables import read_json, read_table, write_csv, write_json, write_text
+from mcbench.analysis.metrics import METRICS, REFERENCE_METRICS
 
 NOISY = "noisy"
 
@@ -120,18 +120,18 @@ def reads_rows(modules) -> bool:
 
 
 def _render_by_rows(path: str, layers: tuple[str, ...] | None) -> RenderBuffers:
-    """A render whose layers (``color`` and ``layers``) are :class:`mcbench.exr.LayerRows`: only
+    """A render whose layers (``color`` and ``layers``) are :class:`mcbench.io.exr.LayerRows`: only
     the header is read here; the method checks the rows it reads for NaN/Inf."""
-    from mcbench.exr import layer_rows
+    from mcbench.io.exr import layer_rows
 
     names = list(dict.fromkeys(["color", *(layers or ())]))
     return RenderBuffers(layers=layer_rows(path, names), spp=int(read_metadata(path).get("spp", 0)), source=path)
 
 
 def _denoised_by_rows(path: str) -> Denoised:
-    """A method's output as :class:`mcbench.exr.LayerRows` of ``color``, ``color_a``, ``color_b``
+    """A method's output as :class:`mcbench.io.exr.LayerRows` of ``color``, ``color_a``, ``color_b``
     (read by rows when the method indexes them; no extras: a READS_ROWS method reads none)."""
-    from mcbench.exr import layer_rows
+    from mcbench.io.exr import layer_rows
 
     layers = layer_rows(path, ["color", "color_a", "color_b"])
     return Denoised(full=layers["color"], a=layers["color_a"], b=layers["color_b"], source=path)
@@ -181,7 +181,7 @@ def compute_case_metrics(scene: str, spp: int, reference_path: str, render_path:
     """
     import pandas as pd
 
-    from mcbench.metrics import flip_with_map
+    from mcbench.analysis.metrics import flip_with_map
 
     start = time.perf_counter()
     needs_variance = any(metric in REFERENCE_METRICS for metric in metrics)
@@ -222,7 +222,7 @@ def read_case_metrics(path: str, *, candidates: list[str], metric_names: list[st
                       case: tuple[str, int] | None = None) -> pd.DataFrame:
     """One per-case metrics CSV, refused (naming the file) unless it is whole: every candidate
     and metric once with a finite value, and only the case ``(scene, spp)`` when given."""
-    from mcbench.ranking import check_complete
+    from mcbench.analysis.ranking import check_complete
 
     frame = read_table(path)
     check_complete(frame, candidates=candidates, metric_names=metric_names,
@@ -269,8 +269,8 @@ def write_rankings(metrics_csv: str, metric: str, csv_path: str, md_path: str, *
     candidate, or any incomplete case, stops here instead of being ranked. ``order``: the rows'
     order (the pool's ID order; default best Avg. first). ``note``: a sentence for the Markdown
     (e.g. that the pool is partial, so the scores are on another scale than the paper's)."""
-    from mcbench.metrics import METRIC_LABELS
-    from mcbench.ranking import check_complete, format_latex, format_markdown, ranking_table
+    from mcbench.analysis.metrics import METRIC_LABELS
+    from mcbench.analysis.ranking import check_complete, format_latex, format_markdown, ranking_table
 
     metrics = read_table(metrics_csv)
     # the ranking pool: the comparison methods' rows are ranked in their own tables
@@ -296,12 +296,12 @@ def write_rankings(metrics_csv: str, metric: str, csv_path: str, md_path: str, *
 
 def write_extras_rankings(metrics_csv: str, metric: str, csv_path: str, md_path: str, *, pool: list[str],
                           extras: list[str], labels: dict[str, str], tex_path: str | None = None) -> pd.DataFrame:
-    """The extra methods' scores (:func:`mcbench.ranking.extras_table`): each method outside the
+    """The extra methods' scores (:func:`mcbench.analysis.ranking.extras_table`): each method outside the
     ranking pool scored in a pool that adds it alone to ``pool`` (the candidates and the noisy
     input), as CSV, Markdown and LaTeX (label ``tab:extras-<metric>``). No extras: a table with a
     sentence saying so."""
-    from mcbench.metrics import METRIC_LABELS
-    from mcbench.ranking import extras_table, format_latex, format_markdown
+    from mcbench.analysis.metrics import METRIC_LABELS
+    from mcbench.analysis.ranking import extras_table, format_latex, format_markdown
 
     metrics = read_table(metrics_csv, columns=("scene", "spp", "candidate", "metric", "value"))
     table = extras_table(metrics, metric, pool=list(pool), extras=list(extras))
@@ -324,7 +324,7 @@ def write_extras_rankings(metrics_csv: str, metric: str, csv_path: str, md_path:
 def render_noisy(scene: str, spp: int, output_path: str, *, resolution=None, variant: str = "auto",
                  seed: int = 0, threads: int | None = None) -> None:
     """Render the full image and the two half buffers of one (scene, spp) to a multi-layer EXR."""
-    from mcbench.render import render_buffers
+    from mcbench.render.renderer import render_buffers
     from scenes import load_scene
 
     layers, metadata = render_buffers(load_scene(scene), spp, resolution=_resolution(resolution),
@@ -336,7 +336,7 @@ def render_noisy(scene: str, spp: int, output_path: str, *, resolution=None, var
 def render_reference_chunk(scene: str, spp: int, chunk: int, output_path: str, *, resolution=None,
                            variant: str = "auto", seed: int = 0, threads: int | None = None) -> None:
     """Render one chunk of a reference with its own seeds (never overlapping the noisy renders)."""
-    from mcbench.render import render_reference_chunk as render_chunk
+    from mcbench.render.renderer import render_reference_chunk as render_chunk
     from scenes import load_scene
 
     layers, metadata = render_chunk(load_scene(scene), spp, chunk, resolution=_resolution(resolution),
@@ -347,7 +347,7 @@ def render_reference_chunk(scene: str, spp: int, chunk: int, output_path: str, *
 
 def merge_reference(chunk_paths: list[str], output_path: str) -> None:
     """Merge reference chunks (spp-weighted, float64) into the reference with its own variance."""
-    from mcbench.render import merge_reference_chunks
+    from mcbench.render.renderer import merge_reference_chunks
 
     chunks = []
     for path in chunk_paths:
@@ -393,7 +393,7 @@ def write_scene_table(metrics_csv: str, reference_paths: dict[str, str], referen
     """
     import pandas as pd
 
-    from mcbench.reports import reference_relmse_floor, scene_latex, scene_markdown, scene_rows
+    from mcbench.analysis.reports import reference_relmse_floor, scene_latex, scene_markdown, scene_rows
     from scenes import load_scene
 
     metrics = read_table(metrics_csv, columns=["scene", "spp", "candidate", "metric", "value"])
@@ -423,7 +423,7 @@ def write_scene_table(metrics_csv: str, reference_paths: dict[str, str], referen
 
 def write_gallery(reference_paths: dict[str, str], png_path: str) -> None:
     """Gallery of all references with their names (Fig. 3 of Zheng et al.)."""
-    from mcbench.reports import gallery_figure
+    from mcbench.analysis.reports import gallery_figure
 
     references = {}
     for scene, path in reference_paths.items():
@@ -437,7 +437,7 @@ def write_training_example(seed: int, output_paths: list[str], *, spp_levels, ta
                            crop_size: int, variant: str = "auto", threads: int | None = None) -> None:
     """Render training scene ``seed`` (mcbench.training_data) and write one EXR per crop."""
     from mcbench.training_data import training_example
-    from mcbench.variants import set_threads
+    from mcbench.render.variants import set_threads
 
     set_threads(threads)
     crops = training_example(seed, list(spp_levels), target_spp, _resolution(resolution), crop_size,
@@ -456,16 +456,16 @@ def write_correlated_training_inputs(base: str, crop_paths: list[str], output_pa
     on every noisy level of each training crop and write its results, the correlated inputs of
     the deep combiner's training (Back et al. 2020 Sec. 5): per level ``N`` the layers
     ``correlated_spp<N>``, ``correlated_a_spp<N>``, ``correlated_b_spp<N>`` and, for a base that
-    writes sub-buffer results (:data:`mcbench.buffers.SUB_OUTPUTS`, e.g. kpcn),
+    writes sub-buffer results (:data:`mcbench.io.buffers.SUB_OUTPUTS`, e.g. kpcn),
     ``correlated<half>_sub<j>_spp<N>``.
 
     ``base`` ``<name>+sure`` (progressive denoising's training data): also the divergence term of
     SURE of each image, ``divergence<half>_spp<N>`` (Eq. 2 with K = 1, ε = 1e-4, the base's
     single-image function re-run on the perturbed colour; ``methods.progressive.divergence_map``,
     seeded by crop, level and image)."""
-    from mcbench.buffers import SUB_OUTPUTS
+    from mcbench.io.buffers import SUB_OUTPUTS
     from mcbench.nn.data import HALF_OF, crop_render_layers
-    from mcbench.variants import set_threads
+    from mcbench.render.variants import set_threads
     from methods import load_method
 
     if threads:
@@ -513,7 +513,7 @@ def write_correlated_training_inputs(base: str, crop_paths: list[str], output_pa
 def learned_method(name: str):
     """``methods/<name>.py`` checked to be a learned method (NETWORK, TRAINING, build_network):
     a denoiser, or a combiner trained on base results (``CORRELATED_BASES``, ``TRAINING_KEYS``)."""
-    from mcbench.weights import check_learned_method
+    from mcbench.io.weights import check_learned_method
     from methods import load_method
 
     module = check_learned_method(load_method(name, config_key=f"network '{name}'"))
@@ -552,8 +552,8 @@ def train_learned_method(name: str, crop_files: list[str], *args, correlated_fil
 def write_error_curves(metrics_csv: str, metric: str, png_path: str, *, labels: dict[str, str],
                        candidates: list[str] | None = None) -> None:
     """Error against spp of every candidate (or of ``candidates`` only), per scene and averaged, for
-    one metric (mcbench.figures, like Fig. 13 of Zheng et al.); ``labels``: candidate -> legend label."""
-    from mcbench.figures import error_curves, error_curves_figure
+    one metric (mcbench.analysis.figures, like Fig. 13 of Zheng et al.); ``labels``: candidate -> legend label."""
+    from mcbench.analysis.figures import error_curves, error_curves_figure
 
     metrics = read_table(metrics_csv, columns=["scene", "spp", "candidate", "metric", "value"])
     if candidates is not None:
@@ -563,9 +563,9 @@ def write_error_curves(metrics_csv: str, metric: str, png_path: str, *, labels: 
 
 def write_study(metrics_csv: str, out_dir: str, *, metrics: list[str], labels: dict[str, str],
                 candidates: list[str], n_resamples: int, seed: int) -> dict:
-    """The 39-candidate study's tables (:func:`mcbench.study.write_study_tables`) under ``out_dir``:
+    """The 39-candidate study's tables (:func:`mcbench.analysis.study.write_study_tables`) under ``out_dir``:
     beside the paper's Table 3, recommendations, findings, bootstrap intervals, summary."""
-    from mcbench.study import write_study_tables
+    from mcbench.analysis.study import write_study_tables
 
     return write_study_tables(metrics_csv, out_dir, metrics=list(metrics), labels=labels,
                               candidates=[c for c in candidates if c != NOISY], noisy=NOISY,
@@ -586,10 +586,10 @@ def recommended_names(recommendations_csv: str, metric: str) -> list[str]:
 def write_study_figures_of(metrics_csv: str, timings_csv: str, recommendations_csv: str, scores_ci_csv: str,
                            render_paths: list[str], paths: dict[str, str], *, metric: str, candidates: list[str],
                            labels: dict[str, str], inputs: dict[str, list[str]]) -> None:
-    """The study's figures for one metric (:func:`mcbench.study_figures.write_study_figures`): the
+    """The study's figures for one metric (:func:`mcbench.analysis.study_figures.write_study_figures`): the
     bases and the ensembles the study recommends (``recommendations_csv``) as curves, the bootstrap
     intervals of ``scores_ci_csv`` on the size figure, render times from the renders' EXRs."""
-    from mcbench.study_figures import curve_candidates, write_study_figures
+    from mcbench.analysis.study_figures import curve_candidates, write_study_figures
 
     recommended = [n for n in recommended_names(recommendations_csv, metric) if n in candidates]
     intervals = read_table(scores_ci_csv)
@@ -605,7 +605,7 @@ def write_speed_error(metrics_csv: str, timings_csv: str, png_path: str, *, metr
                       labels: dict[str, str], inputs: dict[str, list[str]]) -> None:
     """Each method's mean compute time (timings.csv; a combiner's with the ``inputs`` it takes)
     against its mean ``metric`` error (metrics.csv), as a labelled log-log scatter."""
-    from mcbench.figures import speed_error_figure, speed_error_points
+    from mcbench.analysis.figures import speed_error_figure, speed_error_points
 
     metrics = read_table(metrics_csv, columns=["scene", "spp", "candidate", "metric", "value"])
     timings = read_table(timings_csv, columns=["scene", "spp", "method", "seconds"])
@@ -616,13 +616,13 @@ def write_speed_error(metrics_csv: str, timings_csv: str, png_path: str, *, metr
 def write_viewer_case(scene: str, spp: int, reference_path: str, render_path: str,
                       candidate_paths: dict[str, str], case_dir: str, *,
                       weight_inputs: dict[str, list[str]], flip_maps_path: str | None = None) -> dict:
-    """One case's images of the static viewer (mcbench.viewer.write_case_images) in
+    """One case's images of the static viewer (mcbench.analysis.viewer.write_case_images) in
     ``case_dir``, with its manifest fragment as ``case.json``: the reference, the noisy input
     and every candidate tone-mapped at each exposure, their relMSE and FLIP error maps, and
     the filtered weight maps of each candidate that ``weight_inputs`` gives inputs
     ({candidate: input names}) and whose EXR holds ``weights_filtered_{i}`` for each input.
     ``flip_maps_path``: the case's FLIP maps from :func:`compute_case_metrics` (else evaluated here)."""
-    from mcbench.viewer import CASE_RECORD, write_case_images
+    from mcbench.analysis.viewer import CASE_RECORD, write_case_images
 
     reference = read_layers(reference_path, ["color"])
     check_finite(reference_path, reference)
@@ -656,7 +656,7 @@ def write_viewer(metrics_csv: str, case_dirs: list[str], output_dir: str, *, cas
     viewer.js, viewer.css), every case folder (``case_dirs[i]`` holds ``cases[i]``, written by
     :func:`write_viewer_case`) and ``data.js``, the manifest with each case's numbers from
     ``metrics_csv`` (every entry must have every metric of ``metric_names``). Returns the manifest."""
-    from mcbench.viewer import CASE_RECORD, assemble_viewer, build_manifest, case_numbers, directory_bytes
+    from mcbench.analysis.viewer import CASE_RECORD, assemble_viewer, build_manifest, case_numbers, directory_bytes
 
     if len(case_dirs) != len(cases):
         raise BenchError(f"{output_dir}: {len(case_dirs)} case folders for {len(cases)} cases")
@@ -686,7 +686,7 @@ def write_viewer(metrics_csv: str, case_dirs: list[str], output_dir: str, *, cas
 
 
 if __name__ == "__main__":
-    # python -m mcbench.steps evaluate <name>  (or train <name>): mcbench.nn.train's command line
+    # python -m mcbench.pipeline.steps evaluate <name>  (or train <name>): mcbench.nn.train's command line
     # with the methods registry, e.g. to re-evaluate committed weights on the validation crops.
     import sys
 
@@ -697,13 +697,13 @@ if __name__ == "__main__":
 
 def write_progressive_tables(metrics_csv: str, timings_csv: str, out_dir: str, *, pairs: dict[str, str],
                              labels: dict[str, str], metrics: list[str]) -> dict:
-    """Progressive denoising's tables (:mod:`mcbench.progressive_tables`) under ``out_dir``:
+    """Progressive denoising's tables (:mod:`mcbench.analysis.progressive_tables`) under ``out_dir``:
     ``consistency.{csv,md}`` (relMSE against the noisy input per spp) and ``per_spp.{csv,md}``
     (each input and its progressive entries: mean error per spp of each of ``metrics``, and the
     seconds each adds per case)."""
     import pandas as pd
 
-    from mcbench.progressive_tables import (added_seconds, consistency_markdown, consistency_summary,
+    from mcbench.analysis.progressive_tables import (added_seconds, consistency_markdown, consistency_summary,
                                             consistency_table, per_spp_markdown, per_spp_table, table_entries)
 
     out = Path(out_dir)

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from mcbench.metrics import RELMSE_EPSILON, tonemap
+from mcbench.analysis.metrics import RELMSE_EPSILON, tonemap
 
 FLOOR_RATIO_REQUIRED = 10.0
 
@@ -96,8 +96,8 @@ def scene_latex(table: pd.DataFrame, *, caption: str, label: str = "tab:scenes")
     """The scene table as a LaTeX ``table`` with booktabs rules (``\\usepackage{booktabs}``): scene,
     category, reference spp, the reference's estimated relMSE, the noisy and best candidate's relMSE
     at the highest spp and their floor ratio; a ratio below 10 (a reference too noisy to rank) is
-    bold. Text is escaped with :func:`mcbench.ranking.latex_escape`."""
-    from mcbench.ranking import latex_escape
+    bold. Text is escaped with :func:`mcbench.analysis.ranking.latex_escape`."""
+    from mcbench.analysis.ranking import latex_escape
 
     header = ["Scene", "Category", "Ref. spp", "Ref. relMSE", "Noisy relMSE", "Best", "Best relMSE", "Floor ratio"]
     rows = []
@@ -107,7 +107,7 @@ def scene_latex(table: pd.DataFrame, *, caption: str, label: str = "tab:scenes")
                  f"{row.reference_relmse:.3g}", f"{row.noisy_relmse:.3g}", latex_escape(row.best_candidate),
                  f"{row.best_relmse:.3g}", ratio if row.floor_ok else rf"\textbf{{{ratio}}}"]
         rows.append("    " + " & ".join(cells) + r" \\")
-    lines = [r"% Requires \usepackage{booktabs}. Written by mcbench (mcbench.reports.scene_latex).",
+    lines = [r"% Requires \usepackage{booktabs}. Written by mcbench (mcbench.analysis.reports.scene_latex).",
              r"\begin{table}", r"  \centering", rf"  \caption{{{latex_escape(caption)}}}", rf"  \label{{{label}}}",
              r"  \begin{tabular}{llrrrlrr}", r"    \toprule", "    " + " & ".join(header) + r" \\", r"    \midrule",
              *rows, r"    \bottomrule", r"  \end{tabular}", r"\end{table}"]
@@ -121,7 +121,7 @@ def gallery_figure(references: dict[str, np.ndarray], path: str | Path, columns:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from mcbench.figures import save_figure
+    from mcbench.analysis.figures import save_figure
 
     names = list(references)
     columns = max(1, min(columns, len(names)))

@@ -52,7 +52,7 @@ __all__ = ["JobCost", "JOB_COSTS_PATH", "MEMORY_MARGIN", "RUNTIME_MARGIN", "MIN_
            "MIN_RUNTIME_MIN", "JOB_MEMORY_LIMIT_MB", "load_job_costs", "write_job_costs",
            "estimate_job", "job_request", "fit_job_cost"]
 
-JOB_COSTS_PATH = Path(__file__).resolve().parents[1] / "workflow" / "resources" / "job_costs.yaml"
+JOB_COSTS_PATH = Path(__file__).resolve().parents[2] / "workflow" / "resources" / "job_costs.yaml"
 
 MEMORY_MARGIN = 1.5       # x the estimated peak RSS
 RUNTIME_MARGIN = 3.0      # x the estimated wall time

@@ -67,7 +67,7 @@ def write_layers(path: str | os.PathLike, layers: dict[str, np.ndarray],
         with OpenEXR.File(header, channels) as exr:
             exr.write(tmp)
 
-    from mcbench.io import write_atomically   # here: mcbench.io imports pandas (~30 MiB, 0.3 s)
+    from mcbench.io.tables import write_atomically   # here: mcbench.io.tables imports pandas (~30 MiB, 0.3 s)
 
     write_atomically(path, save, suffix=".tmp.exr")
 

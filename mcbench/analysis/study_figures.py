@@ -4,19 +4,19 @@ Inputs are the workflow's tidy tables:
 
 * ``metrics``: columns ``scene, spp, candidate, metric, value`` (``results/metrics.csv``;
   candidate ``noisy`` is the noisy render);
-* ``scores``: :func:`mcbench.ranking.case_scores` output, columns ``scene, spp, candidate,
+* ``scores``: :func:`mcbench.analysis.ranking.case_scores` output, columns ``scene, spp, candidate,
   score`` (score K for the best of K entries of a case, 1 for the worst; higher is better);
 * ``timings``: columns ``scene, spp, method, seconds`` (``results/timings.csv``; compute seconds
   of one method run, I/O excluded);
 * render times: columns ``scene, spp, seconds`` (:func:`read_render_seconds`).
 
 Data functions return DataFrames without NaN or Inf; plotting functions write PNGs with
-matplotlib's Agg backend through :func:`mcbench.figures.save_figure`.
+matplotlib's Agg backend through :func:`mcbench.analysis.figures.save_figure`.
 
 Figures (:func:`write_study_figures`, files named by :func:`study_figure_paths`):
 
 1. ``error_curves_<metric>.png``: error against spp per scene and the mean over scenes for the
-   bases and the recommended ensembles (Fig. 13), drawn by :mod:`mcbench.figures`;
+   bases and the recommended ensembles (Fig. 13), drawn by :mod:`mcbench.analysis.figures`;
 2. ``score_curves_<metric>.png``: mean score over scenes against spp for those candidates, and
    every candidate's overall score ``Avg.`` (Fig. 14 c, d);
 3. ``score_size_<metric>.png``: each candidate's ``Avg.`` against its ensemble size (bases at 1),
@@ -30,7 +30,7 @@ Render times
 ------------
 The noisy render of ``(scene, spp)`` records its time twice: the EXR header attribute
 ``mcbench.seconds`` (``results/renders/{scene}/spp{N}.exr``; scene loading and rendering, no
-EXR writing, :func:`mcbench.render.render_buffers`) and the Snakemake benchmark record
+EXR writing, :func:`mcbench.render.renderer.render_buffers`) and the Snakemake benchmark record
 ``results/benchmarks/render_noisy/{scene}_spp{N}.tsv`` (column ``s``: wall seconds of the whole
 job, with Python start-up, imports and the EXR write). :func:`read_render_seconds` reads either;
 the EXR's is the closer match to the methods' compute-only seconds and is preferred, the TSV
@@ -48,7 +48,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from mcbench.figures import (candidate_styles, combined_seconds, error_curves, error_curves_figure, input_closure,
+from mcbench.analysis.figures import (candidate_styles, combined_seconds, error_curves, error_curves_figure, input_closure,
                              pyplot_agg, save_figure)
 
 __all__ = ["STUDY_FIGURES", "study_figure_paths", "paper_recommended", "curve_candidates", "score_curves",
@@ -71,7 +71,7 @@ def study_figure_paths(figures_dir: str | Path, metric: str) -> dict[str, str]:
 def paper_recommended() -> list[str]:
     """Harness names of the paper's recommended ensembles (Sec. 5.3.5-5.3.6; #27, #20, #10,
     #18), a default for ``recommended`` until the study's own recommendations are computed."""
-    from mcbench.pool import PAPER_RECOMMENDATIONS, candidate_name
+    from mcbench.analysis.pool import PAPER_RECOMMENDATIONS, candidate_name
 
     ids = [PAPER_RECOMMENDATIONS["overall"]["best"], PAPER_RECOMMENDATIONS["overall"]["second"],
            *PAPER_RECOMMENDATIONS["size"].values(), *PAPER_RECOMMENDATIONS["band"].values()]
@@ -81,7 +81,7 @@ def paper_recommended() -> list[str]:
 def curve_candidates(recommended: list[str]) -> list[str]:
     """The candidates drawn as lines: the eight bases in the paper's order, then ``recommended``
     (in its order, bases and repeats left out)."""
-    from mcbench.pool import BASES
+    from mcbench.analysis.pool import BASES
 
     bases = list(BASES.values())
     return bases + [name for name in dict.fromkeys(recommended) if name not in bases]
@@ -119,7 +119,7 @@ def score_curves(scores: pd.DataFrame, *, candidates: list[str] | None = None) -
 
 def average_scores(scores: pd.DataFrame) -> pd.Series:
     """Overall score ``Avg.`` of every candidate (Fig. 14 d, Table 3's last column): the mean
-    over spp of the mean over scenes, as :func:`mcbench.ranking.ranking_table`. A Series named
+    over spp of the mean over scenes, as :func:`mcbench.analysis.ranking.ranking_table`. A Series named
     ``score`` indexed by candidate, best first (stable on ties)."""
     averages = score_curves(scores).mean(axis=0)
     averages = averages.sort_values(ascending=False, kind="stable")
@@ -129,9 +129,9 @@ def average_scores(scores: pd.DataFrame) -> pd.Series:
 
 def candidate_sizes(names, *, sizes: dict[str, int] | None = None) -> dict[str, int]:
     """Ensemble size (number of base denoisers) of each name: from ``sizes`` when given there,
-    else from the candidate pool (:mod:`mcbench.pool`; 1 for a base, DC variants included).
+    else from the candidate pool (:mod:`mcbench.analysis.pool`; 1 for a base, DC variants included).
     Names in neither (the noisy input, comparison methods) are left out."""
-    from mcbench.pool import PoolError, candidate
+    from mcbench.analysis.pool import PoolError, candidate
 
     found = {}
     for name in names:
@@ -176,7 +176,7 @@ def score_size_summary(points: pd.DataFrame) -> pd.DataFrame:
 def closure_seconds(own: dict[str, float], inputs: dict[str, list[str]], *,
                     names: list[str] | None = None) -> dict[str, float]:
     """Total cost of each method (seconds per case) of ``names`` (default: all of ``own``):
-    :func:`mcbench.figures.combined_seconds`, the sum of ``own`` seconds over its input closure,
+    :func:`mcbench.analysis.figures.combined_seconds`, the sum of ``own`` seconds over its input closure,
     each method counted once. Raises ``ValueError`` naming a method without a timing."""
     chosen = names if names is not None else list(own)
     needed = {m for name in chosen for m in input_closure(name, inputs)}
@@ -255,7 +255,7 @@ def read_render_seconds(paths) -> pd.DataFrame:
     for path in map(str, paths):
         name = Path(path).name
         if name.endswith(".exr"):
-            from mcbench.exr import read_metadata
+            from mcbench.io.exr import read_metadata
 
             meta = read_metadata(path)
             match = _EXR_NAME.fullmatch(name)
@@ -423,7 +423,7 @@ def equal_time_curves(table: pd.DataFrame, *, candidates: list[str] | None = Non
 def _label(name: str, labels: dict[str, str] | None) -> str:
     if labels and name in labels:
         return labels[name]
-    from mcbench.pool import PoolError, candidate
+    from mcbench.analysis.pool import PoolError, candidate
 
     try:
         return candidate(name).label
@@ -444,7 +444,7 @@ def study_error_curves_figure(metrics: pd.DataFrame, path: str | Path, *, metric
                               labels: dict[str, str] | None = None, noisy: str = "noisy") -> None:
     """Fig. 13: error against spp per scene and the mean over scenes for ``candidates`` (the
     bases and the recommended ensembles) and the noisy input, by
-    :func:`mcbench.figures.error_curves_figure`."""
+    :func:`mcbench.analysis.figures.error_curves_figure`."""
     wanted = [noisy] + [c for c in candidates if c != noisy]
     rows = metrics[metrics["candidate"].isin(wanted)]
     labels = {name: _label(name, labels) for name in wanted}
@@ -628,7 +628,7 @@ def equal_time_figure(ratios: pd.DataFrame, path: str | Path, *, metric: str, la
 
 
 def _pool_inputs() -> dict[str, list[str]]:
-    from mcbench.pool import pool_methods
+    from mcbench.analysis.pool import pool_methods
 
     _, combiners = pool_methods()
     return {entry["name"]: list(entry["inputs"]) for entry in combiners}
@@ -642,14 +642,14 @@ def write_study_figures(metrics_csv: str, timings_csv: str, render_records: list
     e.g. from :func:`study_figure_paths`; a key left out is not drawn).
 
     ``candidates``: the ranking pool (the 39 candidates; ``noisy`` is added), scored per case by
-    :func:`mcbench.ranking.case_scores`; ``curves``: the candidates drawn as lines (the bases and
+    :func:`mcbench.analysis.ranking.case_scores`; ``curves``: the candidates drawn as lines (the bases and
     the recommended ensembles); ``recommended``: names written beside their points in the size
     and speed figures; ``render_records``: the noisy renders' EXRs or benchmark TSVs
     (:func:`read_render_seconds`; only read for ``equal_time``); ``inputs``: method -> the
     methods it takes (default: the pool's). Returns the equal-time table (empty when not drawn).
     """
-    from mcbench.io import read_table
-    from mcbench.ranking import case_scores
+    from mcbench.io.tables import read_table
+    from mcbench.analysis.ranking import case_scores
 
     unknown = sorted(set(paths) - set(STUDY_FIGURES))
     if unknown:

@@ -1,7 +1,7 @@
 """The 39-candidate study of Zheng et al. 2021, Sec. 5.3, checked with numbers (issue 15).
 
 Pure functions over the tidy metrics table (columns scene, spp, candidate, metric, value; the
-pool's harness names of :mod:`mcbench.pool` plus ``noisy``), writers at the end. Core module:
+pool's harness names of :mod:`mcbench.analysis.pool` plus ``noisy``), writers at the end. Core module:
 imports only from ``mcbench``.
 
 * :func:`paper_comparison` / :func:`paper_kendall` -- our relMSE scores of the candidates of the
@@ -15,12 +15,12 @@ imports only from ``mcbench``.
 
 Scores and the scene bootstrap
 ------------------------------
-Scores are the paper's (:func:`mcbench.ranking.case_scores`: in each case (scene, spp) the best
+Scores are the paper's (:func:`mcbench.analysis.ranking.case_scores`: in each case (scene, spp) the best
 of K entries gets K, the worst 1) over the pool candidates present in the data plus the noisy
 input -- 40 entries when the pool is complete, as in the paper. A candidate's per-scene score is
 the mean over spp of its scores in that scene; its ``Avg.`` is the mean over scenes of those.
 :func:`study_data` insists on a full grid (every scene has every spp, every case every entry:
-:func:`mcbench.ranking.check_complete`), under which this equals the ranking table's mean over
+:func:`mcbench.analysis.ranking.check_complete`), under which this equals the ranking table's mean over
 spp of the mean over scenes (:func:`avg_scores` checks it).
 
 Every statistic here is a mean over scenes of a per-scene quantity (a score, a difference of
@@ -58,10 +58,12 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
-from mcbench import BenchError, pool
-from mcbench.io import read_table, write_csv, write_text
-from mcbench.metrics import METRIC_LABELS
-from mcbench.ranking import case_scores, check_complete
+from mcbench import BenchError
+
+from mcbench.analysis import pool
+from mcbench.io.tables import read_table, write_csv, write_text
+from mcbench.analysis.metrics import METRIC_LABELS
+from mcbench.analysis.ranking import case_scores, check_complete
 
 __all__ = ["NOISY", "PAPER_ENTRIES", "SEED", "N_RESAMPLES", "CONFIDENCE", "ALMOST", "LEARNED_BASES",
            "CLASSICAL_BASES", "REPRODUCED", "NOT_REPRODUCED", "INCONCLUSIVE", "STUDY_FILES", "Resampling",
@@ -214,7 +216,7 @@ def avg_scores(data: StudyData) -> np.ndarray:
 
 
 def ranking_from(data: StudyData) -> pd.DataFrame:
-    """A ranking table like :func:`mcbench.ranking.ranking_table`'s (index candidate, columns
+    """A ranking table like :func:`mcbench.analysis.ranking.ranking_table`'s (index candidate, columns
     spp as strings and ``Avg.``), in ID order (noisy last)."""
     table = pd.DataFrame(data.scores.mean(axis=0).T, index=list(data.names), columns=[str(s) for s in data.spps])
     table["Avg."] = avg_scores(data)
@@ -300,7 +302,7 @@ def difference_ci(data: StudyData, a: str, b: str, *, spps=None, resampling: Res
 
 
 def score_cis(data: StudyData, *, resampling: Resampling = Resampling()) -> pd.DataFrame:
-    """Every entry's ``Avg.`` with its interval, and per spp band (:data:`mcbench.pool.SPP_BANDS`)
+    """Every entry's ``Avg.`` with its interval, and per spp band (:data:`mcbench.analysis.pool.SPP_BANDS`)
     the band's mean score with its interval.
 
     Columns: candidate, id (empty for non-pool names), avg, avg_ci_low, avg_ci_high, ci_method,
@@ -358,9 +360,9 @@ def paper_comparison(ranking: pd.DataFrame, *, names: dict[int, str] | None = No
     """Our scores beside the paper's Table 3 (relMSE; Sec. 5.3.4).
 
     ``ranking``: index candidate names, columns spp as strings and ``Avg.`` (as
-    :func:`mcbench.ranking.ranking_table`). ``names`` maps the paper's IDs to our candidate names
+    :func:`mcbench.analysis.ranking.ranking_table`). ``names`` maps the paper's IDs to our candidate names
     (default: the pool's harness names). Long table, one row per candidate of
-    :data:`mcbench.pool.PAPER_TABLE3` (ID order) and column: columns id, candidate, spp (``"4"``
+    :data:`mcbench.analysis.pool.PAPER_TABLE3` (ID order) and column: columns id, candidate, spp (``"4"``
     ... ``"1024"``, our extra spp, ``"Avg."`` and ``"Avg. (common spp)"`` -- both averaged over
     the spp that both tables have), ours, paper, difference (ours - paper), note. A cell one side
     lacks is empty (None) and the note says which.
@@ -503,7 +505,7 @@ def recommendations(data: StudyData, *, resampling: Resampling = Resampling()) -
     """The best ensemble per scope, derived from ``data``, beside the paper's choice.
 
     Scopes: each ensemble size present (2, 3, 4, 5, 6, 8), each spp band of
-    :data:`mcbench.pool.SPP_BANDS` (mean score over the band's spp in our data; 32 spp is in low
+    :data:`mcbench.analysis.pool.SPP_BANDS` (mean score over the band's spp in our data; 32 spp is in low
     and medium), overall best and second (by ``Avg.``). Only pool ensembles present in the data
     compete (bases never). Ours: the highest mean score (ties: the lower ID, noted). Columns
     :data:`REC_COLUMNS`: ``*_fraction`` is the fraction of the scene resamples
@@ -898,10 +900,10 @@ def findings(data: StudyData, *, resampling: Resampling = Resampling()) -> pd.Da
        expectation, with the true MSE matrix), of (case, ensemble, member) worse than that
        member, and worse than every member. The claim "almost always better" holds when the
        fraction's interval lies below :data:`ALMOST` (10 %).
-    c. Homogeneous (:func:`mcbench.pool.is_homogeneous`) vs heterogeneous sets: per size with
+    c. Homogeneous (:func:`mcbench.analysis.pool.is_homogeneous`) vs heterogeneous sets: per size with
        both, mean heterogeneous - mean homogeneous score; the mean over those sizes, claimed
        above 0. And the other size-4 ensembles' mean - #28, claimed above 0.
-    d. DC (:func:`mcbench.pool.has_dc`): the same with sets without minus with DC; #27 - #29.
+    d. DC (:func:`mcbench.analysis.pool.has_dc`): the same with sets without minus with DC; #27 - #29.
     e. Learned (:data:`LEARNED_BASES`: #1, #3, #6, #7 -- DC variants in neither family) minus
        classical (#4, #8) bases' mean score per spp band: claimed above 0 at low, below 0 at high
        spp; medium is reported without a claim.
@@ -958,7 +960,7 @@ REFERENCE_NOISE_COLUMNS = ["spp", "kendall_tau", "max_abs_change", "real_changes
 def reference_noise_effect(raw: StudyData, corrected: StudyData, *, resampling: Resampling = Resampling(),
                            top: int = 3) -> pd.DataFrame:
     """How the ranking moves when relMSE is corrected for the reference's own noise
-    (:func:`mcbench.metrics.relmse_corrected`), per spp and over all spp (``Avg.``).
+    (:func:`mcbench.analysis.metrics.relmse_corrected`), per spp and over all spp (``Avg.``).
 
     ``raw`` and ``corrected``: the two metrics' :class:`StudyData` over the same scenes, spp and
     entries. Per column: the Kendall tau of the two mean-score orderings, the largest change of a
@@ -993,7 +995,7 @@ def reference_noise_markdown(table: pd.DataFrame, *, labels: dict[str, str] | No
     labels = labels or {}
     lines = ["# References you can trust: raw against corrected relMSE", "",
              "Scores by relMSE against the reference (raw) and by relMSE corrected for the reference's own "
-             "noise with its stored variance (corrected; `mcbench.metrics.relmse_corrected`). An entry's score "
+             "noise with its stored variance (corrected; `mcbench.analysis.metrics.relmse_corrected`). An entry's score "
              "changes *really* when the paired scene-bootstrap interval of its score change excludes 0 "
              f"({100 * resampling.confidence:.0f} %, {resampling.n_resamples} resamples).", ""]
     if table.empty:
@@ -1099,7 +1101,7 @@ def write_study_tables(metrics_csv, out_dir, *, metrics=("relmse", "dssim"), lab
     lines = ["# The 39-candidate study: summary", "",
              f"Scene bootstrap: {resampling.n_resamples} paired resamples, seed {resampling.seed}, "
              f"{100 * resampling.confidence:.0f} % intervals. Rows of the pool marked 'filled' are our choice, "
-             f"not the paper's (see mcbench/pool.py).", ""]
+             f"not the paper's (see mcbench/analysis/pool.py).", ""]
     for metric, data in data_by_metric.items():
         lines.append(f"- {METRIC_LABELS.get(metric, metric)}: {len(data.scenes)} scene(s), spp "
                      f"{', '.join(map(str, data.spps))}, {data.entries} entries"

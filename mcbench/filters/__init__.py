@@ -1,0 +1,9 @@
+"""Layer ``filters``: image filters any method may use.
+
+* :mod:`mcbench.filters.bilateral` -- the cross-bilateral filter (Zheng et al. 2021 Eq. 32-34)
+  and the smoothing passes around it;
+* :mod:`mcbench.filters.nlmeans` -- non-local means with variance cancellation (Rousselle et al.
+  2012);
+* :mod:`mcbench.filters.sure` -- SURE of a denoised image, its divergence, and progressive
+  denoising's mixing activation and t-test (Firmino et al. 2022).
+"""
