@@ -1,6 +1,6 @@
 """Peak memory (RSS) of training each learned network, as the workflow's `train_network` job runs it.
 
-For each network a child process does what the job does (``mcbench.pipeline.steps.train_learned_method``:
+For each network a child process does what the job does (``mcbench.pipeline.training.train_learned_method``:
 the data loading of ``training_data`` -- a denoiser's crops, a combiner's crops with its
 ``CORRELATED_BASES``' results -- then ``train_network``) for ``--steps`` steps, with a validation
 pass and a checkpoint at the last step, into a temporary folder; the parent reads the child's peak
@@ -49,7 +49,7 @@ def child(args: argparse.Namespace) -> None:
     sys.path.insert(0, str(Path(args.code).resolve()))
     from mcbench.nn.data import crop_paths
     from mcbench.nn.train import correlated_paths
-    from mcbench.pipeline.steps import learned_method, train_learned_method
+    from mcbench.pipeline.training import learned_method, train_learned_method
 
     module = learned_method(args.child)
     files = crop_paths(args.data)

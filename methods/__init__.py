@@ -11,7 +11,7 @@ A method module declares
 * a combiner: ``combine(buffers: RenderBuffers, inputs: list[Denoised], **params) -> Denoised``;
   its output may feed another combiner like any base denoiser output.
 * optionally ``RENDER_LAYERS``: the render layers the method reads (a tuple of names; absent:
-  all). A job whose methods all declare it reads only their union (``mcbench.pipeline.steps``), which at
+  all). A job whose methods all declare it reads only their union (``mcbench.pipeline.methods``), which at
   1024^2 saves most of the render's ~340 MB.
 
 Config parameters are the keyword-only parameters of ``denoise``/``combine``, each annotated
@@ -39,12 +39,12 @@ import typing
 from types import ModuleType
 from typing import Callable
 
-from mcbench import BenchError
+from mcbench import NOISY, NOISY_LABEL, BenchError  # NOISY*: re-exported
 from mcbench.io.buffers import denoise_each_buffer  # re-exported: single-image methods call it
 from mcbench.analysis.pool import expand_methods
 
 __all__ = ["KINDS", "NOISY", "NOISY_LABEL", "UnknownMethodError", "available_methods", "load_method",
-           "denoise_each_buffer", "method_parameters", "check_params", "method_table", "config_method_table"]
+           "denoise_each_buffer", "single_image_function", "method_parameters", "check_params", "method_table", "config_method_table"]
 
 KINDS = {"denoiser": "denoise", "combiner": "combine"}
 
@@ -78,11 +78,29 @@ def load_method(name: str, kind: str | None = None, config_key: str = "config") 
     return module
 
 
+def single_image_function(name: str, *, choices=None) -> Callable:
+    """Base denoiser ``name`` as a function of one :class:`mcbench.io.buffers.ImageBuffers` ->
+    (H, W, 3) radiance: its module's ``denoise_image`` (default params), or a learned denoiser's
+    committed network (:func:`mcbench.nn.inference.run_network`). A :class:`BenchError` for a method
+    without one (NFOR and RDFC filter the half buffers jointly; combiners), naming ``choices``
+    (the names a caller supports) when given."""
+    from mcbench.io.weights import is_learned_method
+
+    module = load_method(name, kind="denoiser", config_key=f"single-image base '{name}'")
+    if callable(getattr(module, "denoise_image", None)):
+        return module.denoise_image
+    if is_learned_method(module):
+        from mcbench.nn.inference import load_network, run_network
+
+        network = load_network(module)
+        return lambda image: run_network(network, image)
+    known = f"; one of {', '.join(c for c in choices if c != 'none')}" if choices else ""
+    raise BenchError(f"{name} has no single-image function (it filters the half buffers jointly){known}")
+
+
 # ---------------------------------------------------------------------------------------------
 # The candidate table of a config: checked when the DAG is parsed, before any job runs.
 
-NOISY = "noisy"                 # the noisy input's row in every table: no method may take it
-NOISY_LABEL = "Noisy input"
 _POSITIONAL = {"denoiser": 1, "combiner": 2}   # denoise(buffers, ...), combine(buffers, inputs, ...)
 
 

@@ -17,15 +17,11 @@ sees B's samples, as the deep combiner): x, σ² (the render's variance of the m
 3. α′ = (1 − Φ(2(|t| − 4.2))) α (Eq. 18, :func:`mcbench.filters.sure.t_test`), z = x + α′(y − x).
 
 **The divergence needs F on an arbitrary image.** A combiner receives only its input's three
-images, so ``divergence`` names the single-image denoiser to re-run (:func:`single_image_denoiser`:
+images, so ``divergence`` names the single-image denoiser to re-run (:func:`methods.single_image_function`:
 a method module's ``denoise_image(ImageBuffers)``, or a learned denoiser's network through
 :func:`mcbench.nn.inference.run_network`), only the colour perturbed (variance and features as
 rendered). Supported: ``oidn``, ``jbf``, ``kpcn``, ``mcgan``, ``optix_ae``, ``wskpn`` (each call
-costs what one image of the base costs; K + 1 calls per image, 3 images per case). Measured per
-128² case on 1 thread (best of 3, on the shared machine under load; synthetic render):
-network + t-test without divergence 0.20 s; with OIDN's divergence (K = 1) 0.38 s, K = 4 3.0 s
-(OIDN itself: 0.12 s for its 3 images); with KPCN's divergence 1.3 s; the t-test alone
-(``network: false``) 0.03 s. NFOR and RDFC have no single-image function (they
+costs what one image of the base costs; K + 1 calls per image, 3 images per case). NFOR and RDFC have no single-image function (they
 cross-filter the two half buffers), nor have combiners. For an input that is not itself one of
 these -- an ensemble, a deep combiner -- we do not re-run it (the exact divergence of an ensemble
 would re-run every member K times on perturbed full, A and B images and then the ensemble's
@@ -77,31 +73,30 @@ for each): ``methods/weights/progressive_no_sure.pt`` / ``progressive_no_fact.pt
 loop; without them the method stops with an error naming the file.
 
 Training (one command per network, each resumes from its checkpoint): ``python -m
-methods.progressive full`` (``no_sure``, ``no_fact``; :func:`train_variant`) on the crops that
+mcbench.pipeline.training progressive full`` (``no_sure``, ``no_fact``;
+:func:`mcbench.pipeline.training.train_progressive_variant`) on the crops that
 ``snakemake --cores 2 --configfile workflow/configs/progressive.yaml training_data`` renders: 24
 object scenes (seeds 0-23; 7, 15, 23 validate) × 4 crops of 64², OIDN's results and divergence maps
-on them (``training.combiners: {count: 24, fibre_count: 0, crops: 4}``; no fibre scenes). 1500
-steps each, 0.075 s/step on 2 idle threads (about 2 minutes a network; the records hold each run's
-seconds, the full model's including a first half on a loaded machine). Validation SMAPE against
-the 4096-spp targets (OIDN alone: 0.0513 over the same crops): full 0.0522, without the SURE input
-0.0526, without f_act 0.0515 -- with 84 training crops the three are within each other's noise
-and at OIDN's level; the paper's network, trained on 1348 crops for 2500 epochs, gains more.
+on them (``training.combiners: {count: 24, fibre_count: 0, crops: 4}``; no fibre scenes), 1500
+steps each. The records (``methods/weights/progressive*.json``) hold each run's validation SMAPE
+and seconds; ``docs/measurements.md`` lists them.
 """
 
 from __future__ import annotations
 
 import sys
-from dataclasses import replace
 from functools import cache
 from pathlib import Path
 from types import SimpleNamespace
-from typing import Callable, Literal
+from typing import Literal
 
 import numpy as np
 
 from mcbench import BenchError
 from mcbench.filters import sure as sure_module
-from mcbench.io.buffers import BUFFER_SUFFIXES, Denoised, ImageBuffers, RenderBuffers
+from mcbench.filters.sure import divergence_map
+from mcbench.io.buffers import BUFFER_SUFFIXES, IMAGE_INDEX, Denoised, RenderBuffers
+from methods import single_image_function
 
 KIND = "combiner"
 LABEL = "PD† progressive denoising (ours, scaled, trained on our scenes)"
@@ -112,7 +107,7 @@ TRAINING = {"steps": 1500, "batch_size": 8, "patch": 48, "learning_rate": 1e-3, 
             "validate_every": 500}
 # Tensors forward() needs beyond the render's: the base's result and its σ²f′ (Eq. 2).
 TRAINING_KEYS = {"correlated": 3, "divergence": 3}
-# Trained on OIDN's results with their divergence term ("+sure": mcbench.pipeline.steps writes the
+# Trained on OIDN's results with their divergence term ("+sure": mcbench.pipeline.training writes the
 # divergence layers too, into results/training/correlated/oidn+sure/).
 CORRELATED_BASES = ("oidn+sure",)
 RENDER_LAYERS = tuple(q + s for q in ("color", "variance", "albedo", "normal", "depth")
@@ -120,7 +115,6 @@ RENDER_LAYERS = tuple(q + s for q in ("color", "variance", "albedo", "normal", "
 
 # Bases whose single-image function re-runs for the divergence (module docstring).
 DivergenceBase = Literal["none", "oidn", "jbf", "kpcn", "mcgan", "optix_ae", "wskpn"]
-IMAGE_INDEX = {"full": 0, "a": 1, "b": 2}
 
 
 @cache
@@ -142,38 +136,6 @@ def augment_batch(buffers: dict, rng) -> dict:
     from mcbench.nn.progressive import swap_flags
 
     return {**buffers, "swap": swap_flags(len(buffers["color"]), rng)}
-
-
-# --------------------------------------------------------------------------- divergence
-
-def single_image_denoiser(name: str) -> Callable[[ImageBuffers], np.ndarray]:
-    """Base denoiser ``name`` as a function of one :class:`ImageBuffers` -> (H, W, 3) radiance:
-    its ``denoise_image`` (default params), or a learned denoiser's committed network. A
-    :class:`BenchError` for a method without one (NFOR, RDFC, combiners)."""
-    from methods import load_method
-    from mcbench.io.weights import is_learned_method
-
-    module = load_method(name, kind="denoiser", config_key=f"divergence base '{name}'")
-    if callable(getattr(module, "denoise_image", None)):
-        return module.denoise_image
-    if is_learned_method(module):
-        from mcbench.nn.inference import load_network, run_network
-
-        network = load_network(module)
-        return lambda image: run_network(network, image)
-    raise BenchError(f"{name} has no single-image function (it filters the half buffers jointly); "
-                     f"the divergence of Eq. 2 can re-run one of "
-                     f"{', '.join(a for a in DivergenceBase.__args__ if a != 'none')}")
-
-
-def divergence_map(denoise_image: Callable[[ImageBuffers], np.ndarray], image: ImageBuffers, *,
-                   iterations: int = sure_module.ITERATIONS, epsilon: float = sure_module.EPSILON,
-                   seed=0) -> np.ndarray:
-    """σ²f′ of Eq. 2 for one image (float64 (H, W, 3)): ``denoise_image`` re-run on the image with
-    its colour perturbed (variance and features as they are), K = ``iterations`` times plus once
-    unperturbed."""
-    return sure_module.mc_divergence(lambda color: denoise_image(replace(image, color=color)), image.color,
-                                     image.variance, epsilon=epsilon, iterations=iterations, seed=seed)
 
 
 # --------------------------------------------------------------------------- combination
@@ -206,7 +168,7 @@ def combine_images(buffers: RenderBuffers, inputs: list[Denoised], *, net=None, 
         raise BenchError(f"progressive combines exactly {INPUTS} input, got {len(inputs)}")
     base = inputs[0]
     needs_divergence = net is not None and net.sure_input and divergence != "none"
-    denoise_image = single_image_denoiser(divergence) if needs_divergence else None
+    denoise_image = single_image_function(divergence, choices=DivergenceBase.__args__) if needs_divergence else None
     results, extras = {}, {}
     for which in BUFFER_SUFFIXES:
         image = buffers.image(which)
@@ -275,40 +237,3 @@ def variant_module(variant: str):
     module.LABEL = f"{LABEL}, ablation {variant}"
     module.NETWORK = {**NETWORK, **VARIANTS[variant]}
     return module
-
-
-def train_variant(variant: str, data: str = "results/training", steps: int | None = None,
-                  threads: int | None = None) -> dict:
-    """Train network ``variant`` -- ``full`` (the committed ``progressive.pt``) or an ablation of
-    :data:`VARIANTS` -- on the crops with results of :data:`CORRELATED_BASES` under
-    ``<data>/correlated/``; weights and record in ``methods/weights/``, checkpoint
-    ``results/training/checkpoints/<name>.ckpt`` (a run resumes from it)."""
-    from mcbench.nn.data import crop_paths
-    from mcbench.nn.train import correlated_paths, train_network
-    from mcbench.pipeline.steps import training_data
-    from mcbench.io.weights import record_path, weights_path
-
-    import methods.progressive as this   # not __main__ under ``python -m``: the record names "progressive"
-
-    module = this if variant == "full" else this.variant_module(variant)
-    files, correlated = correlated_paths(data, CORRELATED_BASES, crop_paths(data))
-    crops = training_data("progressive", [str(f) for f in files], {b: [str(f) for f in fs] for b, fs in correlated.items()})
-    name = "progressive" if variant == "full" else f"progressive_{variant}"
-    return train_network(module, crops, weights_path(name), record_path(name),
-                         f"results/training/checkpoints/{name}.ckpt",
-                         {**({"steps": steps} if steps else {}), **({"threads": threads} if threads else {})},
-                         log=lambda message: print(message, file=sys.stderr, flush=True))
-
-
-if __name__ == "__main__":
-    # python -m methods.progressive full|no_sure|no_fact [--steps N]: train h_NN or an ablation of Table 4
-    import argparse
-
-    parser = argparse.ArgumentParser(prog="python -m methods.progressive",
-                                     description="Train progressive denoising's h_NN (full) or an ablation variant.")
-    parser.add_argument("variant", choices=["full", *sorted(VARIANTS)])
-    parser.add_argument("--data", default="results/training")
-    parser.add_argument("--steps", type=int, default=None, help="training steps (default TRAINING['steps'])")
-    parser.add_argument("--threads", type=int, default=None, help="torch threads (default 2)")
-    arguments = parser.parse_args()
-    train_variant(arguments.variant, arguments.data, arguments.steps, arguments.threads)

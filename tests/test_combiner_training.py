@@ -10,7 +10,7 @@ from mcbench import BenchError
 from mcbench.io.buffers import ALL_LAYERS, BIN_LAYERS, SUB_OUTPUTS, Denoised, RenderBuffers
 from mcbench.io.exr import read_layers, write_layers
 from mcbench.nn.data import BUFFER_KEYS, crop_render_layers, load_combiner_crops
-from mcbench.pipeline.steps import write_correlated_training_inputs
+from mcbench.pipeline.training import write_correlated_training_inputs
 from methods import load_method
 
 LEVELS = (4, 8)
@@ -171,7 +171,7 @@ def test_committed_combiner_weights_reproduce_their_validation_loss(name, combin
     from mcbench.io.tables import read_json
     from mcbench.nn.inference import load_network
     from mcbench.nn.train import evaluate
-    from mcbench.pipeline.steps import training_data
+    from mcbench.pipeline.training import training_data
     from mcbench.io.weights import record_path
 
     seed, paths, correlated = combiner_validation_scene

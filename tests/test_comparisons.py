@@ -265,11 +265,14 @@ def test_rule_script_runs_each_step_without_snakemake(tmp_path):
 
 
 def test_ensemble_defaults_are_the_ensembles_own():
-    """ENSEMBLE_DEFAULTS repeats methods/ensemble.py's defaults (core may not import methods)."""
+    """The comparisons read the ensemble's defaults from their one owner in mcbench.combine, and
+    the ensemble plugin's combine() takes them as its defaults."""
     import inspect
 
-    from mcbench.analysis.comparisons import ENSEMBLE_DEFAULTS
+    from mcbench.analysis import comparisons
+    from mcbench.combine.ensemble_weights import ENSEMBLE_DEFAULTS
     from methods import load_method
 
+    assert comparisons.ENSEMBLE_DEFAULTS is ENSEMBLE_DEFAULTS
     signature = inspect.signature(load_method("ensemble").combine)
     assert {key: signature.parameters[key].default for key in ENSEMBLE_DEFAULTS} == ENSEMBLE_DEFAULTS

@@ -13,6 +13,10 @@ import numpy as np
 import pytest
 import qpsolvers
 
+from mcbench.combine import weight_filter
+from mcbench.combine.ensemble_weights import CHANNELS, solve_weights
+from mcbench.combine.simplex_solvers import SOLVERS, objective
+from mcbench.combine.weight_filter import PAPER_FILTER, filter_weights
 from mcbench.io.buffers import Denoised
 from methods import ensemble as E
 
@@ -91,7 +95,7 @@ def random_simplex_problems(seed=1, count=300):
 
 def solve_one(pts, b, solver="exact", **kw):
     xa, xb, ya, yb = as_problems(pts[None], b[None])
-    return E.solve_weights(xa, xb, ya, yb, solver=solver, **kw)[:, 0, 0, 0]
+    return solve_weights(xa, xb, ya, yb, solver=solver, **kw)[:, 0, 0, 0]
 
 
 def assert_simplex(w, axis=0, atol=1e-9):
@@ -109,7 +113,7 @@ def test_exact_matches_qp_objective():
     paths = set()
     for n, kind, scale, pts, b in random_simplex_problems():
         xa, xb, ya, yb = as_problems(pts[None], b[None])
-        w, code = E.solve_weights(xa, xb, ya, yb, solver="exact", return_info=True)
+        w, code = solve_weights(xa, xb, ya, yb, solver="exact", return_info=True)
         w = w[:, 0, 0, 0]
         paths.add(int(code.ravel()[0]))
         assert_simplex(w)
@@ -124,7 +128,7 @@ def test_exact_matches_qp_objective():
 
 
 def test_objective_is_eq13_quadratic_form():
-    """E.objective (Eq. 25 form used by the exact solver) equals w^T <M> w with <M> built
+    """objective (Eq. 25 form used by the exact solver) equals w^T <M> w with <M> built
     element-wise from Eq. 11-12."""
     rng = np.random.default_rng(5)
     n = 5
@@ -135,7 +139,7 @@ def test_objective_is_eq13_quadratic_form():
     M = 0.5 * (MA + MB)
     for _ in range(10):
         w = rng.dirichlet(np.ones(n))
-        got = E.objective(w[:, None, None, None], np.full((1, 1, 1), xa), np.full((1, 1, 1), xb),
+        got = objective(w[:, None, None, None], np.full((1, 1, 1), xa), np.full((1, 1, 1), xb),
                           ya[:, None, None, None], yb[:, None, None, None])[0, 0, 0]
         assert got == pytest.approx(w @ M @ w, rel=1e-12, abs=1e-12)
 
@@ -219,15 +223,15 @@ def biased_denoiser_problems(seed=13, n=4, h=64, w=64):
 def gap_above_optimum(weights, xa, xb, ya, yb):
     """Objective of ``weights`` minus the exact solver's optimum (itself checked against
     quadprog above), in units of the pixel-channel's scale s^2 = max(|x|, |y|)^2."""
-    optimum = E.objective(E.solve_weights(xa, xb, ya, yb, solver="exact"), xa, xb, ya, yb)
+    optimum = objective(solve_weights(xa, xb, ya, yb, solver="exact"), xa, xb, ya, yb)
     scale = np.maximum(np.maximum(np.abs(xa), np.abs(xb)),
                        np.maximum(np.abs(ya).max(axis=0), np.abs(yb).max(axis=0)))
-    return (E.objective(weights, xa, xb, ya, yb) - optimum) / np.maximum(scale, 1e-30) ** 2
+    return (objective(weights, xa, xb, ya, yb) - optimum) / np.maximum(scale, 1e-30) ** 2
 
 
 def test_iterative_never_below_exact():
     xa, xb, ya, yb = random_plane_problems()
-    wi = E.solve_weights(xa, xb, ya, yb, solver="iterative")
+    wi = solve_weights(xa, xb, ya, yb, solver="iterative")
     assert_simplex(wi)
     assert gap_above_optimum(wi, xa, xb, ya, yb).min() >= -1e-12
 
@@ -237,9 +241,9 @@ def test_iterative_reaches_the_optimum_on_99_percent(problems):
     """At least 99 % of pixel-channels end within 1e-6 s^2 of the exact optimum of Eq. 13.
 
     With the paper's alpha in [0, 1] (no away steps) this measured 67 % and 86 %; with away
-    steps (methods/ensemble.py docstring) 99.6 % and 99.96 %."""
+    steps (mcbench/combine/simplex_solvers.py docstring) 99.6 % and 99.96 %."""
     xa, xb, ya, yb = problems()
-    gap = gap_above_optimum(E.solve_weights(xa, xb, ya, yb, solver="iterative"), xa, xb, ya, yb)
+    gap = gap_above_optimum(solve_weights(xa, xb, ya, yb, solver="iterative"), xa, xb, ya, yb)
     share = float(np.mean(gap <= 1e-6))
     assert share >= 0.99, share
 
@@ -252,11 +256,11 @@ def test_iterative_deterministic_starts(start):
     hull, nearest point inside an edge), so one cycle of N steps moves nothing and it stops,
     with the exact weights."""
     xa, xb, ya, yb = random_plane_problems(seed=5, n=5, m=3000)
-    w, iterations = E.solve_weights(xa, xb, ya, yb, start=start, return_info=True)
+    w, iterations = solve_weights(xa, xb, ya, yb, start=start, return_info=True)
     assert_simplex(w)
     gap = gap_above_optimum(w, xa, xb, ya, yb)
     assert gap.min() >= -1e-12 and np.mean(gap <= 1e-6) >= 0.99
-    exact = E.solve_weights(xa, xb, ya, yb, solver="exact")
+    exact = solve_weights(xa, xb, ya, yb, solver="exact")
     two = (exact > 1e-9).sum(axis=0) == 2
     assert two.mean() > 0.2
     if start == "pair":
@@ -264,10 +268,10 @@ def test_iterative_deterministic_starts(start):
         np.testing.assert_allclose(w[:, two], exact[:, two], atol=1e-7)
     else:   # the best vertex is the optimum only where one weight is 1
         assert np.mean(iterations[two] == 5) < 0.5
-    random = E.solve_weights(xa, xb, ya, yb)
+    random = solve_weights(xa, xb, ya, yb)
     assert not np.array_equal(random, w)
     with pytest.raises(ValueError, match="start 'best'"):
-        E.solve_weights(xa, xb, ya, yb, start="best")
+        solve_weights(xa, xb, ya, yb, start="best")
 
 
 def test_iterative_stopping_rule_on_its_trajectory():
@@ -281,8 +285,8 @@ def test_iterative_stopping_rule_on_its_trajectory():
     n, limit, tolerance = 3, 12, 1e-4
     xa, xb, ya, yb = random_plane_problems(seed=21, n=n, m=300)
     kw = dict(solver="iterative", seed=5, tolerance=tolerance)
-    final, counts = E.solve_weights(xa, xb, ya, yb, max_iterations=limit, return_info=True, **kw)
-    trajectory = np.stack([E.solve_weights(xa, xb, ya, yb, max_iterations=t, **kw)
+    final, counts = solve_weights(xa, xb, ya, yb, max_iterations=limit, return_info=True, **kw)
+    trajectory = np.stack([solve_weights(xa, xb, ya, yb, max_iterations=t, **kw)
                            for t in range(1, limit + 1)])          # (limit, n, 1, m, 1)
     step_change = np.abs(np.diff(trajectory, axis=0)).max(axis=1)  # change of update t+2
     counts = counts.ravel()
@@ -308,14 +312,14 @@ def test_iterative_stops_at_the_paper_limit_of_1024():
     xa, xb, ya, yb = biased_denoiser_problems(n=4, h=24, w=24)
     # tolerance 0: only a cycle that changes no weight at all stops early, so that a third of
     # the pixel-channels run to the limit (with the default 1e-9, 99.9 % converge first)
-    w_default, counts = E.solve_weights(xa, xb, ya, yb, tolerance=0.0, return_info=True)
+    w_default, counts = solve_weights(xa, xb, ya, yb, tolerance=0.0, return_info=True)
     assert counts.max() == 1024
     unconverged = counts == 1024
     assert 0.02 < unconverged.mean() < 0.9
     assert np.all(counts[~unconverged] % 4 == 0)
-    w_1001, counts_1001 = E.solve_weights(xa, xb, ya, yb, tolerance=0.0, max_iterations=1001, return_info=True)
+    w_1001, counts_1001 = solve_weights(xa, xb, ya, yb, tolerance=0.0, max_iterations=1001, return_info=True)
     assert counts_1001.max() == 1001 and np.all(counts_1001[unconverged] == 1001)
-    w_more, counts_more = E.solve_weights(xa, xb, ya, yb, tolerance=0.0, max_iterations=4096, return_info=True)
+    w_more, counts_more = solve_weights(xa, xb, ya, yb, tolerance=0.0, max_iterations=4096, return_info=True)
     np.testing.assert_array_equal(counts_more[~unconverged], counts[~unconverged])
     np.testing.assert_array_equal(w_more[:, ~unconverged], w_default[:, ~unconverged])
     assert np.all(counts_more[unconverged] > 1024)
@@ -338,7 +342,7 @@ def test_iterative_two_denoisers_equals_closed_form():
     bs = np.stack([xb_, xa_], -1)
     xa, xb, ya, yb = as_problems(pts, bs)
     for solver in ("iterative", "exact"):
-        w = E.solve_weights(xa, xb, ya, yb, solver=solver)[:, 0, :, 0]
+        w = solve_weights(xa, xb, ya, yb, solver=solver)[:, 0, :, 0]
         np.testing.assert_allclose(w[1], alpha, atol=1e-9, err_msg=solver)
         np.testing.assert_allclose(w[0], 1 - alpha, atol=1e-9, err_msg=solver)
 
@@ -350,17 +354,17 @@ def test_iterative_deterministic_and_seeded():
     ya = rng.normal(size=(4, 16, 16, 3))
     yb = rng.normal(size=(4, 16, 16, 3))
     kw = dict(solver="iterative", max_iterations=64)
-    w0 = E.solve_weights(xa, xb, ya, yb, seed=3, **kw)
-    w1 = E.solve_weights(xa, xb, ya, yb, seed=3, **kw)
+    w0 = solve_weights(xa, xb, ya, yb, seed=3, **kw)
+    w1 = solve_weights(xa, xb, ya, yb, seed=3, **kw)
     assert np.array_equal(w0, w1)
     threads = numba.get_num_threads()
     try:
         numba.set_num_threads(1)
-        w_single = E.solve_weights(xa, xb, ya, yb, seed=3, **kw)
+        w_single = solve_weights(xa, xb, ya, yb, seed=3, **kw)
     finally:
         numba.set_num_threads(threads)
     assert np.array_equal(w0, w_single)
-    w2 = E.solve_weights(xa, xb, ya, yb, seed=4, **kw)
+    w2 = solve_weights(xa, xb, ya, yb, seed=4, **kw)
     assert not np.array_equal(w0, w2)
 
 
@@ -368,14 +372,14 @@ def test_iterative_deterministic_and_seeded():
 # Eq. 16: <M> is an unbiased estimator of M^half
 # ---------------------------------------------------------------------------------------
 def estimated_mse_matrix(color_a, color_b, denoised_a, denoised_b):
-    """<M> per pixel-channel recovered from the project's E.objective by polarisation: on the
+    """<M> per pixel-channel recovered from the project's objective by polarisation: on the
     simplex L(w) = w^T <M> w, so <M>_ii = L(e_i) and <M>_ij = 2 L((e_i + e_j) / 2)
     - (<M>_ii + <M>_jj) / 2. denoised_*: (N, H, W, C). Returns (N, N, H, W, C)."""
     n = denoised_a.shape[0]
 
     def loss(w):
         weights = np.broadcast_to(np.asarray(w, np.float64)[:, None, None, None], denoised_a.shape)
-        return E.objective(weights, color_a, color_b, denoised_a, denoised_b)
+        return objective(weights, color_a, color_b, denoised_a, denoised_b)
 
     eye = np.eye(n)
     diag = [loss(eye[i]) for i in range(n)]
@@ -394,7 +398,7 @@ def simplex_minimiser(matrix):
 
 
 def test_dual_buffer_estimate_unbiased_eq16():
-    """Eq. 16: the project's objective (E.objective, Eq. 11-13 via Eq. 25) is an unbiased
+    """Eq. 16: the project's objective (objective, Eq. 11-13 via Eq. 25) is an unbiased
     estimate of w^T M^half w. Monte Carlo over T pixels of one scene: x^A, x^B ~ N(mu, sigma^2)
     iid; y_i^h = a_i x^h + c_i + s_i eps_i^h + r eta^h (eta shared by the denoisers of one half,
     so y_i^A and y_j^A are correlated but independent of half B). Truth (Eq. 15):
@@ -440,7 +444,7 @@ def test_dual_buffer_estimate_unbiased_eq16():
 # ---------------------------------------------------------------------------------------
 # robustness
 # ---------------------------------------------------------------------------------------
-@pytest.mark.parametrize("solver", E.SOLVERS)
+@pytest.mark.parametrize("solver", SOLVERS)
 def test_robust_degenerate_inputs(solver):
     rng = np.random.default_rng(9)
     H, W, n = 6, 7, 4
@@ -453,13 +457,13 @@ def test_robust_degenerate_inputs(solver):
     xa[1, 1] = xb[1, 1] = ya[:, 1, 1] = yb[:, 1, 1] = 0.0  # all-zero pixel
     xa[2, 2] = 1e6  # fireflies
     yb[1, 3, 3] = 1e6
-    w = E.solve_weights(xa, xb, ya, yb, solver=solver)
+    w = solve_weights(xa, xb, ya, yb, solver=solver)
     assert w.shape == (n, H, W, 3)
     assert_simplex(w)
     if solver == "exact":
         np.testing.assert_allclose(w[:, 0, 0], 0.25, atol=1e-12)
         np.testing.assert_allclose(w[:, 1, 1], 0.25, atol=1e-12)
-    w1 = E.solve_weights(xa, xb, ya[:1], yb[:1], solver=solver)
+    w1 = solve_weights(xa, xb, ya[:1], yb[:1], solver=solver)
     assert np.array_equal(w1, np.ones((1, H, W, 3)))
 
 
@@ -472,11 +476,11 @@ def test_nonfinite_inputs_raise_with_count():
     xa[1, 2, 2] = np.nan  # same pixel: counted once
     yb[2, 4, 4, 0] = -np.inf
     with pytest.raises(ValueError, match=r"3 pixel"):
-        E.solve_weights(xa, xb, ya, yb)
+        solve_weights(xa, xb, ya, yb)
     with pytest.raises(ValueError, match="shape|must"):
-        E.solve_weights(xa, xb, ya[:, :4], yb)
+        solve_weights(xa, xb, ya[:, :4], yb)
     with pytest.raises(ValueError):
-        E.solve_weights(xa, xb[:4], ya, yb)
+        solve_weights(xa, xb[:4], ya, yb)
 
 
 # ---------------------------------------------------------------------------------------
@@ -505,13 +509,13 @@ def synthetic_scene(build, rng, H=20, W=24, n=3, spp=8):
 def test_filter_weights_simplex_and_constant_fixed_point(make_render_buffers):
     rng = np.random.default_rng(13)
     buffers, inputs, (xa, xb, ya, yb, yf, albedo, normal) = synthetic_scene(make_render_buffers, rng)
-    w = E.solve_weights(xa, xb, ya, yb, solver="exact")
-    wf = E.filter_weights(w, yf, ya, yb, albedo, normal)
+    w = solve_weights(xa, xb, ya, yb, solver="exact")
+    wf = filter_weights(w, yf, ya, yb, albedo, normal)
     assert wf.shape == w.shape
     assert_simplex(wf)
     assert np.abs(wf - w).max() > 1e-3  # it does filter
     const = np.broadcast_to(rng.dirichlet(np.ones(3), size=3).T[:, None, None, :], w.shape)
-    wc = E.filter_weights(const, yf, ya, yb, albedo, normal)
+    wc = filter_weights(const, yf, ya, yb, albedo, normal)
     np.testing.assert_allclose(wc, const, atol=1e-12)
 
 
@@ -547,7 +551,7 @@ def brute_force_weight_filter(weights, y_full, y_a, y_b, albedo, normal, *, radi
 
 @pytest.mark.parametrize("radius", [7, 2])
 def test_filter_weights_matches_eq32_34_brute_force(radius):
-    """E.filter_weights with the paper's parameters (Sec. 4.2: radius 7, sigma_s 3, sigma_z 2,
+    """filter_weights with the paper's parameters (Sec. 4.2: radius 7, sigma_s 3, sigma_z 2,
     sigma_albedo 0.25, sigma_normal 0.15) equals the brute-force loop; the data put every
     factor of kappa in its sensitive range, so a wrong guide, Var factor or sigma fails."""
     rng = np.random.default_rng(31)
@@ -563,9 +567,9 @@ def test_filter_weights_matches_eq32_34_brute_force(radius):
     expected = brute_force_weight_filter(weights, y_full, y_a, y_b, albedo, normal,
                                          radius=radius, **paper)
     if radius == 7:
-        got = E.filter_weights(weights, y_full, y_a, y_b, albedo, normal)  # the defaults
+        got = filter_weights(weights, y_full, y_a, y_b, albedo, normal)  # the defaults
     else:
-        got = E.filter_weights(weights, y_full, y_a, y_b, albedo, normal, radius=radius,
+        got = filter_weights(weights, y_full, y_a, y_b, albedo, normal, radius=radius,
                                sigma_spatial=3.0, sigma_color=2.0, sigma_albedo=0.25,
                                sigma_normal=0.15)
     np.testing.assert_allclose(got, expected, rtol=1e-9, atol=1e-12)
@@ -611,13 +615,13 @@ def test_combine_matches_the_output_before_the_rewrite(n, solver, make_render_bu
                                                        monkeypatch):
     """tests/data/ensemble_blend_before.npz holds combine()'s full, A and B blends on this
     deterministic case as computed by the float64, whole-image code before issue 14 (commit
-    9ec8741, the paper's filter alone: E.PAPER_FILTER). The float32 filter and the block-wise solve (blocks of 5 rows here, so blocks
+    9ec8741, the paper's filter alone: PAPER_FILTER). The float32 filter and the block-wise solve (blocks of 5 rows here, so blocks
     and filter bands both cut the 32 x 36 image) must stay within 1e-6 relMSE of it."""
     monkeypatch.setattr(E, "BLOCK_PIXELS", 5 * 36)
     before = np.load(BEFORE)
     buffers, inputs, _ = synthetic_scene(make_render_buffers, np.random.default_rng(100 + n),
                                          H=32, W=36, n=n)
-    out = E.combine(buffers, inputs, solver=solver, **E.PAPER_FILTER)
+    out = E.combine(buffers, inputs, solver=solver, **PAPER_FILTER)
     for which in ("full", "a", "b"):
         expected = before[f"{solver}_n{n}_{which}"].astype(np.float64)
         got = out.image(which).astype(np.float64)
@@ -637,9 +641,9 @@ def test_solve_in_blocks_equals_whole_image(monkeypatch, make_render_buffers):
                                                     np.random.default_rng(7), H=11, W=6, n=3)
     ya, yb = (np.stack([d.image(k) for d in inputs]).astype(np.float64) for k in ("a", "b"))
     monkeypatch.setattr(E, "BLOCK_PIXELS", 2 * 6)      # 2 rows per block, the last one short
-    for solver in E.SOLVERS:
-        for channels in E.CHANNELS:
-            whole = E.solve_weights(xa, xb, ya, yb, solver=solver, channels=channels)
+    for solver in SOLVERS:
+        for channels in CHANNELS:
+            whole = solve_weights(xa, xb, ya, yb, solver=solver, channels=channels)
             out = E.combine(buffers, inputs, solver=solver, channels=channels, filter=False)
             got = np.stack([out.extras[f"weights_raw_{i}"] for i in range(3)])
             assert np.array_equal(got, whole.astype(np.float32)), (solver, channels)
@@ -714,11 +718,11 @@ def test_banded_combine_equals_the_whole_image_pass(passes, solver, monkeypatch,
                                          H=37, W=23, n=4)
     # a firefly-like spike so that the outlier pass replaces values near band borders
     inputs[1].a[16:18, 5:8] += 3.0
-    options = dict(solver=solver, **(E.PAPER_FILTER if passes == "paper" else {}))
-    monkeypatch.setattr(E, "FILTER_BLOCK_PIXELS", 10 ** 9)
+    options = dict(solver=solver, **(PAPER_FILTER if passes == "paper" else {}))
+    monkeypatch.setattr(weight_filter, "FILTER_BLOCK_PIXELS", 10 ** 9)
     monkeypatch.setattr(E, "BLOCK_PIXELS", 10 ** 9)
     whole = E.combine(buffers, inputs, **options)
-    monkeypatch.setattr(E, "FILTER_BLOCK_PIXELS", 4 * 23)
+    monkeypatch.setattr(weight_filter, "FILTER_BLOCK_PIXELS", 4 * 23)
     monkeypatch.setattr(E, "BLOCK_PIXELS", 3 * 23)
     banded = E.combine(buffers, inputs, **options)
     for i in range(4):
@@ -748,7 +752,7 @@ def test_combine_reads_layers_by_rows(tmp_path, monkeypatch, make_render_buffers
 
     buffers, inputs, _ = synthetic_scene(make_render_buffers, np.random.default_rng(22),
                                          H=30, W=17, n=3)
-    monkeypatch.setattr(E, "FILTER_BLOCK_PIXELS", 5 * 17)
+    monkeypatch.setattr(weight_filter, "FILTER_BLOCK_PIXELS", 5 * 17)
     monkeypatch.setattr(E, "BLOCK_PIXELS", 4 * 17)
     write_layers(tmp_path / "render.exr", buffers.layers, metadata={"spp": 8})
     paths = [tmp_path / f"in{i}.exr" for i in range(3)]

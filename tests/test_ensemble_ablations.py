@@ -14,6 +14,10 @@ import numpy as np
 import pytest
 import qpsolvers
 
+from mcbench.combine.blending import blend, combine_with
+from mcbench.combine.ensemble_weights import CHANNELS, WEIGHTS, solve_weights
+from mcbench.combine.simplex_solvers import SOLVERS, objective
+from mcbench.combine.weight_filter import PAPER_FILTER, filter_weights
 from mcbench.io.buffers import Denoised
 from methods import ensemble as E
 
@@ -60,7 +64,7 @@ def summed_objective(weights, xa, xb, ya, yb):
     w = np.asarray(weights, np.float64)
     if w.ndim == 3:
         w = np.broadcast_to(w[..., None], ya.shape)
-    return E.objective(w, xa, xb, ya, yb).sum(axis=-1)
+    return objective(w, xa, xb, ya, yb).sum(axis=-1)
 
 
 def pixel_scale2(xa, xb, ya, yb, axis=None):
@@ -93,7 +97,7 @@ def test_unconstrained_two_denoisers_equal_eq19():
     pts = rng.normal(size=(m, 2, 2))
     bs = rng.normal(size=(m, 2)) * 1.5
     xa, xb, ya, yb = as_problems(pts, bs)
-    got = E.solve_weights(xa, xb, ya, yb, weights="unconstrained")[:, 0, :, 0]
+    got = solve_weights(xa, xb, ya, yb, weights="unconstrained")[:, 0, :, 0]
     expected = np.empty((2, m))
     for k in range(m):
         M = mse_matrix(xa[0, k, 0], xb[0, k, 0], ya[:, 0, k, 0], yb[:, 0, k, 0])
@@ -113,7 +117,7 @@ def test_unconstrained_equals_equality_constrained_least_squares():
         pts = rng.normal(size=(m, n, 2))
         bs = rng.normal(size=(m, 2)) * 2.0
         xa, xb, ya, yb = as_problems(pts, bs)
-        w = E.solve_weights(xa, xb, ya, yb, weights="unconstrained")
+        w = solve_weights(xa, xb, ya, yb, weights="unconstrained")
         for k in range(m):
             system = np.vstack([pts[k].T, np.ones((1, n))])
             rhs = np.concatenate([bs[k], [1.0]])
@@ -121,7 +125,7 @@ def test_unconstrained_equals_equality_constrained_least_squares():
                    else np.linalg.lstsq(system, rhs, rcond=None)[0])
             np.testing.assert_allclose(w[:, 0, k, 0], ref, atol=1e-9, err_msg=f"n={n}")
         bound = -0.5 * (xa - xb) ** 2
-        np.testing.assert_allclose(E.objective(w, xa, xb, ya, yb), bound, atol=1e-9)
+        np.testing.assert_allclose(objective(w, xa, xb, ya, yb), bound, atol=1e-9)
 
 
 def ridge_kkt(points, target, ridge):
@@ -161,7 +165,7 @@ def test_unconstrained_singular_is_the_minimum_norm_limit(kind):
             pts[2:] = pts[1]
         b = rng.normal(size=2) * 2
         xa, xb, ya, yb = as_problems(pts[None], b[None])
-        got = E.solve_weights(xa, xb, ya, yb, weights="unconstrained")[:, 0, 0, 0]
+        got = solve_weights(xa, xb, ya, yb, weights="unconstrained")[:, 0, 0, 0]
         s = max(np.abs(pts).max(), np.abs(b).max())
         ref = min_norm_on_sum_one(pts / s, b / s)
         np.testing.assert_allclose(got, ref, atol=1e-8 * max(1.0, np.abs(ref).max()),
@@ -176,7 +180,7 @@ def test_unconstrained_single_channel_equals_kkt():
     rng = np.random.default_rng(4)
     for n in range(2, 8):
         xa, xb, ya, yb = pixel_problems(rng, n, 30, "random")
-        w = E.solve_weights(xa, xb, ya, yb, weights="unconstrained", channels="single")
+        w = solve_weights(xa, xb, ya, yb, weights="unconstrained", channels="single")
         assert_shared_by_channels(w)
         for k in range(30):
             points = np.concatenate([ya[:, 0, k], yb[:, 0, k]], axis=1)   # (N, 6)
@@ -185,15 +189,15 @@ def test_unconstrained_single_channel_equals_kkt():
             np.testing.assert_allclose(w[:, 0, k, 0], ref, atol=1e-8, err_msg=f"n={n}")
 
 
-@pytest.mark.parametrize("channels", E.CHANNELS)
+@pytest.mark.parametrize("channels", CHANNELS)
 def test_unconstrained_never_above_simplex_optimum(channels):
     """Dropping w >= 0 can only lower the objective (a larger feasible set); the exact
     simplex solution is the reference; on these realistic problems some weights are negative
     and some pixels strictly gain."""
     rng = np.random.default_rng(5)
     xa, xb, ya, yb = pixel_problems(rng, 4, 400, "realistic")
-    wu = E.solve_weights(xa, xb, ya, yb, weights="unconstrained", channels=channels)
-    ws = E.solve_weights(xa, xb, ya, yb, solver="exact", channels=channels)
+    wu = solve_weights(xa, xb, ya, yb, weights="unconstrained", channels=channels)
+    ws = solve_weights(xa, xb, ya, yb, solver="exact", channels=channels)
     assert_sum_one(wu)
     fu = summed_objective(wu, xa, xb, ya, yb)
     fs = summed_objective(ws, xa, xb, ya, yb)
@@ -213,7 +217,7 @@ def simplex_grid(steps):
     return np.stack([i[keep], j[keep], steps - i[keep] - j[keep]], -1) / steps
 
 
-@pytest.mark.parametrize("solver", E.SOLVERS)
+@pytest.mark.parametrize("solver", SOLVERS)
 def test_single_channel_equals_brute_force_simplex_grid(solver):
     """N = 3: the shared weights minimise the channel-summed Eq. 13 (with <M> from Eq. 11-12
     per channel) over a fine grid of the simplex (step 1/600): never above the grid's best
@@ -221,7 +225,7 @@ def test_single_channel_equals_brute_force_simplex_grid(solver):
     rng = np.random.default_rng(6)
     count = 12
     xa, xb, ya, yb = pixel_problems(rng, 3, count, "random")
-    w = E.solve_weights(xa, xb, ya, yb, solver=solver, channels="single")
+    w = solve_weights(xa, xb, ya, yb, solver=solver, channels="single")
     assert_shared_by_channels(w)
     assert w.min() >= 0.0
     assert_sum_one(w)
@@ -261,7 +265,7 @@ def test_single_channel_exact_matches_quadprog_on_summed_mse(kind):
     rng = np.random.default_rng(7)
     for n in range(2, 9):
         xa, xb, ya, yb = pixel_problems(rng, n, 25, kind)
-        w = E.solve_weights(xa, xb, ya, yb, solver="exact", channels="single")
+        w = solve_weights(xa, xb, ya, yb, solver="exact", channels="single")
         for k in range(25):
             M = sum(mse_matrix(xa[0, k, c], xb[0, k, c], ya[:, 0, k, c], yb[:, 0, k, c])
                     for c in range(3))
@@ -280,7 +284,7 @@ def test_single_channel_exact_identical_outputs_share_equally():
     xa, xb, ya, yb = pixel_problems(rng, 5, 40, "realistic")
     ya[3], yb[3] = ya[1], yb[1]
     ya[4], yb[4] = ya[1], yb[1]
-    w = E.solve_weights(xa, xb, ya, yb, solver="exact", channels="single")
+    w = solve_weights(xa, xb, ya, yb, solver="exact", channels="single")
     np.testing.assert_array_equal(w[3], w[1])
     np.testing.assert_array_equal(w[4], w[1])
     assert (w[1] > 0.05).any()
@@ -291,7 +295,7 @@ def test_single_channel_exact_identical_outputs_share_equally():
         f_ref = summed_objective(ref[:, None, None], xa[:, k:k + 1], xb[:, k:k + 1],
                                  ya[:, :, k:k + 1], yb[:, :, k:k + 1])[0, 0]
         assert f[k] <= f_ref + 1e-8 * s2[k]
-    same = E.solve_weights(xa, xb, np.repeat(ya[:1], 4, 0), np.repeat(yb[:1], 4, 0),
+    same = solve_weights(xa, xb, np.repeat(ya[:1], 4, 0), np.repeat(yb[:1], 4, 0),
                            solver="exact", channels="single")
     np.testing.assert_allclose(same, 0.25, atol=1e-15)
 
@@ -301,9 +305,9 @@ def test_single_channel_costs_objective_against_channel_wise():
     rise, and it does where the denoisers' colour biases differ per channel."""
     rng = np.random.default_rng(8)
     xa, xb, ya, yb = pixel_problems(rng, 3, 300, "realistic")
-    f_single = summed_objective(E.solve_weights(xa, xb, ya, yb, solver="exact",
+    f_single = summed_objective(solve_weights(xa, xb, ya, yb, solver="exact",
                                                 channels="single"), xa, xb, ya, yb)
-    f_rgb = summed_objective(E.solve_weights(xa, xb, ya, yb, solver="exact"), xa, xb, ya, yb)
+    f_rgb = summed_objective(solve_weights(xa, xb, ya, yb, solver="exact"), xa, xb, ya, yb)
     s2 = pixel_scale2(xa, xb, ya, yb, axis=-1)
     assert np.all(f_rgb <= f_single + 1e-10 * s2)
     assert np.mean(f_single > f_rgb + 1e-6 * s2) > 0.5
@@ -312,7 +316,7 @@ def test_single_channel_costs_objective_against_channel_wise():
 # ---------------------------------------------------------------------------------------
 # the general QP solver (Sec. 5.2.2, Fig. 6)
 # ---------------------------------------------------------------------------------------
-@pytest.mark.parametrize("channels", E.CHANNELS)
+@pytest.mark.parametrize("channels", CHANNELS)
 @pytest.mark.parametrize("kind", ["random", "realistic"])
 def test_qp_solver_objective_matches_exact(channels, kind):
     """Objective of solver="qp" within 1e-8 of the exact solver's, in units of the pixel's
@@ -321,14 +325,14 @@ def test_qp_solver_objective_matches_exact(channels, kind):
     axis = -1 if channels == "single" else None
     for n in range(2, 9):
         xa, xb, ya, yb = pixel_problems(rng, n, 20, kind)
-        wq = E.solve_weights(xa, xb, ya, yb, solver="qp", channels=channels)
-        we = E.solve_weights(xa, xb, ya, yb, solver="exact", channels=channels)
+        wq = solve_weights(xa, xb, ya, yb, solver="qp", channels=channels)
+        we = solve_weights(xa, xb, ya, yb, solver="exact", channels=channels)
         assert wq.min() >= 0.0
         assert_sum_one(wq)
         if channels == "single":
             fq, fe = summed_objective(wq, xa, xb, ya, yb), summed_objective(we, xa, xb, ya, yb)
         else:
-            fq, fe = E.objective(wq, xa, xb, ya, yb), E.objective(we, xa, xb, ya, yb)
+            fq, fe = objective(wq, xa, xb, ya, yb), objective(we, xa, xb, ya, yb)
         gap = (fq - fe) / pixel_scale2(xa, xb, ya, yb, axis=axis)
         assert np.abs(gap).max() <= 1e-8, (n, np.abs(gap).max())
 
@@ -336,7 +340,7 @@ def test_qp_solver_objective_matches_exact(channels, kind):
 # ---------------------------------------------------------------------------------------
 # robustness and the unchanged defaults
 # ---------------------------------------------------------------------------------------
-OPTIONS = list(itertools.product(E.SOLVERS, E.WEIGHTS, E.CHANNELS))
+OPTIONS = list(itertools.product(SOLVERS, WEIGHTS, CHANNELS))
 
 
 @pytest.mark.parametrize("solver,weights,channels", OPTIONS)
@@ -358,7 +362,7 @@ def test_finite_on_fireflies_black_and_1x1(solver, weights, channels, make_rende
     inputs = [Denoised(full=ys["f"][i].astype(np.float32), a=ys["a"][i].astype(np.float32),
                        b=ys["b"][i].astype(np.float32)) for i in range(n)]
     options = dict(solver=solver, weights=weights, channels=channels)
-    w = E.solve_weights(buffers.color_a, buffers.color_b, ys["a"], ys["b"], **options)
+    w = solve_weights(buffers.color_a, buffers.color_b, ys["a"], ys["b"], **options)
     # rounding of the sum is relative to the weights' size (unconstrained: up to ~1e9 here)
     assert_sum_one(w, atol=1e-12 * max(1.0, np.abs(w).max()))
     if weights == "simplex":
@@ -370,7 +374,7 @@ def test_finite_on_fireflies_black_and_1x1(solver, weights, channels, make_rende
     tiny_inputs = [Denoised(full=d.full[:1, :1], a=d.a[:1, :1], b=d.b[:1, :1]) for d in inputs]
     small = E.combine(tiny, tiny_inputs, **options)
     assert small.full.shape == (1, 1, 3) and np.isfinite(small.full).all()
-    one = E.solve_weights(buffers.color_a, buffers.color_b, ys["a"][:1], ys["b"][:1], **options)
+    one = solve_weights(buffers.color_a, buffers.color_b, ys["a"][:1], ys["b"][:1], **options)
     assert np.array_equal(one, np.ones((1, H, W, 3)))
 
 
@@ -387,12 +391,12 @@ def test_unconstrained_filter_keeps_negative_weights(make_render_buffers):
                        b=ys[2][i].astype(np.float32)) for i in range(n)]
     y_full, y_a, y_b = (np.stack([np.asarray(getattr(d, k), np.float64) for d in inputs])
                         for k in ("full", "a", "b"))
-    raw = E.solve_weights(buffers.color_a, buffers.color_b, y_a, y_b, weights="unconstrained")
-    filt = E.filter_weights(raw, y_full, y_a, y_b, buffers.albedo, buffers.normal,
+    raw = solve_weights(buffers.color_a, buffers.color_b, y_a, y_b, weights="unconstrained")
+    filt = filter_weights(raw, y_full, y_a, y_b, buffers.albedo, buffers.normal,
                             nonnegative=False)
     np.testing.assert_allclose(filt.sum(axis=0), 1.0, atol=1e-12 * np.abs(raw).max())
-    out = E.combine(buffers, inputs, weights="unconstrained", **E.PAPER_FILTER)
-    filt32 = E.filter_weights(raw, y_full, y_a, y_b, buffers.albedo, buffers.normal,
+    out = E.combine(buffers, inputs, weights="unconstrained", **PAPER_FILTER)
+    filt32 = filter_weights(raw, y_full, y_a, y_b, buffers.albedo, buffers.normal,
                               nonnegative=False, dtype=np.float32)   # combine's precision
     for i in range(n):
         assert np.array_equal(out.extras[f"weights_filtered_{i}"], filt32[i])
@@ -406,7 +410,7 @@ def test_defaults_are_the_measured_filter(make_render_buffers):
     code's guide-variance blur and outlier removal, the measured best: methods/ensemble.py
     docstring) give exactly the output of the explicit defaults and of the solve -> filter
     (float32, as combine) -> blend path, bit for bit; the paper's filter alone
-    (E.PAPER_FILTER) is the same path without the two passes."""
+    (PAPER_FILTER) is the same path without the two passes."""
     rng = np.random.default_rng(12)
     H, W, n = 14, 15, 3
     truth = rng.uniform(0.2, 1.0, (H, W, 3))
@@ -421,22 +425,22 @@ def test_defaults_are_the_measured_filter(make_render_buffers):
                          radius=7, sigma_spatial=3.0, sigma_color=2.0, sigma_albedo=0.25,
                          sigma_normal=0.15, guide_variance_blur="gaussian9",
                          outlier_removal=True, colour_distance="mean", start="random")
-    paper = E.combine(buffers, inputs, **E.PAPER_FILTER)
+    paper = E.combine(buffers, inputs, **PAPER_FILTER)
     y_full, y_a, y_b = (np.stack([np.asarray(getattr(d, k), np.float64) for d in inputs])
                         for k in ("full", "a", "b"))
-    raw = E.solve_weights(buffers.color_a, buffers.color_b, y_a, y_b, solver="iterative")
+    raw = solve_weights(buffers.color_a, buffers.color_b, y_a, y_b, solver="iterative")
     for got, passes in ((default, dict(guide_variance_blur="gaussian9", outlier_removal=True)),
                         (explicit, dict(guide_variance_blur="gaussian9", outlier_removal=True)),
-                        (paper, E.PAPER_FILTER)):
-        filt = E.filter_weights(raw, y_full, y_a, y_b, buffers.albedo, buffers.normal,
+                        (paper, PAPER_FILTER)):
+        filt = filter_weights(raw, y_full, y_a, y_b, buffers.albedo, buffers.normal,
                                 dtype=np.float32, **passes)
         for which in ("full", "a", "b"):
-            assert np.array_equal(got.image(which), E.blend(filt, inputs, which).astype(np.float32))
+            assert np.array_equal(got.image(which), blend(filt, inputs, which).astype(np.float32))
         for i in range(n):
             assert np.array_equal(got.extras[f"weights_raw_{i}"], raw[i].astype(np.float32))
             assert np.array_equal(got.extras[f"weights_filtered_{i}"], filt[i])
-    np.testing.assert_allclose(paper.full, E.combine_with(
-        E.filter_weights(raw, y_full, y_a, y_b, buffers.albedo, buffers.normal), y_full),
+    np.testing.assert_allclose(paper.full, combine_with(
+        filter_weights(raw, y_full, y_a, y_b, buffers.albedo, buffers.normal), y_full),
         rtol=1e-6, atol=1e-7)
     # the options do change the result (the comparison above has power)
     for change in (dict(weights="unconstrained"), dict(channels="single"), dict(filter=False),
@@ -450,12 +454,12 @@ def test_unknown_options_name_the_choices():
     ya = yb = np.zeros((2, 2, 2, 3))
     for key, bad in (("weights", "nonneg"), ("channels", "grey"), ("solver", "osqp")):
         with pytest.raises(ValueError, match=f"{key} '{bad}'"):
-            E.solve_weights(xa, xb, ya, yb, **{key: bad})
+            solve_weights(xa, xb, ya, yb, **{key: bad})
 
 
-@pytest.mark.parametrize("params", [dict(E.PAPER_FILTER, guide_variance_blur="gaussian9"),
-                                    dict(E.PAPER_FILTER, outlier_removal=True),
-                                    dict(E.PAPER_FILTER, colour_distance="sum"),
+@pytest.mark.parametrize("params", [dict(PAPER_FILTER, guide_variance_blur="gaussian9"),
+                                    dict(PAPER_FILTER, outlier_removal=True),
+                                    dict(PAPER_FILTER, colour_distance="sum"),
                                     dict(guide_variance_blur="gaussian9", outlier_removal=True,
                                          colour_distance="sum")])
 def test_postprocessing_keeps_the_constraint(params, make_render_buffers):
@@ -469,14 +473,14 @@ def test_postprocessing_keeps_the_constraint(params, make_render_buffers):
     ys = [np.clip(truth + rng.normal(0, 0.05, (n, H, W, 3)), 0, None) for _ in range(3)]
     inputs = [Denoised(full=ys[0][i].astype(np.float32), a=ys[1][i].astype(np.float32),
                        b=ys[2][i].astype(np.float32)) for i in range(n)]
-    for weights in E.WEIGHTS:
+    for weights in WEIGHTS:
         out = E.combine(buffers, inputs, weights=weights, **params)
         filt = np.stack([out.extras[f"weights_filtered_{i}"] for i in range(n)]).astype(np.float64)
         assert np.isfinite(filt).all() and np.isfinite(out.full).all()
         assert_sum_one(filt, atol=1e-5 * max(1.0, np.abs(filt).max()))
         if weights == "simplex":
             assert filt.min() >= 0.0
-        plain = E.combine(buffers, inputs, weights=weights, **E.PAPER_FILTER)
+        plain = E.combine(buffers, inputs, weights=weights, **PAPER_FILTER)
         assert not np.array_equal(plain.full, out.full)
 
 
@@ -492,8 +496,8 @@ def test_outlier_removal_that_empties_a_pixel_keeps_the_filtered_weights():
     y = np.ones((3, H, W, 3))
     flat = np.full((H, W, 3), 0.5)
     kwargs = dict(sigma_spatial=0.01, radius=1)
-    plain = E.filter_weights(w, y, y, y, flat, flat, **kwargs)
-    cleaned = E.filter_weights(w, y, y, y, flat, flat, outlier_removal=True, **kwargs)
+    plain = filter_weights(w, y, y, y, flat, flat, **kwargs)
+    cleaned = filter_weights(w, y, y, y, flat, flat, outlier_removal=True, **kwargs)
     np.testing.assert_allclose(plain, w, atol=1e-12)
     np.testing.assert_array_equal(cleaned[:, 4, 4], plain[:, 4, 4])
     assert np.isfinite(cleaned).all()

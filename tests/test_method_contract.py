@@ -159,7 +159,7 @@ def test_loads_and_keeps_the_contract(name, make_render_buffers):
 @pytest.mark.parametrize("name", [n for n in available_methods() if hasattr(load_method(n), "RENDER_LAYERS")])
 def test_declared_render_layers_are_all_the_method_reads(name, make_render_buffers):
     """A method declaring RENDER_LAYERS gets only those (and colour) from a job
-    (mcbench.pipeline.steps.render_layers): on such a render it must give exactly its full-render result."""
+    (mcbench.pipeline.methods.render_layers): on such a render it must give exactly its full-render result."""
     module = load_method(name)
     buffers = make_render_buffers(height=HEIGHT, width=WIDTH, seed=1, bins=True)
     inputs = synthetic_inputs(buffers)

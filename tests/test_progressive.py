@@ -382,12 +382,13 @@ def test_t_test_only_mode_converges_to_the_noisy_image_when_the_base_is_biased(m
 
 def test_divergence_bases_and_their_refusals():
     import methods.progressive as progressive
+    from methods import single_image_function
     from mcbench import BenchError
 
-    assert callable(progressive.single_image_denoiser("oidn"))
-    assert callable(progressive.single_image_denoiser("jbf"))
+    assert callable(single_image_function("oidn"))
+    assert callable(single_image_function("jbf"))
     with pytest.raises(BenchError, match="no single-image function"):
-        progressive.single_image_denoiser("nfor")
+        single_image_function("nfor")
     with pytest.raises(BenchError):
         progressive.combine(None, [], iterations=0)
 

@@ -157,6 +157,35 @@ def test_post_filter_keeps_the_simplex_and_a_uniform_selection(make_render_buffe
                                                                buffers.albedo, buffers.normal), uniform, atol=1e-12)
 
 
+def test_post_filter_and_blend_are_the_ensembles(make_render_buffers):
+    """The selection's blend and "Post" filter are the ensemble's shared code (mcbench.combine:
+    combine_with, the weight filter alone with the paper's parameters), and equal bit for bit
+    what the selection computed on its own before: the guide z = sum s_i y_i, Var[z] ~
+    (z^A - z^B)^2 / 2, one cross_bilateral_filter of the N x C maps as (K, H, W), clipped at 0
+    and divided by the sum."""
+    from mcbench.combine.blending import combine_with
+    from mcbench.combine.weight_filter import FILTER_PARAMETERS, PAPER_FILTER, filter_weights
+
+    assert selection.POST_FILTER == FILTER_PARAMETERS
+    buffers = make_render_buffers(height=11, width=8, seed=12)
+    inputs = random_inputs(buffers, 3, seed=13)
+    y = {w: np.stack([d.image(w) for d in inputs]).astype(np.float64) for w in ("full", "a", "b")}
+    s = selection.one_hot_selection(np.random.default_rng(14).normal(size=(3, 11, 8, 3)))
+    assert np.array_equal(selection.blend(s, y["full"]), combine_with(s, y["full"]))
+    soft = selection.filter_selection_maps(s, y["full"], y["a"], y["b"], buffers.albedo, buffers.normal)
+    assert np.array_equal(soft, filter_weights(s, y["full"], y["a"], y["b"], buffers.albedo,
+                                               buffers.normal, **PAPER_FILTER))
+    n, h, w, c = s.shape
+    guide = np.einsum("nhwc,nhwc->hwc", s, y["full"])
+    variance = 0.5 * (np.einsum("nhwc,nhwc->hwc", s, y["a"]) - np.einsum("nhwc,nhwc->hwc", s, y["b"])) ** 2
+    p = FILTER_PARAMETERS
+    filtered = cross_bilateral_filter(np.moveaxis(s, 3, 1).reshape(n * c, h, w), guide, variance,
+                                      [buffers.albedo, buffers.normal], [p["sigma_albedo"], p["sigma_normal"]],
+                                      p["sigma_spatial"], p["sigma_color"], p["radius"])
+    clipped = np.maximum(np.moveaxis(filtered.reshape(n, c, h, w), 1, 3), 0.0)
+    assert np.array_equal(soft, clipped / clipped.sum(axis=0, keepdims=True))
+
+
 # --- the combiners --------------------------------------------------------------------------------
 
 def test_naive_average_is_the_mean_of_each_image(make_render_buffers):

@@ -1,4 +1,4 @@
-"""Fast tests of the rule bodies in ``mcbench.pipeline.steps`` on tiny synthetic EXRs: each step's files
+"""Fast tests of the rule bodies in ``mcbench.pipeline`` on tiny synthetic EXRs: each step's files
 against the project functions (or closed forms) recomputed here from the same inputs."""
 
 from __future__ import annotations
@@ -9,9 +9,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from mcbench import BenchError
+from mcbench import NOISY, BenchError
 
-from mcbench.pipeline import steps
+from mcbench.pipeline import methods, metrics, render, report, viewer
 from mcbench.io.buffers import Denoised, RenderBuffers
 from mcbench.io.exr import read_layers, read_metadata, write_layers
 from mcbench.analysis.metrics import METRICS
@@ -33,7 +33,7 @@ def case_files(tmp_path, make_render_buffers):
 
 def run(method, render, tmp_path, **kw):
     output, timing = tmp_path / f"{method}.exr", tmp_path / f"{method}.json"
-    steps.run_method(method, str(render), str(output), str(timing), scene=SCENE, spp=SPP,
+    methods.run_method(method, str(render), str(output), str(timing), scene=SCENE, spp=SPP,
                      threads=1, **kw)
     return output, timing
 
@@ -80,10 +80,10 @@ def test_run_methods_in_one_job_equals_one_job_per_method(case_files, tmp_path):
     single, batch = tmp_path / "single", tmp_path / "batch"
     single.mkdir(), batch.mkdir()
     for name, module, params, inputs in specs:
-        steps.run_method(name, str(render), str(single / f"{name}.exr"), str(single / f"{name}.json"),
+        methods.run_method(name, str(render), str(single / f"{name}.exr"), str(single / f"{name}.json"),
                          module_name=module, params=params,
                          input_paths=[str(single / f"{i}.exr") for i in inputs], scene=SCENE, spp=SPP)
-    steps.run_methods([{"name": name, "module": module, "params": params,
+    methods.run_methods([{"name": name, "module": module, "params": params,
                         "input_paths": [str(batch / f"{i}.exr") for i in inputs],
                         "exr": str(batch / f"{name}.exr"), "timing": str(batch / f"{name}.json")}
                        for name, module, params, inputs in specs], str(render), scene=SCENE, spp=SPP)
@@ -98,7 +98,7 @@ def test_run_methods_in_one_job_equals_one_job_per_method(case_files, tmp_path):
 def test_run_methods_names_a_missing_input(case_files, tmp_path):
     render, _ = case_files
     with pytest.raises(Exception, match="missing.exr"):
-        steps.run_methods([{"name": "ens", "module": "ensemble", "params": {},
+        methods.run_methods([{"name": "ens", "module": "ensemble", "params": {},
                             "input_paths": [str(tmp_path / "missing.exr")],
                             "exr": str(tmp_path / "ens.exr"), "timing": str(tmp_path / "ens.json")}],
                           str(render))
@@ -116,7 +116,7 @@ def test_run_method_refuses_an_input_of_another_size(case_files, tmp_path, make_
 def case_metrics(render, reference, tmp_path, *, scene=SCENE, spp=SPP):
     output, _ = run("jbf", render, tmp_path, module_name="jbf")
     csv = tmp_path / f"metrics_{scene}_{spp}.csv"
-    frame = steps.compute_case_metrics(scene, spp, str(reference), str(render), {"jbf": str(output)},
+    frame = metrics.compute_case_metrics(scene, spp, str(reference), str(render), {"jbf": str(output)},
                                        list(METRICS), str(csv))
     return frame, csv, output
 
@@ -125,13 +125,13 @@ def test_compute_case_metrics_equals_the_metrics_recomputed(case_files, tmp_path
     render, reference = case_files
     frame, csv, output = case_metrics(render, reference, tmp_path)
     truth = read_layers(reference, ["color"])["color"]
-    images = {steps.NOISY: RenderBuffers.load(render).color, "jbf": Denoised.load(output).full}
+    images = {NOISY: RenderBuffers.load(render).color, "jbf": Denoised.load(output).full}
     assert len(frame) == len(images) * len(METRICS)
     for row in frame.itertuples():
         assert (row.scene, row.spp) == (SCENE, SPP)
         assert row.value == METRICS[row.metric](images[row.candidate], truth)
     assert frame.set_index(["candidate", "metric"]).loc[("jbf", "relmse"), "value"] < \
-        frame.set_index(["candidate", "metric"]).loc[(steps.NOISY, "relmse"), "value"]
+        frame.set_index(["candidate", "metric"]).loc[(NOISY, "relmse"), "value"]
     pd.testing.assert_frame_equal(pd.read_csv(csv), frame)
 
 
@@ -144,17 +144,17 @@ def test_case_metrics_write_the_flip_maps_the_viewer_uses(case_files, tmp_path):
     render, reference = case_files
     output, _ = run("jbf", render, tmp_path, module_name="jbf")
     maps_path = tmp_path / "maps.exr"
-    frame = steps.compute_case_metrics(SCENE, SPP, str(reference), str(render), {"jbf": str(output)},
+    frame = metrics.compute_case_metrics(SCENE, SPP, str(reference), str(render), {"jbf": str(output)},
                                        ["relmse", "flip"], str(tmp_path / "m.csv"), flip_maps_path=str(maps_path))
     maps = read_layers(maps_path)
     truth = read_layers(reference, ["color"])["color"]
-    assert set(maps) == {steps.NOISY, "jbf"}
+    assert set(maps) == {NOISY, "jbf"}
     np.testing.assert_allclose(maps["jbf"], flip_map(Denoised.load(output).full, truth), rtol=1e-6, atol=1e-7)
     flip_values = frame[frame.metric == "flip"].set_index("candidate")["value"]
     assert flip_values["jbf"] == METRICS["flip"](Denoised.load(output).full, truth)
     with_maps, without = tmp_path / "with", tmp_path / "without"
     for folder, path in ((with_maps, str(maps_path)), (without, None)):
-        steps.write_viewer_case(SCENE, SPP, str(reference), str(render), {"jbf": str(output)}, str(folder),
+        viewer.write_viewer_case(SCENE, SPP, str(reference), str(render), {"jbf": str(output)}, str(folder),
                                 weight_inputs={}, flip_maps_path=path)
     assert (with_maps / "jbf_flip.png").read_bytes() == (without / "jbf_flip.png").read_bytes()
 
@@ -164,7 +164,7 @@ def test_gather_tables_concatenates_the_cases(case_files, tmp_path):
     first, csv_a, _ = case_metrics(render, reference, tmp_path, scene="box", spp=8)
     second, csv_b, _ = case_metrics(render, reference, tmp_path, scene="room", spp=16)
     out = tmp_path / "metrics.csv"
-    frame = steps.gather_tables([str(csv_a), str(csv_b)], str(out), candidates=[steps.NOISY, "jbf"],
+    frame = metrics.gather_tables([str(csv_a), str(csv_b)], str(out), candidates=[NOISY, "jbf"],
                                 metric_names=list(METRICS), cases=[("box", 8), ("room", 16)])
     expected = pd.concat([first, second], ignore_index=True)
     pd.testing.assert_frame_equal(frame.reset_index(drop=True), expected)
@@ -174,12 +174,12 @@ def test_gather_tables_concatenates_the_cases(case_files, tmp_path):
 def test_write_rankings_scores_the_lower_error_higher(case_files, tmp_path):
     render, reference = case_files
     frame, csv, _ = case_metrics(render, reference, tmp_path)
-    table = steps.write_rankings(str(csv), "relmse", str(tmp_path / "r.csv"), str(tmp_path / "r.md"),
-                                 candidates=[steps.NOISY, "jbf"], labels={"jbf": "JBF"})
+    table = report.write_rankings(str(csv), "relmse", str(tmp_path / "r.csv"), str(tmp_path / "r.md"),
+                                 candidates=[NOISY, "jbf"], labels={"jbf": "JBF"})
     # two entries: the lower relMSE scores 2, the other 1 (Sec. 5.3.3)
-    assert table.loc["jbf", "Avg."] == 2.0 and table.loc[steps.NOISY, "Avg."] == 1.0
+    assert table.loc["jbf", "Avg."] == 2.0 and table.loc[NOISY, "Avg."] == 1.0
     assert "JBF" in (tmp_path / "r.md").read_text()
-    assert set(pd.read_csv(tmp_path / "r.csv")["candidate"]) == {"jbf", steps.NOISY}
+    assert set(pd.read_csv(tmp_path / "r.csv")["candidate"]) == {"jbf", NOISY}
 
 
 def test_gather_timings_collects_and_sorts_the_records(tmp_path):
@@ -192,7 +192,7 @@ def test_gather_timings_collects_and_sorts_the_records(tmp_path):
         path.write_text(json.dumps(record))
         paths.append(str(path))
     out = tmp_path / "timings.csv"
-    frame = steps.gather_timings(paths, str(out))
+    frame = metrics.gather_timings(paths, str(out))
     assert list(frame.columns) == ["scene", "spp", "method", "module", "kind", "seconds", "width",
                                    "height", "threads", "machine"]
     assert list(zip(frame["method"], frame["scene"], frame["seconds"])) == [
@@ -218,7 +218,7 @@ def test_merge_reference_is_the_spp_weighted_mean(tmp_path):
         chunks.append((spp, layers))
         paths.append(str(path))
     out = tmp_path / "reference.exr"
-    steps.merge_reference(paths, str(out))
+    render.merge_reference(paths, str(out))
     merged = read_layers(out)
 
     def pooled(name):
@@ -239,8 +239,8 @@ def test_a_job_of_row_reading_methods_never_reads_an_input_whole(case_files, tmp
     by rows (no read_layers of those files) and writes what the whole-file path writes."""
     render, _ = case_files
     inputs = [run(name, render, tmp_path, module_name=name)[0] for name in ("jbf", "oidn")]
-    assert steps.reads_rows([load_method("ensemble")])
-    assert not steps.reads_rows([load_method("ensemble"), load_method("naive_average")])
+    assert methods.reads_rows([load_method("ensemble")])
+    assert not methods.reads_rows([load_method("ensemble"), load_method("naive_average")])
     expected = load_method("ensemble").combine(RenderBuffers.load(render), [Denoised.load(p) for p in inputs])
     import mcbench.io.buffers
     import mcbench.io.exr
@@ -250,7 +250,7 @@ def test_a_job_of_row_reading_methods_never_reads_an_input_whole(case_files, tmp
     monkeypatch.setattr(mcbench.io.buffers, "read_layers", refuse)
     monkeypatch.setattr(mcbench.io.exr, "read_layers", refuse)
     output = tmp_path / "ens_rows.exr"
-    steps.run_methods([{"name": "ens", "module": "ensemble", "params": {}, "input_paths": [str(p) for p in inputs],
+    methods.run_methods([{"name": "ens", "module": "ensemble", "params": {}, "input_paths": [str(p) for p in inputs],
                         "exr": str(output), "timing": str(tmp_path / "ens_rows.json")}], str(render))
     monkeypatch.undo()
     layers = read_layers(output)

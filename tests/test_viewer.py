@@ -18,10 +18,8 @@ import pytest
 from PIL import Image
 
 from mcbench import BenchError
-
-from mcbench.pipeline import steps
-
 from mcbench.analysis import viewer
+from mcbench.pipeline import viewer as viewer_step
 from mcbench.io.exr import write_layers
 
 PAGE = Path(__file__).resolve().parents[1] / "workflow" / "report" / "viewer"
@@ -309,12 +307,12 @@ def build_viewer(results):
     for scene, spp in cases:
         case_dir = root / "viewer_cases" / scene / f"spp{spp}"
         files = paths[(scene, spp)]
-        steps.write_viewer_case(scene, spp, files["reference"], files["render"], files["candidates"],
+        viewer_step.write_viewer_case(scene, spp, files["reference"], files["render"], files["candidates"],
                                 str(case_dir), weight_inputs={"ens": ["jbf", "oidn"]})
         (case_dir / ".snakemake_timestamp").write_text("")      # what Snakemake leaves in a directory()
         case_dirs.append(str(case_dir))
     output = root / "viewer"
-    manifest = steps.write_viewer(metrics_csv, case_dirs, str(output), cases=cases, candidates=CANDIDATES,
+    manifest = viewer_step.write_viewer(metrics_csv, case_dirs, str(output), cases=cases, candidates=CANDIDATES,
                                   labels=LABELS, metric_names=METRIC_NAMES, static_dir=str(PAGE))
     return output, manifest
 
@@ -381,10 +379,10 @@ def test_viewer_refuses_a_case_record_of_another_case(results):
     root, paths, metrics_csv, cases = results
     files = paths[("box", 4)]
     case_dir = root / "case"
-    steps.write_viewer_case("box", 4, files["reference"], files["render"], files["candidates"], str(case_dir),
+    viewer_step.write_viewer_case("box", 4, files["reference"], files["render"], files["candidates"], str(case_dir),
                             weight_inputs={})
     with pytest.raises(BenchError, match=r"case\.json: holds case \(box, 4\), expected \(box, 16\)"):
-        steps.write_viewer(metrics_csv, [str(case_dir)], str(root / "viewer"), cases=[("box", 16)],
+        viewer_step.write_viewer(metrics_csv, [str(case_dir)], str(root / "viewer"), cases=[("box", 16)],
                            candidates=CANDIDATES, labels=LABELS, metric_names=METRIC_NAMES, static_dir=str(PAGE))
 
 
@@ -394,7 +392,7 @@ def test_viewer_case_names_a_candidate_file_of_the_wrong_shape(results):
     wrong = root / "wrong.exr"
     write_layers(wrong, {"color": np.zeros((8, 16, 3)), "color_a": np.zeros((8, 16, 3)), "color_b": np.zeros((8, 16, 3))})
     with pytest.raises(BenchError, match=re.escape(str(wrong))):
-        steps.write_viewer_case("box", 4, files["reference"], files["render"], {"jbf": str(wrong)},
+        viewer_step.write_viewer_case("box", 4, files["reference"], files["render"], {"jbf": str(wrong)},
                                 str(root / "case"), weight_inputs={})
 
 

@@ -39,6 +39,7 @@ import numpy as np
 import pandas as pd
 
 from mcbench import BenchError
+from mcbench.combine.ensemble_weights import ENSEMBLE_DEFAULTS
 from mcbench.io.tables import read_table, write_csv, write_text
 from mcbench.analysis.metrics import METRIC_LABELS
 from mcbench.analysis.ranking import format_markdown, ranking_table
@@ -48,12 +49,9 @@ __all__ = ["ENSEMBLE_DEFAULTS", "ABLATIONS", "ONE_HOT_VARIANTS", "PAPER_AVG", "C
            "beats_markdown", "ablation_cases", "ablation_table", "ablation_markdown", "comparison_ranking",
            "write_onehot_tables", "write_ablation_table", "write_comparison_ranking"]
 
-# methods/ensemble.py's defaults of the options that change what is solved or filtered (a test
-# checks them against its signature): changing one of the first four is an ablation, any other
-# (the public code's post-processing, the solver's start) makes an "ensemble variant"
-ENSEMBLE_DEFAULTS = {"weights": "simplex", "channels": "rgb", "solver": "iterative", "filter": True,
-                     "guide_variance_blur": "gaussian9", "outlier_removal": True, "colour_distance": "mean",
-                     "start": "random"}
+# ENSEMBLE_DEFAULTS (mcbench.combine.ensemble_weights, re-exported): the ensemble's defaults of the
+# options that change what is solved or filtered; changing one of the first four is an ablation,
+# any other (the public code's post-processing, the solver's start) makes an "ensemble variant"
 ONE_HOT_VARIANTS = ("sbf", "nfor", "post")
 TABLE_VARIANTS = {1: ("sbf", "nfor"), 2: ("post",)}
 # (param, value) -> ablation kind; the section of the paper that makes the claim.

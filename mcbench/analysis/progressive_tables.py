@@ -27,9 +27,8 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from mcbench import BenchError
+from mcbench import NOISY, BenchError
 
-NOISY = "noisy"
 # the smallest denominator of a ratio (relMSE values of real cases are > 1e-8)
 TINY = 1e-30
 CONSISTENCY_COLUMNS = ["entry", "input", "spp", "cases", "noisy", "value", "input_value", "worse", "ratio",

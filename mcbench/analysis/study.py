@@ -58,7 +58,7 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
-from mcbench import BenchError
+from mcbench import NOISY, BenchError
 
 from mcbench.analysis import pool
 from mcbench.io.tables import read_table, write_csv, write_text
@@ -73,7 +73,6 @@ __all__ = ["NOISY", "PAPER_ENTRIES", "SEED", "N_RESAMPLES", "CONFIDENCE", "ALMOS
            "ci_verdict", "findings", "findings_markdown", "REFERENCE_NOISE_COLUMNS", "reference_noise_effect",
            "reference_noise_markdown", "study_outputs", "write_study_tables"]
 
-NOISY = "noisy"
 PAPER_ENTRIES = 40              # the paper's scale: 39 candidates + the noisy input
 SEED = 20210815
 N_RESAMPLES = 2000

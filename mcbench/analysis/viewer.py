@@ -1,5 +1,5 @@
 """Images and manifest of the static image viewer (issue 17): pure functions over arrays plus
-small writers. No Snakemake here; :mod:`mcbench.pipeline.steps` reads the EXRs and calls these.
+small writers. No Snakemake here; :mod:`mcbench.pipeline.viewer` reads the EXRs and calls these.
 
 What the viewer shows, per test case (scene, spp):
 

@@ -1,6 +1,13 @@
 """Layer ``combine``: per-pixel weighting of several images of one case.
 
+* :mod:`mcbench.combine.simplex_solvers` -- batches of small simplex-constrained least-squares
+  problems: the ensemble's solvers (Zheng et al. 2021 Sec. 4.1, 5.2.1-5.2.3);
+* :mod:`mcbench.combine.ensemble_weights` -- the ensemble's raw weights of an image or a block of
+  rows (``solve_weights``), its options' choices, defaults and checks;
+* :mod:`mcbench.combine.weight_filter` -- the cross-bilateral filter of weight maps (Sec. 4.2) and
+  the public code's passes around it;
+* :mod:`mcbench.combine.blending` -- weighted sums of the images (Eq. 3 / 35);
 * :mod:`mcbench.combine.selection` -- dual-buffer MSE estimates, their prefilters and one-hot
-  selection (Zheng et al. 2021 Sec. 5.2.6);
+  selection (Sec. 5.2.6);
 * :mod:`mcbench.combine.oracle` -- weights from ground-truth statistics (Sec. 5.2.7).
 """

@@ -41,16 +41,18 @@ Selection and blending
 :func:`one_hot_selection` picks per pixel *and channel* the candidate of lowest MSE (channel-wise
 like the ensemble's weights, Sec. 5.2.3, and like ``methods/nfor.py``'s selection map). Ties go
 to the **lowest candidate index** (the first in the combiner's input list), so identical inputs
-always select input 0. :func:`filter_selection_maps` is the "Post" variant: the Sec. 4.2 cross-
-bilateral filter (Eq. 32-34) of the one-hot maps, guided by the raw combined images as the
-ensemble's weight filter is; a convex combination of one-hot vectors stays on the simplex.
-:func:`blend` is Eq. 3 / 35.
+always select input 0. :func:`filter_selection_maps` is the "Post" variant: the ensemble's Sec. 4.2 weight filter
+(Eq. 32-34, :func:`mcbench.combine.weight_filter.filter_weights`, the paper's filter alone) of the
+one-hot maps, guided by the raw combined images; a convex combination of one-hot vectors stays
+on the simplex. :func:`blend` is Eq. 3 / 35 (:func:`mcbench.combine.blending.combine_with`).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from mcbench.combine.blending import combine_with
+from mcbench.combine.weight_filter import FILTER_PARAMETERS, PAPER_FILTER, filter_weights
 from mcbench.filters.bilateral import cross_bilateral_filter
 from mcbench.filters.nlmeans import nl_means_filter
 
@@ -64,7 +66,7 @@ NFOR_MSE_FILTER = dict(radius=9, patch_radius=1, k=1.0, alpha=1.0, epsilon=1e-10
 # SBF-style cross-bilateral pre-filter of the MSE maps: Sec. 4.2's numbers (our choice, see above)
 SBF_MSE_FILTER = dict(radius=7, sigma_spatial=3.0, sigma_color=2.0, sigma_albedo=0.25, sigma_normal=0.15)
 # Sec. 4.2's weight filter, applied to the one-hot maps by the "Post" variant (the paper's values)
-POST_FILTER = dict(radius=7, sigma_spatial=3.0, sigma_color=2.0, sigma_albedo=0.25, sigma_normal=0.15)
+POST_FILTER = dict(FILTER_PARAMETERS)
 
 
 def check_finite_arrays(named: dict, *, what: str) -> None:
@@ -184,8 +186,9 @@ def one_hot_selection(mse) -> np.ndarray:
 
 
 def blend(weights, denoised) -> np.ndarray:
-    """Eq. 3 / 35: sum_i w_i y_i per pixel and channel; (N, H, W, C) x (N, H, W, C) -> (H, W, C)."""
-    return np.einsum("nhwc,nhwc->hwc", np.asarray(weights, np.float64), np.asarray(denoised, np.float64))
+    """Eq. 3 / 35: sum_i w_i y_i per pixel and channel; (N, H, W, C) x (N, H, W, C) -> (H, W, C)
+    float64 (:func:`mcbench.combine.blending.combine_with`)."""
+    return combine_with(weights, denoised)
 
 
 def filter_selection_maps(selection, denoised_full, denoised_a, denoised_b, albedo, normal, *,
@@ -194,7 +197,9 @@ def filter_selection_maps(selection, denoised_full, denoised_a, denoised_b, albe
                           sigma_color: float = POST_FILTER["sigma_color"],
                           sigma_albedo: float = POST_FILTER["sigma_albedo"],
                           sigma_normal: float = POST_FILTER["sigma_normal"]) -> np.ndarray:
-    """The "Post" variant: Sec. 4.2's cross-bilateral filter (Eq. 32-34) of selection maps.
+    """The "Post" variant: Sec. 4.2's cross-bilateral filter (Eq. 32-34) of selection maps, the
+    ensemble's weight filter alone (:func:`mcbench.combine.weight_filter.filter_weights` with
+    :data:`mcbench.combine.weight_filter.PAPER_FILTER`, float64).
 
     selection, denoised_full, denoised_a, denoised_b : (N, H, W, C); albedo, normal (H, W, 3).
     Guide: the raw combined image z = sum_i s_i y_i with Var[z] ~ (z^A - z^B)^2 / 2, z^A, z^B the
@@ -202,12 +207,6 @@ def filter_selection_maps(selection, denoised_full, denoised_a, denoised_b, albe
     per pixel. Defaults: :data:`POST_FILTER` (the paper's). Returns (N, H, W, C) float64 soft maps,
     each pixel-channel on the simplex (w >= 0, sum 1).
     """
-    s = _candidates("selection", selection)
-    n, h, w, c = s.shape
-    guide = blend(s, denoised_full)
-    guide_variance = 0.5 * (blend(s, denoised_a) - blend(s, denoised_b)) ** 2
-    flat = np.moveaxis(s, 3, 1).reshape(n * c, h, w)
-    filtered = cross_bilateral_filter(flat, guide, guide_variance, [albedo, normal],
-                                      [sigma_albedo, sigma_normal], sigma_spatial, sigma_color, radius)
-    soft = np.maximum(np.moveaxis(filtered.reshape(n, c, h, w), 1, 3), 0.0)
-    return np.ascontiguousarray(soft / soft.sum(axis=0, keepdims=True))
+    return filter_weights(_candidates("selection", selection), denoised_full, denoised_a, denoised_b,
+                          albedo, normal, radius, sigma_spatial, sigma_color, sigma_albedo,
+                          sigma_normal, **PAPER_FILTER)

@@ -271,3 +271,15 @@ def _separable_sum(image: np.ndarray, taps: np.ndarray, r: int) -> np.ndarray:
 def t_test_scale(x, y, variance, alpha, **options) -> np.ndarray:
     """α′ of Eq. 18 (:func:`t_test`'s ``alpha``), float64 (H, W, 3)."""
     return t_test(x, y, variance, alpha, **options).alpha
+
+
+def divergence_map(denoise_image: Callable, image, *, iterations: int = ITERATIONS, epsilon: float = EPSILON,
+                   seed=0) -> np.ndarray:
+    """σ²f′ of Eq. 2 for one image (float64 (H, W, 3)): ``denoise_image`` (a function of an
+    :class:`mcbench.io.buffers.ImageBuffers`, returning (H, W, 3) radiance) re-run on ``image`` with
+    its colour perturbed (variance and features as they are), K = ``iterations`` times plus once
+    unperturbed (:func:`mc_divergence`)."""
+    from dataclasses import replace
+
+    return mc_divergence(lambda color: denoise_image(replace(image, color=color)), image.color,
+                         image.variance, epsilon=epsilon, iterations=iterations, seed=seed)

@@ -33,6 +33,8 @@ from mcbench import BenchError
 from mcbench.io.exr import check_finite, read_layers, read_metadata
 
 BUFFER_SUFFIXES = {"full": "", "a": "_a", "b": "_b"}
+#: Index of each image of a case in seeds that run per image (e.g. SURE's perturbations).
+IMAGE_INDEX = {"full": 0, "a": 1, "b": 2}
 QUANTITIES = ("color", "variance", "albedo", "normal", "depth",
               "albedo_variance", "normal_variance", "depth_variance")
 # Layers every render must hold (the list); the rest are optional extras.

@@ -22,14 +22,14 @@ are the validation set; all crops of a scene go to the same side.
 
 Combiners (the deep combiner, Back et al. 2020) also need a base denoiser's result on each
 training input: :func:`load_combiner_crops` reads the crops together with the base outputs written
-by :func:`mcbench.pipeline.steps.write_correlated_training_inputs` (``correlated/<base>/example_<seed>_<k>.exr``,
+by :func:`mcbench.pipeline.training.write_correlated_training_inputs` (``correlated/<base>/example_<seed>_<k>.exr``,
 layers ``correlated<half>_spp<N>`` and, for bases that expose a kernel, ``correlated<half>_sub<j>_spp<N>``),
 one item per (crop, base), with the extra input keys the combiner declares (``TRAINING_KEYS``):
 render layers by name (e.g. ``albedo_variance``), ``correlated`` (the base's result on that image),
 ``color_sub``/``variance_sub`` (the image's two sample subsets, :data:`mcbench.io.buffers.SUB_BUFFERS`,
 concatenated), ``correlated_sub`` (the base's result on each) and ``divergence`` (layers
 ``divergence<half>_spp<N>``: the base's SURE divergence term, written for a base named
-``<base>+sure``, :func:`mcbench.pipeline.steps.write_correlated_training_inputs`).
+``<base>+sure``, :func:`mcbench.pipeline.training.write_correlated_training_inputs`).
 
 Batches: step ``s`` of a run seeded ``seed`` draws from ``numpy.random.default_rng([seed, s])``
 item, level, buffer, patch position and one of the 8 rotations/flips of the square patch, so a

@@ -347,7 +347,7 @@ def main(argv: list[str] | None = None, *, load_method: Callable[[str], ModuleTy
     name to its module (the caller's, e.g. ``methods.load_method``: core never imports ``methods``);
     ``load_data(name, crop_files, correlated_files)`` builds a learned combiner's training data
     (the crops with results of its ``CORRELATED_BASES`` under ``<data>/correlated/<base>/``)."""
-    parser = argparse.ArgumentParser(prog="python -m mcbench.pipeline.steps",
+    parser = argparse.ArgumentParser(prog="python -m mcbench.pipeline.training",
                                      description="Train a learned denoiser, or evaluate its committed weights.")
     parser.add_argument("command", choices=["train", "evaluate"])
     parser.add_argument("name", help="method module in methods/ (kpcn, mcgan, optix_ae, wskpn, ...)")
@@ -375,6 +375,6 @@ def main(argv: list[str] | None = None, *, load_method: Callable[[str], ModuleTy
             print(f"{args.name}: validation loss {result['loss']:.6f} (recorded {recorded:.6f}, "
                   f"ratio {result['loss'] / recorded:.4f}), relMSE {result['relmse']:.6f}")
     except BenchError as exc:
-        print(f"mcbench.pipeline.steps: {exc}", file=sys.stderr)
+        print(f"mcbench.pipeline.training: {exc}", file=sys.stderr)
         return 1
     return 0

@@ -1,5 +1,5 @@
 """The oracle study's step (Zheng et al. 2021 Sec. 5.2.7, Fig. 11): weights from ground-truth
-statistics next to the dual-buffer estimate. Like :mod:`mcbench.pipeline.steps` it resolves scene and
+statistics next to the dual-buffer estimate. Like every pipeline module it resolves scene and
 method names (plugins); the maths is :mod:`mcbench.combine.oracle`.
 
 One test scene is rendered ``repetitions + 1`` times at ``spp`` with the oracle seeds of
@@ -25,7 +25,7 @@ import time
 import numpy as np
 import pandas as pd
 
-from mcbench import BenchError
+from mcbench import NOISY, BenchError
 from mcbench.io.buffers import Denoised, RenderBuffers
 from mcbench.io.exr import check_finite, read_layers
 from mcbench.io.tables import write_csv, write_text
@@ -36,7 +36,6 @@ from mcbench.progress import eta_seconds, progress_line
 from mcbench.render.seeds import oracle_render_seed
 from mcbench.combine.selection import blend
 
-NOISY = "noisy"
 GROUND_TRUTH = {"full": "M (full buffers, Eq. 7)", "half": "M^half (half buffers, Eq. 15)"}
 SOLVES = {"one_hot": (one_hot_weights, "one-hot"), "unconstrained": (unconstrained_weights, "unconstrained"),
           "simplex": (simplex_weights, "simplex")}
@@ -93,10 +92,10 @@ def run_oracle_study(scene: str, reference_path: str, *, table_csv: str, table_m
     a-i (``panel``, ``statistics``, ``weights``, ``relmse``, ``dssim``) then the held-out noisy
     render and each base denoiser (panel ``-``), errors against the block-averaged reference.
     """
-    from methods import load_method
+    from mcbench.pipeline.registry import load_method
     from mcbench.render.renderer import render_dict_buffers
     from mcbench.render.variants import pick_variant, set_threads
-    from scenes import load_scene
+    from mcbench.pipeline.registry import load_scene
 
     started = time.perf_counter()
     module = load_scene(scene, config_key="oracle.scene")

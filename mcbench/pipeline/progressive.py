@@ -53,15 +53,16 @@ relMSE 0.28 at 4 spp, 0.80 at 256, 0.94 at 1024, 0.99 at 2048, 1.03 at 4096 and 
 from __future__ import annotations
 
 import time
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from mcbench import BenchError
+from mcbench import NOISY, BenchError
 from mcbench.io.buffers import RenderBuffers
 from mcbench.io.exr import ExrError, check_finite, read_layers
 from mcbench.analysis.figures import pyplot_agg, save_figure
-from mcbench.io.tables import write_csv, write_text
+from mcbench.io.tables import read_table, write_csv, write_text
 from mcbench.analysis.metrics import relmse, relmse_corrected, smape
 from mcbench.analysis.oracle_tables import table_markdown
 from mcbench.combine.oracle import block_average
@@ -70,7 +71,6 @@ from mcbench.analysis.reports import reference_relmse_floor
 from mcbench.render.seeds import MAX_PROGRESSIVE_CURVE_LEVELS, MAX_PROGRESSIVE_CURVE_PASSES, progressive_curve_seed
 from mcbench.pipeline.oracle import oracle_size
 
-NOISY = "noisy"
 COLUMNS = ("spp", "entry", "label", "relmse", "relmse_corrected", "smape", "seconds")
 DIVERGENCES = ("none", "oidn", "jbf", "kpcn", "mcgan", "optix_ae", "wskpn")   # methods.progressive.DivergenceBase
 
@@ -118,7 +118,7 @@ def block_reference(reference_path: str, width: int, height: int, downscale: int
 
     The reference must have the harness's resolution ``(width * downscale, height * downscale)``
     and finite ``color`` (and ``variance``) layers. Its ``variance`` layer holds each pixel's
-    variance of the mean v_i (as :func:`mcbench.pipeline.steps.compute_case_metrics` reads it for
+    variance of the mean v_i (as :func:`mcbench.pipeline.metrics.compute_case_metrics` reads it for
     ``relmse_corrected``). The pixels of a block are independent estimates (their samples are), so
     the variance of the block mean m = (1/f²) Σ r_i over the f² pixels (f = ``downscale``) is
 
@@ -256,10 +256,11 @@ def run_consistency_curve(scene: str, reference_path: str, *, table_csv: str, ta
     ``label``, ``relmse``, ``relmse_corrected`` (only when the reference has a variance layer),
     ``smape``, ``seconds``; entries :func:`entry_names` (module docstring).
     """
-    from methods import NOISY_LABEL, load_method
+    from mcbench import NOISY_LABEL
+    from mcbench.pipeline.registry import load_method, single_image_function
     from mcbench.render.renderer import load_scene_dict, passes_for, render_dict_buffers
     from mcbench.render.variants import pick_variant, set_threads
-    from scenes import load_scene
+    from mcbench.pipeline.registry import load_scene
 
     started = time.perf_counter()
     levels = check_spp_levels(spp_levels)
@@ -272,7 +273,7 @@ def run_consistency_curve(scene: str, reference_path: str, *, table_csv: str, ta
                          f"{', '.join(DIVERGENCES)}")
     combiner = load_method("progressive", kind="combiner", config_key="progressive_curve")
     if divergence != "none":
-        combiner.single_image_denoiser(divergence)     # its error names the method
+        single_image_function(divergence, choices=DIVERGENCES)     # its error names the method
     mu, reference_variance = block_reference(reference_path, width, height, downscale)
     floor = reference_floor(mu, reference_variance)
 
@@ -343,3 +344,31 @@ def run_consistency_curve(scene: str, reference_path: str, *, table_csv: str, ta
                + consistency_markdown(table, base))
     curve_figure(table, figure_png, entries=entries, labels=labels, floor=floor, title=title)
     return table
+
+
+def write_progressive_tables(metrics_csv: str, timings_csv: str, out_dir: str, *, pairs: dict[str, str],
+                             labels: dict[str, str], metrics: list[str]) -> dict:
+    """Progressive denoising's tables (:mod:`mcbench.analysis.progressive_tables`) under ``out_dir``:
+    ``consistency.{csv,md}`` (relMSE against the noisy input per spp) and ``per_spp.{csv,md}``
+    (each input and its progressive entries: mean error per spp of each of ``metrics``, and the
+    seconds each adds per case)."""
+    import pandas as pd
+
+    from mcbench.analysis.progressive_tables import (added_seconds, consistency_markdown, consistency_summary,
+                                            consistency_table, per_spp_markdown, per_spp_table, table_entries)
+
+    out = Path(out_dir)
+    table = read_table(metrics_csv, columns=("scene", "spp", "candidate", "metric", "value"))
+    timings = read_table(timings_csv, columns=("scene", "spp", "method", "seconds"))
+    consistency = consistency_table(table, dict(pairs), metric="relmse", noisy=NOISY)
+    summary = consistency_summary(consistency)
+    write_csv(out / "consistency.csv", consistency, float_format="%.6g")
+    write_text(out / "consistency.md", consistency_markdown(consistency, summary, labels, metric="relmse"))
+    entries = table_entries(dict(pairs), noisy=NOISY)
+    errors = {metric: per_spp_table(table, entries, metric=metric) for metric in metrics}
+    seconds = added_seconds(timings, entries)
+    long = pd.concat([frame.assign(quantity=metric) for metric, frame in
+                      {**errors, **({"seconds": seconds} if not seconds.empty else {})}.items()])
+    write_csv(out / "per_spp.csv", long.reset_index(), float_format="%.6g")
+    write_text(out / "per_spp.md", per_spp_markdown(errors, seconds, labels))
+    return {"consistency": consistency, "summary": summary, "errors": errors, "seconds": seconds}

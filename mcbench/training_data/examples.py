@@ -29,7 +29,7 @@ tiling). Each crop holds ``<layer>_spp<N>`` for every layer of :data:`mcbench.io
 (and of :data:`mcbench.io.buffers.BIN_LAYERS`, the four sample bins, for levels that are multiples
 of 4) and noisy level ``N``, plus ``target`` (H, W, 3) and ``target_variance`` (H, W, 3).
 ``snakemake training_data`` writes them as ``results/training/example_<seed>_<k>.exr``
-(:func:`mcbench.pipeline.steps.write_training_example`).
+(:func:`mcbench.pipeline.training.write_training_example`).
 """
 
 from __future__ import annotations

@@ -10,7 +10,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(workflow.basedir)))  # methods/, scenes/, mcbench/ from a checkout
 
-from mcbench import BenchError  # noqa: E402
+from mcbench import NOISY, NOISY_LABEL, BenchError  # noqa: E402
 from mcbench.analysis.comparisons import comparison_role  # noqa: E402
 from mcbench.pipeline.config import config_digest, resolve_config  # noqa: E402
 from mcbench.analysis.metrics import ALL_METRICS  # noqa: E402
@@ -19,8 +19,7 @@ from mcbench.analysis.study_figures import STUDY_FIGURES as STUDY_FIGURE_KEYS, c
 from mcbench.pipeline.resources import JobCost, estimate_job, job_request, load_job_costs  # noqa: E402
 from mcbench.render.seeds import training_seeds  # noqa: E402
 from mcbench.io.weights import COMMITTED_WEIGHTS, is_learned_method  # noqa: E402
-from methods import NOISY, NOISY_LABEL, config_method_table, load_method  # noqa: E402
-from scenes import available_scenes, load_scene  # noqa: E402
+from mcbench.pipeline.registry import available_scenes, config_method_table, load_method, load_scene  # noqa: E402
 
 
 # The whole configuration: the config file (config.yaml or the --configfile) plus the schema's
@@ -131,7 +130,7 @@ def batch_inputs(batch):
 
 
 def batch_entries(batch):
-    """Params function: the ``mcbench.pipeline.steps.run_methods`` entries of a batch's methods in one case."""
+    """Params function: the ``mcbench.pipeline.methods.run_methods`` entries of a batch's methods in one case."""
 
     def entries(wildcards):
         return [{"name": name, "module": METHODS[name]["module"], "params": METHODS[name]["params"],

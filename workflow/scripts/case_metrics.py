@@ -1,5 +1,5 @@
 from mcbench.pipeline.logs import run_logged
-from mcbench.pipeline.steps import compute_case_metrics
+from mcbench.pipeline.metrics import compute_case_metrics
 
 candidates = {name: snakemake.input[name] for name in snakemake.params.candidates}
 run_logged(snakemake.log[0], compute_case_metrics, snakemake.wildcards.scene, int(snakemake.wildcards.spp),

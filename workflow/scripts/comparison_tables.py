@@ -1,7 +1,7 @@
 """The comparison tables of Zheng et al. 2021 Sec. 5.2 (rules in workflow/rules/comparisons.smk):
 one script for the three rules, dispatched on the rule's name."""
 
-from mcbench.analysis.comparisons import write_ablation_table, write_comparison_ranking, write_onehot_tables
+from mcbench.pipeline.comparisons import write_ablation_table, write_comparison_ranking, write_onehot_tables
 from mcbench.pipeline.logs import run_logged
 
 

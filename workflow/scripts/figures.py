@@ -1,5 +1,5 @@
 from mcbench.pipeline.logs import run_logged
-from mcbench.pipeline.steps import write_error_curves, write_speed_error
+from mcbench.pipeline.figures import write_error_curves, write_speed_error
 
 # the two rules of workflow/rules/figures.smk
 labels = dict(snakemake.params.labels)

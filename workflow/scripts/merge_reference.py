@@ -1,4 +1,4 @@
 from mcbench.pipeline.logs import run_logged
-from mcbench.pipeline.steps import merge_reference
+from mcbench.pipeline.render import merge_reference
 
 run_logged(snakemake.log[0], merge_reference, list(snakemake.input), snakemake.output[0])

@@ -7,7 +7,7 @@ if snakemake.rule == "progressive_curve":
     os.environ["MCBENCH_WEIGHTS_DIR"] = os.path.abspath(snakemake.params.weights_dir)
 
 from mcbench.pipeline.logs import run_logged  # noqa: E402
-from mcbench.pipeline.steps import write_progressive_tables  # noqa: E402
+from mcbench.pipeline.progressive import write_progressive_tables  # noqa: E402
 from mcbench.pipeline.progressive import run_consistency_curve  # noqa: E402
 
 params = snakemake.params

@@ -1,5 +1,5 @@
 from mcbench.pipeline.logs import run_logged
-from mcbench.pipeline.steps import write_extras_rankings, write_rankings
+from mcbench.pipeline.report import write_extras_rankings, write_rankings
 
 if snakemake.rule == "extras_table":
     run_logged(snakemake.log[0], write_extras_rankings, snakemake.input[0], snakemake.wildcards.metric,

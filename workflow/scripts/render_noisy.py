@@ -1,5 +1,5 @@
 from mcbench.pipeline.logs import run_logged
-from mcbench.pipeline.steps import render_noisy
+from mcbench.pipeline.render import render_noisy
 
 run_logged(snakemake.log[0], render_noisy, snakemake.wildcards.scene, int(snakemake.wildcards.spp),
            snakemake.output[0], resolution=snakemake.params.resolution,

@@ -1,5 +1,5 @@
 from mcbench.pipeline.logs import run_logged
-from mcbench.pipeline.steps import render_reference_chunk
+from mcbench.pipeline.render import render_reference_chunk
 
 run_logged(snakemake.log[0], render_reference_chunk, snakemake.wildcards.scene, snakemake.params.spp,
            int(snakemake.wildcards.chunk), snakemake.output[0], resolution=snakemake.params.resolution,

@@ -5,7 +5,7 @@ os.environ.setdefault("OMP_NUM_THREADS", str(snakemake.threads))          # PyTo
 os.environ["MCBENCH_WEIGHTS_DIR"] = os.path.abspath(snakemake.params.weights_dir)
 
 from mcbench.pipeline.logs import run_logged  # noqa: E402
-from mcbench.pipeline.steps import run_method  # noqa: E402
+from mcbench.pipeline.methods import run_method  # noqa: E402
 
 spec = snakemake.params.spec
 run_logged(snakemake.log[0], run_method, snakemake.wildcards.method, snakemake.input.render,

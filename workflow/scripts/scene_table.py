@@ -1,5 +1,5 @@
 from mcbench.pipeline.logs import run_logged
-from mcbench.pipeline.steps import write_scene_table
+from mcbench.pipeline.report import write_scene_table
 
 run_logged(snakemake.log[0], write_scene_table, snakemake.input.metrics, dict(snakemake.params.references),
            dict(snakemake.params.reference_spp), snakemake.output.csv, snakemake.output.md,

@@ -1,7 +1,7 @@
 from pathlib import Path
 
 from mcbench.pipeline.logs import run_logged
-from mcbench.pipeline.steps import write_study, write_study_figures_of
+from mcbench.pipeline.study import write_study, write_study_figures_of
 
 # the two rules of workflow/rules/study.smk
 if snakemake.rule == "study_tables":

@@ -3,7 +3,7 @@ import os
 os.environ["MCBENCH_WEIGHTS_DIR"] = os.path.abspath(snakemake.params.weights_dir)
 
 from mcbench.pipeline.logs import run_logged  # noqa: E402
-from mcbench.pipeline.steps import train_learned_method  # noqa: E402
+from mcbench.pipeline.training import train_learned_method  # noqa: E402
 
 correlated = {name[len("correlated_"):]: list(files) for name, files in snakemake.input.items()
               if name.startswith("correlated_")}

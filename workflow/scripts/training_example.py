@@ -1,5 +1,5 @@
 from mcbench.pipeline.logs import run_logged
-from mcbench.pipeline.steps import write_training_example
+from mcbench.pipeline.training import write_training_example
 
 settings = snakemake.params.settings
 run_logged(snakemake.log[0], write_training_example, int(snakemake.wildcards.seed), list(snakemake.output),

@@ -1,5 +1,5 @@
 from mcbench.pipeline.logs import run_logged
-from mcbench.pipeline.steps import write_viewer
+from mcbench.pipeline.viewer import write_viewer
 
 cases = [(case["scene"], int(case["spp"])) for case in snakemake.params.cases]
 run_logged(snakemake.log[0], write_viewer, snakemake.input.metrics, list(snakemake.input.cases), snakemake.output[0],

@@ -1,5 +1,5 @@
 from mcbench.pipeline.logs import run_logged
-from mcbench.pipeline.steps import write_viewer_case
+from mcbench.pipeline.viewer import write_viewer_case
 
 candidates = {name: snakemake.input[name] for name in snakemake.params.candidates}
 run_logged(snakemake.log[0], write_viewer_case, snakemake.wildcards.scene, int(snakemake.wildcards.spp),

@@ -1,0 +1,163 @@
+"""The work behind ``workflow/rules/methods.smk``: running base denoisers and combiners on one
+test case (a batch of methods per job), with their outputs, timing records and output checks.
+"""
+
+from __future__ import annotations
+
+import json
+import platform
+import time
+
+import numpy as np
+
+from mcbench import BenchError
+from mcbench.io.buffers import Denoised, RenderBuffers
+from mcbench.io.exr import check_finite, read_metadata, write_layers
+from mcbench.io.tables import write_json
+
+
+def _machine() -> str:
+    return f"{platform.node()} {platform.machine()} {platform.processor() or ''}".strip()
+
+
+def run_method(method: str, render_path: str, output_path: str, timing_path: str, *,
+               module_name: str, params: dict | None = None, input_paths: list[str] = (),
+               scene: str = "", spp: int = 0, threads: int = 1) -> None:
+    """Run one base denoiser or combiner on a render and write its output EXR and timing JSON.
+
+    The timing counts the method's compute only (EXR reading and writing excluded), measured
+    with ``time.perf_counter``; base denoisers include their three runs (full, A, B).
+    """
+    run_methods([{"name": method, "module": module_name, "params": params or {},
+                  "input_paths": list(input_paths), "exr": output_path, "timing": timing_path}],
+                render_path, scene=scene, spp=spp, threads=threads)
+
+
+def run_methods(entries: list[dict], render_path: str, *, scene: str = "", spp: int = 0,
+                threads: int = 1) -> None:
+    """Run several methods of one test case in one process, in the given order (one DAG job).
+
+    ``entries``: dicts with ``name``, ``module``, ``params``, ``input_paths`` (the output EXRs
+    of the method's inputs) and ``exr``, ``timing`` (where its output and timing record go),
+    in dependency order: an entry may take an earlier entry's output as an input. The render and
+    every input EXR are read once; an input made earlier in the same call is read back from the
+    file just written, so each method sees exactly what a job of its own would see (results
+    do not depend on the batching). Every method gets its own output, timing record and output
+    check. The timing is the method's compute on the case (``time.perf_counter``; EXR reading and
+    writing excluded) after an untimed run on the case's top-left 32 x 32 crop (once per module and
+    parameters: methods that differ only in their inputs share it), so that just-in-time
+    compilation, numba's cache loading and first-call set-up are not counted (they are paid once
+    per process, whatever the image size); the first failure stops the call, naming the
+    method. Methods are imported once per process (a learned method's torch import is paid once
+    per batch, not once per method).
+    """
+    from mcbench.pipeline.registry import load_method
+
+    modules = {entry["module"]: load_method(entry["module"], config_key=f"method '{entry['name']}'")
+               for entry in entries}
+    by_rows = reads_rows(modules.values())
+    if by_rows:
+        buffers = _render_by_rows(render_path, render_layers(modules.values()))
+    else:
+        buffers = RenderBuffers.load(render_path, layers=render_layers(modules.values()))
+    loaded: dict[str, Denoised] = {}
+
+    def input_of(path: str) -> Denoised:
+        if path not in loaded:
+            denoised = _denoised_by_rows(path) if by_rows else Denoised.load(path, extras=True)
+            if denoised.full.shape != buffers.color.shape:
+                raise BenchError(f"{path}: shape {denoised.full.shape} does not match render "
+                                 f"{render_path} of shape {buffers.color.shape}")
+            loaded[path] = denoised
+        return loaded[path]
+
+    height, width = buffers.shape
+    warmed: set[tuple[str, str]] = set()
+    for entry in entries:
+        method, module_name, params = entry["name"], entry["module"], dict(entry.get("params") or {})
+        module = modules[module_name]
+        inputs = [input_of(path) for path in entry.get("input_paths", ())]
+        # untimed run on a corner crop: compiles / loads the method's JIT kernels (numba's cache
+        # load alone took 0.6 s of a 0.06 s ensemble at 128x128) and first-call set-up, once per
+        # module and parameters in the process (the 31 pool ensembles share one)
+        key = (module_name, json.dumps(params, sort_keys=True, default=str))
+        if key not in warmed:
+            _apply(module, *_corner_crop(buffers, inputs), params)
+            warmed.add(key)
+        start = time.perf_counter()
+        result = _apply(module, buffers, inputs, params)
+        seconds = time.perf_counter() - start
+        layers = result.layers()
+        bad = {name: layer for name, layer in layers.items() if not np.all(np.isfinite(layer))}
+        if bad:
+            check_finite(f"{entry['exr']} (output of method '{method}')", bad)
+        write_layers(entry["exr"], layers, metadata={"method": method, "scene": scene, "spp": spp,
+                                                     "seconds": f"{seconds:.6f}"})
+        write_json(entry["timing"], {"scene": scene, "spp": spp, "method": method, "module": module_name,
+                                     "kind": module.KIND, "seconds": seconds, "width": width,
+                                     "height": height, "threads": threads, "machine": _machine()})
+
+
+WARM_UP_SIZE = 32  # pixels per side of the untimed warm-up crop of run_methods
+
+
+def reads_rows(modules) -> bool:
+    """Whether a job of these method modules reads its render and inputs by rows: every module
+    declares ``READS_ROWS`` (methods/__init__.py; the ensemble), so no layer is held whole (a
+    1024^2 N = 8 ensemble job: about 520 MiB instead of about 840, ``benchmarks/bench_ensemble.py``).
+    Such a method reads the rows it needs inside its own call, so its recorded seconds include
+    those reads (uncompressed scanlines, a few per cent of its compute); a batch with any other
+    method reads every file whole, before the timed call."""
+    modules = list(modules)
+    return bool(modules) and all(getattr(module, "READS_ROWS", False) for module in modules)
+
+
+def _render_by_rows(path: str, layers: tuple[str, ...] | None) -> RenderBuffers:
+    """A render whose layers (``color`` and ``layers``) are :class:`mcbench.io.exr.LayerRows`: only
+    the header is read here; the method checks the rows it reads for NaN/Inf."""
+    from mcbench.io.exr import layer_rows
+
+    names = list(dict.fromkeys(["color", *(layers or ())]))
+    return RenderBuffers(layers=layer_rows(path, names), spp=int(read_metadata(path).get("spp", 0)), source=path)
+
+
+def _denoised_by_rows(path: str) -> Denoised:
+    """A method's output as :class:`mcbench.io.exr.LayerRows` of ``color``, ``color_a``, ``color_b``
+    (read by rows when the method indexes them; no extras: a READS_ROWS method reads none)."""
+    from mcbench.io.exr import layer_rows
+
+    layers = layer_rows(path, ["color", "color_a", "color_b"])
+    return Denoised(full=layers["color"], a=layers["color_a"], b=layers["color_b"], source=path)
+
+
+def render_layers(modules) -> tuple[str, ...] | None:
+    """The render layers a job of these method modules reads: the union of their
+    ``RENDER_LAYERS`` (methods/__init__.py), or None (every layer) when one does not declare it."""
+    names: dict[str, None] = {}
+    for module in modules:
+        declared = getattr(module, "RENDER_LAYERS", None)
+        if declared is None:
+            return None
+        names.update(dict.fromkeys(declared))
+    return tuple(names)
+
+
+def _apply(module, buffers: RenderBuffers, inputs: list[Denoised], params: dict) -> Denoised:
+    if module.KIND == "denoiser":
+        return module.denoise(buffers, **params)
+    return module.combine(buffers, inputs, **params)
+
+
+def _corner_crop(buffers: RenderBuffers, inputs: list[Denoised]) -> tuple[RenderBuffers, list[Denoised]]:
+    """The top-left WARM_UP_SIZE^2 pixels of a render and of its inputs (every layer)."""
+    h, w = (min(WARM_UP_SIZE, n) for n in buffers.shape)
+
+    def corner(layer: np.ndarray) -> np.ndarray:  # contiguous, like a loaded layer (same kernels)
+        return np.ascontiguousarray(layer[:h, :w])
+
+    crop = RenderBuffers(layers={k: corner(v) for k, v in buffers.layers.items()}, spp=buffers.spp,
+                         source=buffers.source)
+    cropped = [Denoised(full=corner(d.full), a=corner(d.a), b=corner(d.b),
+                        extras={k: corner(v) for k, v in d.extras.items()} if d.extras else None)
+               for d in inputs]
+    return crop, cropped

@@ -1,0 +1,59 @@
+"""The one place in ``mcbench`` that resolves method and scene names: the registries of the
+plugin packages ``methods/`` and ``scenes/``, re-exported for the rules and the pipeline steps.
+
+A name from a config is resolved here (or by the rules through this module); every layer below
+the pipeline takes a method or scene *module*, never a name, so the core imports no plugin.
+The plugins are imported when a function is called, not when this module is imported.
+"""
+
+from __future__ import annotations
+
+from types import ModuleType
+from typing import Callable
+
+__all__ = ["available_methods", "load_method", "config_method_table", "single_image_function",
+           "available_scenes", "load_scene"]
+
+
+def available_methods() -> list[str]:
+    """The method modules in ``methods/`` (:func:`methods.available_methods`)."""
+    import methods
+
+    return methods.available_methods()
+
+
+def load_method(name: str, kind: str | None = None, config_key: str = "config") -> ModuleType:
+    """``methods/<name>.py`` checked against the contract of ``kind`` (:func:`methods.load_method`);
+    an unknown name is an error naming ``config_key``."""
+    import methods
+
+    return methods.load_method(name, kind, config_key)
+
+
+def config_method_table(config: dict, *, is_learned: Callable[[ModuleType], bool]) -> dict:
+    """The candidate table of a resolved config (:func:`methods.config_method_table`)."""
+    import methods
+
+    return methods.config_method_table(config, is_learned=is_learned)
+
+
+def single_image_function(name: str, *, choices=None) -> Callable:
+    """Base denoiser ``name`` as a function of one image (:func:`methods.single_image_function`)."""
+    import methods
+
+    return methods.single_image_function(name, choices=choices)
+
+
+def available_scenes() -> list[str]:
+    """The scene modules in ``scenes/`` (:func:`scenes.available_scenes`)."""
+    import scenes
+
+    return scenes.available_scenes()
+
+
+def load_scene(name: str, config_key: str = "scenes") -> ModuleType:
+    """``scenes/<name>.py`` checked against the scene contract (:func:`scenes.load_scene`); an
+    unknown name is an error naming ``config_key``."""
+    import scenes
+
+    return scenes.load_scene(name, config_key=config_key)

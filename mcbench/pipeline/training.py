@@ -1,0 +1,188 @@
+"""The work behind ``workflow/rules/training.smk``: training crops, the bases' results on them
+(the correlated inputs of learned combiners), and training a learned method by name.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from mcbench import BenchError
+from mcbench.io.buffers import RenderBuffers
+from mcbench.io.exr import check_finite, read_layers, read_metadata, write_layers
+from mcbench.pipeline.render import resolution_pair
+
+
+def write_training_example(seed: int, output_paths: list[str], *, spp_levels, target_spp: int, resolution,
+                           crop_size: int, variant: str = "auto", threads: int | None = None) -> None:
+    """Render training scene ``seed`` (mcbench.training_data) and write one EXR per crop."""
+    from mcbench.training_data import training_example
+    from mcbench.render.variants import set_threads
+
+    set_threads(threads)
+    crops = training_example(seed, list(spp_levels), target_spp, resolution_pair(resolution), crop_size,
+                             len(output_paths), variant=variant)
+    for path, (layers, metadata) in zip(output_paths, crops):
+        check_finite(f"{path} (training scene {seed})", layers)
+        write_layers(path, layers, metadata=metadata)
+
+
+SURE_SUFFIX = "+sure"   # a training base "<name>+sure" also writes SURE's divergence term
+
+
+def write_correlated_training_inputs(base: str, crop_paths: list[str], output_paths: list[str], *,
+                                     threads: int | None = None) -> None:
+    """Run base denoiser ``base`` (``methods/<base>.py``; a learned one with its committed weights)
+    on every noisy level of each training crop and write its results, the correlated inputs of
+    the deep combiner's training (Back et al. 2020 Sec. 5): per level ``N`` the layers
+    ``correlated_spp<N>``, ``correlated_a_spp<N>``, ``correlated_b_spp<N>`` and, for a base that
+    writes sub-buffer results (:data:`mcbench.io.buffers.SUB_OUTPUTS`, e.g. kpcn),
+    ``correlated<half>_sub<j>_spp<N>``.
+
+    ``base`` ``<name>+sure`` (progressive denoising's training data): also the divergence term of
+    SURE of each image, ``divergence<half>_spp<N>`` (Eq. 2 with K = 1, ε = 1e-4, the base's
+    single-image function re-run on the perturbed colour; ``mcbench.filters.sure.divergence_map``,
+    seeded by crop, level and image)."""
+    from mcbench.io.buffers import SUB_OUTPUTS
+    from mcbench.nn.data import HALF_OF, crop_render_layers
+    from mcbench.render.variants import set_threads
+    from mcbench.pipeline.registry import load_method
+
+    if threads:
+        set_threads(threads)
+        try:
+            import torch
+            torch.set_num_threads(int(threads))
+        except ImportError:
+            pass
+    name, with_sure = (base[:-len(SURE_SUFFIX)], True) if base.endswith(SURE_SUFFIX) else (base, False)
+    module = load_method(name, kind="denoiser", config_key=f"base '{base}'")
+    if with_sure:
+        from mcbench.filters.sure import divergence_map
+        from mcbench.io.buffers import IMAGE_INDEX
+        from mcbench.pipeline.registry import single_image_function
+        denoise_image = single_image_function(name)
+    if len(crop_paths) != len(output_paths):
+        raise BenchError(f"{len(crop_paths)} crops for {len(output_paths)} outputs of base '{base}'")
+    for crop_path, output_path in zip(crop_paths, output_paths):
+        meta = read_metadata(crop_path)
+        if "spp_levels" not in meta:
+            raise BenchError(f"{crop_path}: not a training crop (no spp_levels metadata)")
+        levels = [int(v) for v in meta["spp_levels"].split(",")]
+        layers = read_layers(crop_path)
+        check_finite(crop_path, layers)
+        out, start = {}, time.perf_counter()
+        for level in levels:
+            buffers = RenderBuffers(layers=crop_render_layers(layers, level), spp=level,
+                                    source=f"{crop_path} at {level} spp")
+            result = module.denoise(buffers)
+            for half, which in HALF_OF.items():
+                out[f"correlated{half}_spp{level}"] = result.image(which)
+                extras = result.extras or {}
+                for j, sub_name in enumerate(SUB_OUTPUTS[which]):
+                    if sub_name in extras:
+                        out[f"correlated{half}_sub{j}_spp{level}"] = extras[sub_name]
+                if with_sure:
+                    seed = [int(meta.get("seed", 0)), int(meta.get("crop", 0)), level, IMAGE_INDEX[which]]
+                    out[f"divergence{half}_spp{level}"] = divergence_map(
+                        denoise_image, buffers.image(which), seed=seed).astype(np.float32)
+        check_finite(f"{output_path} (results of '{base}' on {crop_path})", out)
+        write_layers(output_path, out, metadata={"base": base, "seed": meta.get("seed", ""),
+                                                 "crop": meta.get("crop", ""), "spp_levels": meta["spp_levels"],
+                                                 "seconds": f"{time.perf_counter() - start:.3f}"})
+
+
+def learned_method(name: str):
+    """``methods/<name>.py`` checked to be a learned method (NETWORK, TRAINING, build_network):
+    a denoiser, or a combiner trained on base results (``CORRELATED_BASES``, ``TRAINING_KEYS``)."""
+    from mcbench.io.weights import check_learned_method
+    from mcbench.pipeline.registry import load_method
+
+    module = check_learned_method(load_method(name, config_key=f"network '{name}'"))
+    if module.KIND == "combiner":
+        missing = [a for a in ("CORRELATED_BASES", "TRAINING_KEYS") if not hasattr(module, a)]
+        if missing:
+            raise BenchError(f"methods/{name}.py: a learned combiner needs {', '.join(missing)}")
+    return module
+
+
+def training_data(name: str, crop_files: list[str], correlated_files: dict[str, list[str]] | None = None):
+    """The training data of learned method ``name``: its crops (a denoiser: the crop paths
+    themselves) or, for a combiner, :func:`mcbench.nn.data.load_combiner_crops` over the results
+    of its ``CORRELATED_BASES`` (``correlated_files``: {base: files, one per crop})."""
+    module = learned_method(name)
+    if module.KIND != "combiner":
+        return list(crop_files)
+    from mcbench.nn.data import load_combiner_crops
+
+    correlated_files = correlated_files or {}
+    missing = [b for b in module.CORRELATED_BASES if b not in correlated_files]
+    if missing:
+        raise BenchError(f"{name}: no results of base(s) {missing} for its training")
+    return load_combiner_crops(crop_files, {b: correlated_files[b] for b in module.CORRELATED_BASES},
+                               module.TRAINING_KEYS)
+
+
+def train_learned_method(name: str, crop_files: list[str], *args, correlated_files=None, **kwargs):
+    """Train ``methods/<name>.py`` (:func:`mcbench.nn.train.train_network`) on
+    :func:`training_data` (the step resolves the name, core never imports methods)."""
+    from mcbench.nn.train import train_network
+
+    return train_network(learned_method(name), training_data(name, crop_files, correlated_files), *args, **kwargs)
+
+
+def train_progressive_variant(variant: str, data: str = "results/training", steps: int | None = None,
+                              threads: int | None = None) -> dict:
+    """Train progressive denoising's h_NN (``methods/progressive.py``): ``full`` (the committed
+    ``progressive.pt``) or an ablation of its ``VARIANTS`` (``no_sure``, ``no_fact``; Firmino et al.
+    2022 Table 4), on the crops with results of its ``CORRELATED_BASES`` under
+    ``<data>/correlated/``; weights and record in ``methods/weights/``, checkpoint
+    ``results/training/checkpoints/<name>.ckpt`` (a run resumes from it)."""
+    import sys
+
+    from mcbench.io.weights import record_path, weights_path
+    from mcbench.nn.data import crop_paths
+    from mcbench.nn.train import correlated_paths, train_network
+    from mcbench.pipeline.registry import load_method
+
+    progressive = load_method("progressive", kind="combiner", config_key="progressive training")
+    if variant != "full" and variant not in progressive.VARIANTS:
+        raise BenchError(f"unknown progressive variant '{variant}'; known: full, {', '.join(progressive.VARIANTS)}")
+    module = progressive if variant == "full" else progressive.variant_module(variant)
+    files, correlated = correlated_paths(data, progressive.CORRELATED_BASES, crop_paths(data))
+    crops = training_data("progressive", [str(f) for f in files],
+                          {b: [str(f) for f in fs] for b, fs in correlated.items()})
+    name = "progressive" if variant == "full" else f"progressive_{variant}"
+    return train_network(module, crops, weights_path(name), record_path(name),
+                         f"results/training/checkpoints/{name}.ckpt",
+                         {**({"steps": steps} if steps else {}), **({"threads": threads} if threads else {})},
+                         log=lambda message: print(message, file=sys.stderr, flush=True))
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m mcbench.pipeline.training progressive full|no_sure|no_fact [--steps N] [--threads N]``
+    trains progressive denoising's network or an ablation; ``python -m mcbench.pipeline.training
+    evaluate|train <name> ...`` is :func:`mcbench.nn.train.main` with the methods registry (e.g. to
+    re-evaluate committed weights on the validation crops)."""
+    import argparse
+    import sys
+
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv[:1] == ["progressive"]:
+        parser = argparse.ArgumentParser(prog="python -m mcbench.pipeline.training progressive",
+                                         description="Train progressive denoising's h_NN (full) or an ablation.")
+        parser.add_argument("variant", choices=["full", "no_fact", "no_sure"])
+        parser.add_argument("--data", default="results/training")
+        parser.add_argument("--steps", type=int, default=None, help="training steps (default TRAINING['steps'])")
+        parser.add_argument("--threads", type=int, default=None, help="torch threads (default 2)")
+        arguments = parser.parse_args(argv[1:])
+        train_progressive_variant(arguments.variant, arguments.data, arguments.steps, arguments.threads)
+        return 0
+    from mcbench.nn.train import main as train_main
+
+    return train_main(argv, load_method=learned_method, load_data=training_data)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
