@@ -23,7 +23,7 @@ least) and peak RSS (``os.wait4`` of the child). Printed:
 2. the fitted exponent b of combine time ~ pixels^b (256^2 ... 2048^2, N = 4) and ~ N^b
    (N = 2 ... 8 at 1024^2), both solvers (1.0 = linear);
 3. numba against NumPy in the same run: the weight filter (Eq. 32-34) of
-   ``methods.ensemble.filter_weights`` against a vectorised NumPy implementation of the same
+   ``mcbench.combine.weight_filter.filter_weights`` against a vectorised NumPy implementation of the same
    equations (one shifted-image pass per window offset, float64) at 256^2, N = 4, and the
    relMSE between their blends;
 4. the machine load (``os.getloadavg``) before and after (and the 1-minute load after each job
@@ -221,7 +221,8 @@ def numpy_weight_filter(weights, y_full, y_a, y_b, albedo, normal, *, radius=7, 
 def filter_against_numpy(size: int = 256, n: int = 4, repeats: int = 2):
     """Seconds of the numba weight filter and of the NumPy baseline on one case, and the relMSE
     between the blends of their filtered weights."""
-    from methods import ensemble as E
+    from mcbench.combine.ensemble_weights import solve_weights
+    from mcbench.combine.weight_filter import filter_weights
     from timing import timed
 
     rng = np.random.default_rng(1)
@@ -229,10 +230,10 @@ def filter_against_numpy(size: int = 256, n: int = 4, repeats: int = 2):
     xa, xb = (mu + np.sqrt(mu) * 0.3 * rng.standard_normal(mu.shape) for _ in range(2))
     y = {k: np.stack([mu + 0.05 * (i + 1) / n + 0.02 * rng.standard_normal(mu.shape) for i in range(n)])
          for k in ("full", "a", "b")}
-    raw = E.solve_weights(xa, xb, y["a"], y["b"], solver="exact")
-    E.filter_weights(raw[:, :16, :16], y["full"][:, :16, :16], y["a"][:, :16, :16],
-                     y["b"][:, :16, :16], albedo[:16, :16], normal[:16, :16])   # compile
-    t_numba, fast = timed(lambda: E.filter_weights(raw, y["full"], y["a"], y["b"], albedo, normal), repeats)
+    raw = solve_weights(xa, xb, y["a"], y["b"], solver="exact")
+    filter_weights(raw[:, :16, :16], y["full"][:, :16, :16], y["a"][:, :16, :16],
+                   y["b"][:, :16, :16], albedo[:16, :16], normal[:16, :16])   # compile
+    t_numba, fast = timed(lambda: filter_weights(raw, y["full"], y["a"], y["b"], albedo, normal), repeats)
     t_numpy, slow = timed(lambda: numpy_weight_filter(raw, y["full"], y["a"], y["b"], albedo, normal), 1)
     blend_fast = np.einsum("nhwc,nhwc->hwc", fast, y["full"])
     blend_slow = np.einsum("nhwc,nhwc->hwc", slow, y["full"])

@@ -46,7 +46,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench_ensemble import synthetic  # noqa: E402
-from methods import ensemble as E  # noqa: E402
+from mcbench.combine.ensemble_weights import CHANNELS, solve_weights  # noqa: E402
+from mcbench.combine.simplex_solvers import QP_BACKEND, STARTS, objective  # noqa: E402
 from timing import timed  # noqa: E402
 
 
@@ -70,7 +71,7 @@ SOLVER_ORDER = ("iterative", "exact", "qp")
 
 
 def channel_objective(weights, xa, xb, ya, yb, channels):
-    value = E.objective(weights, xa, xb, ya, yb)
+    value = objective(weights, xa, xb, ya, yb)
     return value.sum(axis=-1) if channels == "single" else value
 
 
@@ -88,7 +89,7 @@ def measure(kind: str, n: int, pixels: int, channels: str, repeats: int) -> dict
     for solver in SOLVER_ORDER:
         reps = 1 if solver == "qp" else repeats   # the slow loop: its noise is averaged
         seconds, weights[solver] = timed(
-            lambda: E.solve_weights(xa, xb, ya, yb, solver=solver, channels=channels), reps)
+            lambda: solve_weights(xa, xb, ya, yb, solver=solver, channels=channels), reps)
         row[f"{solver}_us"] = seconds / count * 1e6
     optimum = channel_objective(weights["exact"], xa, xb, ya, yb, channels)
     scale2 = problem_scale2(xa, xb, ya, yb, channels)
@@ -121,18 +122,18 @@ def image_sized(kind: str, n: int, side: int) -> list[dict]:
     """Both solvers on the problems of a side x side image (all numba threads, like combine):
     seconds, the iterative solver's gap to the exact optimum ((L - L_exact) / scale^2: median,
     99th percentile, max), its mean iteration count and the fraction of problems stopped at the
-    1024-iteration limit, for each start of the iterative solver (``E.STARTS``; "random" is the
+    1024-iteration limit, for each start of the iterative solver (``STARTS``; "random" is the
     paper's)."""
     xa, xb, ya, yb = PROBLEMS[kind](side * side, n)
-    seconds, exact = timed(lambda: E.solve_weights(xa, xb, ya, yb, solver="exact"), 1)
-    optimum = E.objective(exact, xa, xb, ya, yb)
+    seconds, exact = timed(lambda: solve_weights(xa, xb, ya, yb, solver="exact"), 1)
+    optimum = objective(exact, xa, xb, ya, yb)
     scale2 = problem_scale2(xa, xb, ya, yb, "rgb")
     rows = [dict(kind=kind, N=n, solver="exact", start="-", seconds=seconds, gap_med=0.0,
                  gap_p99=0.0, gap_max=0.0, iterations=float("nan"), at_limit=float("nan"))]
-    for start in E.STARTS:
-        seconds, (w, iterations) = timed(lambda: E.solve_weights(
+    for start in STARTS:
+        seconds, (w, iterations) = timed(lambda: solve_weights(
             xa, xb, ya, yb, solver="iterative", start=start, return_info=True), 1)
-        gap = (E.objective(w, xa, xb, ya, yb) - optimum) / scale2
+        gap = (objective(w, xa, xb, ya, yb) - optimum) / scale2
         rows.append(dict(kind=kind, N=n, solver="iterative", start=start, seconds=seconds,
                          gap_med=float(np.median(gap)), gap_p99=float(np.percentile(gap, 99)),
                          gap_max=float(gap.max()), iterations=float(iterations.mean()),
@@ -161,7 +162,7 @@ def main(argv=None):
     ap.add_argument("--pixels", type=int, default=1024,
                     help="pixels per problem set (x3 channels for --channels rgb)")
     ap.add_argument("--kinds", nargs="+", default=list(PROBLEMS), choices=list(PROBLEMS))
-    ap.add_argument("--channels", default="rgb", choices=list(E.CHANNELS))
+    ap.add_argument("--channels", default="rgb", choices=list(CHANNELS))
     ap.add_argument("--threads", type=int, default=1, help="numba threads")
     ap.add_argument("--repeats", type=int, default=3, help="best of R timings (not qp)")
     ap.add_argument("--quick", action="store_true", help="few pixels, N = 2 4 8")
@@ -175,10 +176,10 @@ def main(argv=None):
     # warm-up: compile every kernel once
     xa, xb, ya, yb = random_problems(4, 3)
     for solver in SOLVER_ORDER:
-        E.solve_weights(xa, xb, ya, yb, solver=solver, channels=args.channels)
+        solve_weights(xa, xb, ya, yb, solver=solver, channels=args.channels)
     load = os.getloadavg()
     print(f"numba threads: {numba.get_num_threads()}; channels: {args.channels}; QP backend: "
-          f"{E.QP_BACKEND}; load average at start: {load[0]:.2f} {load[1]:.2f} {load[2]:.2f} "
+          f"{QP_BACKEND}; load average at start: {load[0]:.2f} {load[1]:.2f} {load[2]:.2f} "
           f"({os.cpu_count()} CPUs)\n*_us: microseconds per problem; *_speedup: t_qp / t_solver "
           f"(same run); gaps: (L(w) - L(w_exact)) / scale^2 per problem, median and p99",
           flush=True)

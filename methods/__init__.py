@@ -11,8 +11,8 @@ A method module declares
 * a combiner: ``combine(buffers: RenderBuffers, inputs: list[Denoised], **params) -> Denoised``;
   its output may feed another combiner like any base denoiser output.
 * optionally ``RENDER_LAYERS``: the render layers the method reads (a tuple of names; absent:
-  all). A job whose methods all declare it reads only their union (``mcbench.pipeline.methods``), which at
-  1024^2 saves most of the render's ~340 MB.
+  all). A job whose methods all declare it reads only their union (``mcbench.pipeline.methods``),
+  which saves most of a large render's memory.
 
 Config parameters are the keyword-only parameters of ``denoise``/``combine``, each annotated
 (``int``, ``float``, ``bool``, ``str`` or ``typing.Literal[...]`` for a choice): when the DAG is

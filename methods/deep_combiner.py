@@ -35,9 +35,7 @@ training data          their rendered scenes        our procedural scenes, corre
                                                     inputs from nfor, kpcn and oidn
 =====================  ===========================  ==================================
 
-Training: 2000 steps of batch 8, 48² patches, relMSE. Measured here (forward, backward, clip and
-Adam step with 2 threads on a shared 2-core machine): 0.43 s/step at best, 0.60 s median while
-other jobs ran (CPU time 0.56 s/step), so 2000 steps take about 14-20 minutes.
+Training: 2000 steps of batch 8, 48² patches, relMSE.
 """
 
 from __future__ import annotations

@@ -25,10 +25,8 @@ y_b's log-space noise level (:func:`mcbench.nn.combination.sub_buffer_inputs`). 
 five 3×3 layers of 48 channels (two dilated) and a 1×1 layer giving 2×225 logits; 121,650
 parameters.
 
-Training: 1100 steps of batch 8, 48² patches, relMSE. Measured here (forward, backward, clip and
-Adam step with 2 threads on a shared 2-core machine): 0.80 s/step at best, 1.1 s median while
-other jobs ran (CPU time 0.99 s/step: twice the combination work of the single-buffer kernel), so
-1100 steps take about 15-20 minutes.
+Training: 1100 steps of batch 8, 48² patches, relMSE (a step does twice the combination work of
+the single-buffer combiner's).
 """
 
 from __future__ import annotations

@@ -91,6 +91,7 @@ RENDER_LAYERS = ("color_a", "color_b", "albedo", "normal")
 READS_ROWS = True
 # the choices combine() validates (owned by mcbench.combine; here for its annotations):
 # SOLVERS, STARTS, WEIGHTS, CHANNELS, GUIDE_VARIANCE_BLURS, COLOUR_DISTANCES
+
 BLOCK_PIXELS = 1 << 16   # pixels per block of rows that combine() solves at once (memory bound)
 
 

@@ -54,10 +54,9 @@ Constants we had to choose (one-line reasons):
   |f(p)|) counts as 0. The prefiltered features are float64 means of float32 data, so real
   differences are >= ~6e-8 relative and rounding noise is ~1e-16; without it a feature that is
   constant up to rounding (a flat albedo region after NL-means) became a unit-scaled regressor
-  of pure noise, and 1e-15 perturbations changed the output by ~1e-3 relMSE (the speed-up's
-  one behaviour change: on the synthetic benchmark case outputs move by ~1e-5 relMSE full and
-  ~1e-4 A/B against the implementation before it, and equal that implementation with this rule
-  added to the last float32 bit).
+  of pure noise, so rounding-level perturbations of the input changed the output. This rule is
+  the compiled implementation's one behaviour change against the one before it
+  (``benchmarks/bench_nfor.py`` compares the two, with and without the rule).
 * Feature variance of a half buffer: the raw per-pixel (f_A - f_B)^2 / 2, not smoothed, because
   the paper derives it from the half-buffer difference and NL-means averages it over 7x7 patches.
 * Distances are averaged over colour channels (Rousselle et al. 2012 Eq. 5, as
@@ -71,11 +70,9 @@ equations as dot products over the neighbours (float64, reassociated so they vec
 normal equations and the Cholesky solve stay float64 because the pivot test at 1e-9 needs
 ~7 digits after the column scaling), solves, and evaluates the fit at every neighbour. All
 kernels use float64: the weights' distances subtract variance terms of similar size, and
-float32 buys little where the time is in exp, divisions and the dot products.
-Measured with ``NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/bench_nfor.py --sizes 128 512``
-(2-core AMD EPYC VM shared with other jobs, load 6-7; CPU seconds, the steadier figure):
-128^2 1.64 s (before: 5.06 s, 3.1x), 512^2 26.8 s (before: 116.1 s, 4.3x). About 70 % of the
-time is the five regressions, 30 % the NL-means filters.
+float32 buys little where the time is in exp, divisions and the dot products (the five
+regressions take most of it, the NL-means filters the rest). ``benchmarks/bench_nfor.py``
+measures the speed (``NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/bench_nfor.py --sizes 128 512``).
 
 Departures from the paper: NL-means weights over colour channels are averaged (Tungsten takes
 the per-channel minimum weight); we have 7 features (no direct-visibility feature: the renders

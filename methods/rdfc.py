@@ -55,8 +55,8 @@ Constants (published ones first, then ours with the reason):
   colour distances (direct sums over the in-image patch pairs) and every per-pixel term as
   loops over x that vectorise, into the band's sums; affects speed only. ``tile`` (default
   None) still splits the image into tiles with a halo, with identical interiors (tested).
-* Speed, ``NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/bench_rdfc.py --sizes 128 512``
-  (2-core AMD EPYC VM shared with other jobs; CPU seconds): see that benchmark's docstring.
+* Speed: ``benchmarks/bench_rdfc.py`` measures it
+  (``NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/bench_rdfc.py --sizes 128 512``).
   All arithmetic is float64 (the SURE derivative subtracts terms of similar size).
 * Argmin ties resolve to the lowest index (FIRST): on noise-free input FIRST reproduces it.
 * Propagated output variance ``sum w^2 V / (sum w)^2`` ignores weight/colour correlation;

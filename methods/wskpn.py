@@ -7,9 +7,9 @@ us on our procedural scenes. Weights: ``methods/weights/wskpn.pt``, record ``wsk
   output widths agree, a batch-normalised identity, then applies ReLU;
   :meth:`WeightSharingKPN.fuse` folds the batch norms and re-parameterises every block into the
   single 5×5 convolution it equals (done once after loading weights, Sec. 4.1 "equivalently
-  transformed"; tested). The batch norms are RepVGG's own and are needed: a first version without
-  them summed four branches per block, its activations grew ~3× per block and after 1000 steps the
-  fusion softmax and the importance tanh saturated with zero gradients. The sixth block is linear
+  transformed"; tested). The batch norms are RepVGG's own and are needed: without them the four
+  summed branches let the activations grow from block to block until the fusion softmax and the
+  importance tanh saturated with zero gradients. The sixth block is linear
   (no ReLU): it outputs M importance maps and M fusion logits.
 * **Kernel construction** (Sec. 4.2, Eq. 3-4): kernel of size k_i built from importance map i by
   unfold + softmax, here computed exactly as a ratio of two box filters
@@ -19,7 +19,7 @@ us on our procedural scenes. Weights: ``methods/weights/wskpn.pt``, record ``wsk
   paper's 3, our departure): M = 7, fused by per-pixel softmax weights α_i. The paper denoises
   1 spp, where passing a pixel through is never right; our inputs go up to 1024 spp, where it
   often is, and shared importance maps cannot otherwise make every pixel's own weight dominate
-  (a 400-step pilot without it was worse than the noisy input at 256 and 1024 spp).
+  (without it the network was worse than the noisy input at high spp).
 * Filtering runs on the HDR irradiance (colour / (albedo + ε)); the albedo is multiplied back
   (Fig. 1).
 * Inputs (Sec. 5.1): tone-mapped colour (irradiance, x/(1+x) then gamma 1/2.2), albedo, normal
@@ -43,9 +43,8 @@ KIND = "denoiser"
 LABEL = "WSKPN† (Fan et al. 2021; ours, trained on our scenes)"
 
 NETWORK = {"channels": 32, "blocks": 6, "kernel_sizes": [1, 3, 5, 7, 9, 11, 13]}
-# 5000 steps (the first weights had 8000, 31 min) so that the retraining with the fibre scenes
-# fitted one working session (in the first training, validation SMAPE was 0.0259 at step 5000
-# and 0.0250 at step 8000, with the learning rate still decaying).
+# 5000 steps: a first training of 8000 steps gained little validation SMAPE after step 5000, and
+# fewer steps keep a retraining (e.g. with new training scenes) short.
 TRAINING = {"steps": 5000, "batch_size": 8, "patch": 64, "learning_rate": 1e-3, "loss": "smape"}
 INPUT_CHANNELS = 11
 

@@ -252,7 +252,7 @@ def test_rule_script_runs_each_step_without_snakemake(tmp_path):
     fake = SimpleNamespace(rule="comparison_ablations",
                            input=SimpleNamespace(metrics=metrics_csv, timings=timings_csv),
                            output=SimpleNamespace(csv=str(tmp_path / "a.csv"), md=str(tmp_path / "a.md")),
-                           params=params, wildcards=SimpleNamespace(), log=[str(tmp_path / "a.log")])
+                           params=params, wildcards=SimpleNamespace(), log=[str(tmp_path / "a.log")], threads=1)
     runpy.run_path(str(ROOT / "workflow/scripts/comparison_tables.py"), init_globals={"snakemake": fake})
     assert "naive averaging (5.2.5)" in (tmp_path / "a.md").read_text()
     fake.rule, fake.wildcards = "comparison_ranking", SimpleNamespace(metric="relmse")

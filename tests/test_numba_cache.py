@@ -14,23 +14,25 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-# A solver call that compiles (and caches) methods.ensemble's numba kernels.
+# A solver call that compiles (and caches) the ensemble's numba kernels (mcbench.combine.simplex_solvers:
+# 20 problems of 2 denoisers, 3 channels sharing the weights).
 SOLVE = """
 import numpy as np
 rng = np.random.default_rng(0)
-xa, xb = rng.uniform(0, 1, (2, 4, 5, 3))
-ya, yb = rng.uniform(0, 1, (2, 2, 4, 5, 3))
-weights = ensemble.solve_weights(xa, xb, ya, yb, solver="iterative", seed=1)
+xa, xb = rng.uniform(0, 1, (2, 20, 3))
+ya, yb = rng.uniform(0, 1, (2, 20, 2, 3))
+weights, _ = ensemble.iterative_weights(ya, yb, xa, xb, ensemble.seed_state(1), 1024, 1e-9, 0, 0)
 assert np.all(np.isfinite(weights)), weights
 print("solved", weights.shape)
 """
 BY_PATH = """
 import importlib.util
-spec = importlib.util.spec_from_file_location("ensemble_loaded_by_path", "methods/ensemble.py")
+spec = importlib.util.spec_from_file_location("ensemble_loaded_by_path",
+                                              "mcbench/combine/simplex_solvers.py")
 ensemble = importlib.util.module_from_spec(spec)
 spec.loader.exec_module(ensemble)
 """
-NORMAL = "import methods.ensemble as ensemble\n"
+NORMAL = "import mcbench.combine.simplex_solvers as ensemble\n"
 
 
 @pytest.fixture
@@ -55,8 +57,8 @@ def numba_cache_files(folder: Path) -> list[Path]:
 
 
 def test_loading_a_module_by_path_does_not_break_its_normal_import(project_copy):
-    """The sequence of the issue: load methods/ensemble.py by file path and solve, then a normal
-    `import methods.ensemble` solves too (it died with No module named '<dynamic>')."""
+    """The sequence of the issue: load the solvers' module by file path and solve, then a normal
+    `import mcbench.combine.simplex_solvers` solves too (it died with No module named '<dynamic>')."""
     copy, env = project_copy
     first = run_python(BY_PATH + SOLVE, copy, env)
     assert first.returncode == 0, first.stderr
@@ -91,7 +93,7 @@ def test_only_the_canonical_import_of_a_file_caches(tmp_path, monkeypatch):
 
     ensemble_file = ROOT / "methods" / "ensemble.py"
     assert canonical_module_name(ensemble_file) == "methods.ensemble"
-    assert canonical_module_name(ROOT / "mcbench" / "bilateral.py") == "mcbench.filters.bilateral"
+    assert canonical_module_name(ROOT / "mcbench" / "filters" / "bilateral.py") == "mcbench.filters.bilateral"
     assert canonical_module_name(tmp_path / "loose.py") == "loose"            # no package around it
     import methods.ensemble
 

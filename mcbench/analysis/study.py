@@ -1,4 +1,4 @@
-"""The 39-candidate study of Zheng et al. 2021, Sec. 5.3, checked with numbers (issue 15).
+"""The 39-candidate study of Zheng et al. 2021, Sec. 5.3, checked with numbers.
 
 Pure functions over the tidy metrics table (columns scene, spp, candidate, metric, value; the
 pool's harness names of :mod:`mcbench.analysis.pool` plus ``noisy``), writers at the end. Core module:
@@ -8,7 +8,7 @@ imports only from ``mcbench``.
   paper's Table 3 beside the paper's, per spp and ``Avg.``, and the Kendall tau of the two
   orderings (Sec. 5.3.3-5.3.4).
 * :func:`bootstrap_ci`, :func:`score_cis`, :func:`difference_ci` -- confidence intervals over
-  scenes (uncertainty, item 6).
+  scenes (the uncertainty of every score and difference).
 * :func:`recommendations` -- the best ensemble by size, spp band and overall, derived from the
   data, beside the paper's (Sec. 5.3.5-5.3.6).
 * :func:`findings` -- the paper's observations of Sec. 5.3.4 with a verdict each.
@@ -949,7 +949,7 @@ def findings_markdown(table: pd.DataFrame, *, resampling: Resampling = Resamplin
 
 
 # --------------------------------------------------------------------------------------------
-# references you can trust (item 7): raw against reference-noise-corrected relMSE
+# references you can trust: raw against reference-noise-corrected relMSE
 # --------------------------------------------------------------------------------------------
 
 REFERENCE_NOISE_COLUMNS = ["spp", "kendall_tau", "max_abs_change", "real_changes", "changed", "top_raw",

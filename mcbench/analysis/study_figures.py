@@ -1,4 +1,4 @@
-"""Figures of the 39-candidate study (Zheng et al. 2021, Sec. 5.3; issue 15, item 8).
+"""Figures of the 39-candidate study (Zheng et al. 2021, Sec. 5.3).
 
 Inputs are the workflow's tidy tables:
 

@@ -1,4 +1,4 @@
-"""Images and manifest of the static image viewer (issue 17): pure functions over arrays plus
+"""Images and manifest of the static image viewer: pure functions over arrays plus
 small writers. No Snakemake here; :mod:`mcbench.pipeline.viewer` reads the EXRs and calls these.
 
 What the viewer shows, per test case (scene, spp):
@@ -51,7 +51,7 @@ EXPOSURES_EV = (-2, -1, 0, 1, 2)
 # JPEG quality 85 with 4:4:4 chroma (no subsampling: colour noise is what a reader compares)
 JPEG_QUALITY = 85
 # Quantisation levels of an error or weight map: 64 colours look continuous on a perceptual map
-# and keep the maps' PNGs about 25 % smaller than 256 levels (noisy maps barely compress).
+# and keep the maps' PNGs smaller than 256 levels would (noisy maps barely compress).
 LEVELS = 64
 REFERENCE = "reference"         # the reference's entry name in the manifest
 REFERENCE_LABEL = "Reference"
@@ -354,7 +354,7 @@ def manifest_files(manifest: dict) -> list[str]:
 def _link_or_copy(source, target) -> None:
     """A hard link where the file system allows one (the case images are written once and
     replaced, never edited in place, so a link is a snapshot), else a copy: the viewer then
-    takes no second copy of its ~80 MB of images on disk."""
+    takes no second copy of its images on disk."""
     Path(target).unlink(missing_ok=True)     # a stale file of an earlier assembly
     try:
         os.link(source, target)

@@ -31,8 +31,8 @@ dual-buffer problems) three weight maps are solved:
   2^N - 1 supports: N <= :data:`MAX_SIMPLEX_N`.
 
 Layouts: outputs and weights (N, H, W, C) like the ensemble's; matrices (H, W, C, N, N), one
-problem per pixel-channel; the per-problem solvers take (P, N, N). The table and figure
-tables and figure of the study are in :mod:`mcbench.analysis.oracle_tables`.
+problem per pixel-channel; the per-problem solvers take (P, N, N). The study's tables and
+figure are in :mod:`mcbench.analysis.oracle_tables`.
 """
 
 from __future__ import annotations

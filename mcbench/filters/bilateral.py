@@ -40,9 +40,8 @@ ask), float32 for the ensemble's weight maps, where its 1e-7 relative rounding i
 anything a weight map can show (the ensemble keeps its solver's geometry in float64). The colour
 term is float64 whatever ``dtype``: Eq. 33 divides differences of nearly equal guide values by
 variances that can be 0, and the zero-variance guard tests the difference for exact equality,
-so rounding the guide to float32 would switch neighbours on and off (measured: 2e-6 relMSE of
-an ensemble's blend on a real case, furball at 4 spp). Neighbours
-with exponent above :data:`EXPONENT_CUTOFF` (kernel below 1.6e-38 of the centre's weight) count
+so rounding the guide to float32 would switch neighbours on and off. Neighbours with exponent
+above :data:`EXPONENT_CUTOFF` (kernel below 1.6e-38 of the centre's weight) count
 as 0.
 """
 

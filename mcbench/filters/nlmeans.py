@@ -28,10 +28,8 @@ Two implementations with the same result (tested to 1e-10 relative):
 shared with the regression kernel of ``methods/nfor.py``. All arithmetic is float64 (the
 distances subtract variance terms of similar size, and the weights feed float64 sums).
 
-Speed, ``NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/bench_nlmeans.py --sizes 128 512``
-(CPU seconds on a shared 2-core AMD EPYC VM): R = 5, F = 3, 1 channel: 128^2 0.018 s (NumPy
-0.070 s, 3.8x), 512^2 0.34 s (1.71 s, 5.1x); R = 9, F = 1, 3-channel guide, 6 value
-channels: 128^2 0.11 s (0.97 s, 9.2x), 512^2 1.9 s (15.4 s, 8.0x).
+``benchmarks/bench_nlmeans.py`` measures the compiled filter against the NumPy path
+(``NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/bench_nlmeans.py --sizes 128 512``).
 """
 
 from __future__ import annotations

@@ -37,7 +37,7 @@ BUFFER_SUFFIXES = {"full": "", "a": "_a", "b": "_b"}
 IMAGE_INDEX = {"full": 0, "a": 1, "b": 2}
 QUANTITIES = ("color", "variance", "albedo", "normal", "depth",
               "albedo_variance", "normal_variance", "depth_variance")
-# Layers every render must hold (the issue's list); the rest are optional extras.
+# Layers every render must hold (full image, halves A and B, features); the rest are optional extras.
 REQUIRED_LAYERS = ("color", "color_a", "color_b", "variance", "variance_a", "variance_b",
                    "albedo", "normal", "depth")
 ALL_LAYERS = tuple(q + s for q in QUANTITIES for s in BUFFER_SUFFIXES.values())
@@ -121,8 +121,8 @@ class RenderBuffers:
         """Read a render EXR, refusing missing layers or NaN/Inf pixels (errors name the file).
 
         ``layers``: only these layers (plus ``color``, which gives the shape), e.g. a method's
-        ``RENDER_LAYERS``; the rest are not kept (at 1024^2 a render holds ~340 MB of layers, an
-        ensemble reads 60 MB of them). None: every layer, after checking :data:`REQUIRED_LAYERS`."""
+        ``RENDER_LAYERS``; the rest are not kept (a render holds several times the layers most
+        methods read). None: every layer, after checking :data:`REQUIRED_LAYERS`."""
         path = Path(path)
         if layers is not None:
             wanted = list(dict.fromkeys(("color", *layers)))

@@ -38,10 +38,9 @@ def write_layers(path: str | os.PathLike, layers: dict[str, np.ndarray],
 
     ``metadata`` values are stored as string header attributes (``mcbench.<key>``).
     ``compression``: ``"none"`` (default) or ``"zip"``. Uncompressed because the harness reads
-    its EXRs far more often than it writes them: a 128² render with sample bins (32 layers) reads
-    in 0.06 s instead of 0.24 s with ZIP, and at 1024² ZIP's decoding cost more than the ensemble's
-    compute (about 0.35 s per layer here); the files are about 1.5x larger (5.4 MB against 3.5 MB
-    for that render).
+    its EXRs far more often than it writes them: ZIP decoding makes every read several times
+    slower (at large sizes it costs more than the ensemble's compute), and uncompressed scanlines
+    can be read by row ranges; the price is larger files.
     """
     if compression not in COMPRESSIONS:
         raise ValueError(f"{path}: compression {compression!r}; expected one of {sorted(COMPRESSIONS)}")
@@ -67,7 +66,7 @@ def write_layers(path: str | os.PathLike, layers: dict[str, np.ndarray],
         with OpenEXR.File(header, channels) as exr:
             exr.write(tmp)
 
-    from mcbench.io.tables import write_atomically   # here: mcbench.io.tables imports pandas (~30 MiB, 0.3 s)
+    from mcbench.io.tables import write_atomically   # at call time: readers of EXRs need no tables module
 
     write_atomically(path, save, suffix=".tmp.exr")
 
@@ -151,7 +150,7 @@ class LayerRows:
     scanlines (OpenEXR's scanline API, ``InputFile.channels`` over a row range: for the
     uncompressed files the harness writes that reads only their bytes) and returns a new array;
     ``np.asarray(layer)`` reads the whole layer. Values equal :func:`read_layers`'s exactly. Each
-    read opens the file (~0.1 ms), so no handle stays open; the layers of one :func:`layer_rows`
+    read opens the file (cheap next to the decoding), so no handle stays open; the layers of one :func:`layer_rows`
     call share one read per row range (:class:`_FileRows`)."""
 
     def __init__(self, reader: _FileRows, name: str, shape: tuple[int, ...]):

@@ -14,8 +14,8 @@ items (one per crop and base) share their crop's render planes and differ only i
 subset or a split shares the planes of the set it comes from. Batches read and decompress the
 planes they draw from (a dense ``(items, L, 3, C, H, W)`` copy, which :attr:`CropSet.inputs`
 builds for inspection, is never made in training), bit-identical to the dense layout's: the
-default 640 crops of the denoisers, 2.1 GB of float32, take about 1 GB of disk and page cache
-and none of the training process's memory.
+crops live on disk and in the page cache, not in the training process's memory
+(``benchmarks/training_memory.py`` measures the peak).
 
 Split: training scenes with ``seed % VALIDATION_MODULUS == VALIDATION_REMAINDER`` (every 8th)
 are the validation set; all crops of a scene go to the same side.

@@ -62,7 +62,7 @@ def image_tensors(image: ImageBuffers) -> dict[str, torch.Tensor]:
 
 
 def set_deterministic_algorithms(mode: bool) -> None:
-    """``torch.use_deterministic_algorithms(mode)`` without its import of ``torch._inductor`` (1-2 s
+    """``torch.use_deterministic_algorithms(mode)`` without its import of ``torch._inductor`` (seconds
     per process, for a compiler mcbench never runs): torch 2.13's function sets the flag in
     ``torch._C`` and inductor's copy of it; the copy is set too when inductor is loaded already."""
     if "torch._inductor.config" in sys.modules:

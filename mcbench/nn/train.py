@@ -78,10 +78,10 @@ DEFAULT_SETTINGS = {
 RESUMABLE_CHANGES = ("threads", "validate_every", "checkpoint_every")
 # Steps between two progress lines (mean training loss over the interval, its seconds, ETA).
 LOG_EVERY = 50
-# Validation items (full crops) per forward pass: a deep combiner's activations take about 35 MB
-# per 64x64 item, so 16 at once cost 0.6 GB of peak memory; each item's result does not depend
-# on the batch it is in (to the last bit for most networks, within float32 rounding for the
-# others), and validation never changes the weights.
+# Validation items (full crops) per forward pass: small, because a network's activations over a
+# whole crop are large and peak memory grows with the batch (``benchmarks/training_memory.py``);
+# each item's result does not depend on the batch it is in (to the last bit for most networks,
+# within float32 rounding for the others), and validation never changes the weights.
 VALIDATION_BATCH = 2
 
 

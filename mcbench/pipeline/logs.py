@@ -12,9 +12,12 @@ import sys
 import traceback
 from pathlib import Path
 
+from mcbench.pipeline.threads import thread_report
+
 
 def run_logged(log_path: str | None, step, *args, **kwargs):
-    """Call ``step(*args, **kwargs)`` with fds 1 and 2 redirected to ``log_path``."""
+    """Call ``step(*args, **kwargs)`` with fds 1 and 2 redirected to ``log_path``; the log ends with
+    the job's thread use (:func:`mcbench.pipeline.threads.thread_report`)."""
     if not log_path:
         return step(*args, **kwargs)
     Path(log_path).parent.mkdir(parents=True, exist_ok=True)
@@ -26,7 +29,9 @@ def run_logged(log_path: str | None, step, *args, **kwargs):
         os.dup2(log.fileno(), 1)
         os.dup2(log.fileno(), 2)
         try:
-            return step(*args, **kwargs)
+            result = step(*args, **kwargs)
+            print(thread_report(), flush=True)
+            return result
         except BaseException as exc:
             traceback.print_exc()
             sys.stderr.flush()

@@ -78,7 +78,7 @@ def run_methods(entries: list[dict], render_path: str, *, scene: str = "", spp: 
         module = modules[module_name]
         inputs = [input_of(path) for path in entry.get("input_paths", ())]
         # untimed run on a corner crop: compiles / loads the method's JIT kernels (numba's cache
-        # load alone took 0.6 s of a 0.06 s ensemble at 128x128) and first-call set-up, once per
+        # load alone can cost more than a small case's compute) and first-call set-up, once per
         # module and parameters in the process (the 31 pool ensembles share one)
         key = (module_name, json.dumps(params, sort_keys=True, default=str))
         if key not in warmed:
@@ -103,10 +103,10 @@ WARM_UP_SIZE = 32  # pixels per side of the untimed warm-up crop of run_methods
 
 def reads_rows(modules) -> bool:
     """Whether a job of these method modules reads its render and inputs by rows: every module
-    declares ``READS_ROWS`` (methods/__init__.py; the ensemble), so no layer is held whole (a
-    1024^2 N = 8 ensemble job: about 520 MiB instead of about 840, ``benchmarks/bench_ensemble.py``).
-    Such a method reads the rows it needs inside its own call, so its recorded seconds include
-    those reads (uncompressed scanlines, a few per cent of its compute); a batch with any other
+    declares ``READS_ROWS`` (methods/__init__.py; the ensemble), so no layer is held whole
+    (``benchmarks/bench_ensemble.py`` measures the peak memory saved). Such a method reads the
+    rows it needs inside its own call, so its recorded seconds include those reads (uncompressed
+    scanlines, cheap next to its compute); a batch with any other
     method reads every file whole, before the timed call."""
     modules = list(modules)
     return bool(modules) and all(getattr(module, "READS_ROWS", False) for module in modules)

@@ -14,9 +14,9 @@ Choices:
   The ground truth is the harness's reference averaged over ``downscale`` x ``downscale`` blocks
   (:func:`mcbench.combine.oracle.block_average`: with the box pixel filter the block mean is the reference
   of the same camera at the lower resolution). The reference must be much less noisy than the
-  top level, or the top of the curve measures the reference's noise: cornell_box's 65536-spp
-  reference of an earlier 128x128 run, averaged 2 x 2, is worth 262144 spp at the curve's 64x64,
-  32x the top level (the default config's 16384-spp references are worth 65536 spp, 8x). The
+  top level, or the top of the curve measures the reference's noise: a reference of R spp
+  averaged ``downscale`` x ``downscale`` is worth R x downscale² spp at the curve's resolution
+  (the default config's 16384-spp references are worth 65536 spp, 8x the 8192-spp top level). The
   reference's own noise floor (:func:`reference_floor`, the relMSE a perfect image would show)
   is written in the Markdown and drawn dashed in the figure, and ``relmse_corrected`` removes it
   (:func:`mcbench.analysis.metrics.relmse_corrected` with the block mean's variance, see
@@ -42,12 +42,6 @@ Choices:
   exceptions) and gives PD/noisy and t-test-only/noisy relMSE per spp, which should approach 1,
   ideally from below (from just above where the t-test still lets through a bias of the base too
   small to be significant at that spp).
-
-Measured (shared 2-core machine, 1 thread, llvm_ad_rgb): cornell_box at 64x64 against the 65536-spp
-128x128 reference, spp 4..8192 (12 levels): 45 s wall, 42 s of it in the function, 37 s of that
-rendering (19 s the 8192-spp level); OIDN about 0.03 s and PD about 0.1 s per level. PD/noisy
-relMSE 0.28 at 4 spp, 0.80 at 256, 0.94 at 1024, 0.99 at 2048, 1.03 at 4096 and 1.09 at 8192
-(t-test alone 1.26 at 8192; OIDN alone 2.3).
 """
 
 from __future__ import annotations

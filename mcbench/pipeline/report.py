@@ -101,7 +101,7 @@ def _records_of(scene: str, paths: list[str]) -> list[str]:
 def write_scene_table(metrics_csv: str, reference_paths: dict[str, str], reference_spp: dict[str, int],
                       csv_path: str, md_path: str, *, noisy_records: list[str],
                       reference_records: list[str], tex_path: str | None = None) -> pd.DataFrame:
-    """Scene table with reference noise floors (issue: trustworthy references) and render costs.
+    """Scene table with reference noise floors and render costs.
 
     Render costs come from the Snakemake ``benchmark:`` records of the noisy render jobs
     (``noisy_records``) and reference chunk jobs (``reference_records``), inputs of the rule.

@@ -15,16 +15,16 @@ nothing)::
     rss_mb  = base_mb + mb_per_mpx * P + mb_per_mpx_entry * P * E
 
 i.e. a constant part (process start, imports, the numba cache, the workflow's parse) and parts
-linear in the pixels, the methods and the samples -- what the measurements show: per-method costs
-grow linearly with pixels after the issue-14 work (NFOR 1.64 s at 128^2, 26.8 s at 512^2, x16.3
-for x16 pixels), a render's with pixels x spp, and a job's memory is the interpreter's plus a few
-float32/float64 copies of its case's buffers. The constants (``workflow/resources/job_costs.yaml``)
+linear in the pixels, the methods and the samples: per-method costs grow linearly with pixels
+(``benchmarks/bench_nfor.py`` and the other method benchmarks measure it), a render's with pixels
+x spp, and a job's memory is the interpreter's plus a few float32/float64 copies of its case's
+buffers. The constants (``workflow/resources/job_costs.yaml``)
 are fitted by non-negative least squares to the ``benchmark:`` records (wall seconds, peak RSS)
 of finished runs at two resolutions by ``python benchmarks/job_costs.py RESULTS...``, which
 writes that file; its header names the runs it was fitted to. Two fits per rule: to the largest
 job of each size (section ``rules``: requests) and to the mean one (``typical``: the CPU-hour
 estimates of ``benchmarks/cluster_estimate.py``); ``run_method`` also per method module
-(``run_method/nfor``), since NFOR and OIDN differ ten-fold within that rule.
+(``run_method/nfor``), since the methods' costs within that rule differ widely (NFOR, OIDN).
 
 Requests
 --------

@@ -2,8 +2,7 @@
 
 ``auto`` picks, in order, ``cuda_ad_rgb`` (Dr.Jit finds a CUDA GPU), ``llvm_ad_rgb`` (a
 libLLVM >= :data:`MIN_LLVM_MAJOR` is found, see :func:`find_libllvm`; older versions crash
-Dr.Jit 1.5 on the development machine) and ``scalar_rgb`` (3-4x slower, with a one-line
-notice on stderr). The variant is set once per process (:func:`pick_variant`).
+Dr.Jit 1.5) and ``scalar_rgb`` (single-lane and much slower, with a one-line notice on stderr). The variant is set once per process (:func:`pick_variant`).
 """
 
 from __future__ import annotations
@@ -17,7 +16,7 @@ from mcbench import BenchError
 
 __all__ = ["MIN_LLVM_MAJOR", "LLVM_SEARCH_PATTERNS", "find_libllvm", "pick_variant", "set_threads"]
 
-MIN_LLVM_MAJOR = 19              # older libLLVM versions crash Dr.Jit 1.5 on this machine
+MIN_LLVM_MAJOR = 19              # older libLLVM versions crash Dr.Jit 1.5
 LLVM_SEARCH_PATTERNS = ("/usr/lib/x86_64-linux-gnu/libLLVM*.so*", "/usr/lib/llvm-*/lib/libLLVM*.so*",
                         "/usr/lib64/libLLVM*.so*", "/usr/local/lib/libLLVM*.so*",
                         "/usr/lib/libLLVM*.so*", "/opt/homebrew/opt/llvm/lib/libLLVM*.dylib")

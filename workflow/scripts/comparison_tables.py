@@ -1,8 +1,13 @@
 """The comparison tables of Zheng et al. 2021 Sec. 5.2 (rules in workflow/rules/comparisons.smk):
 one script for the three rules, dispatched on the rule's name."""
 
-from mcbench.pipeline.comparisons import write_ablation_table, write_comparison_ranking, write_onehot_tables
-from mcbench.pipeline.logs import run_logged
+from mcbench.pipeline.threads import limit_threads
+
+if "snakemake" in globals():  # a test may run this file with a stand-in snakemake object
+    limit_threads(snakemake.threads)  # before any heavy import (numba, torch, OpenBLAS, OIDN read it)  # noqa: F821
+
+from mcbench.pipeline.comparisons import write_ablation_table, write_comparison_ranking, write_onehot_tables  # noqa: E402
+from mcbench.pipeline.logs import run_logged  # noqa: E402
 
 
 def run(smk) -> None:

@@ -1,5 +1,9 @@
-from mcbench.pipeline.logs import run_logged
-from mcbench.pipeline.figures import write_error_curves, write_speed_error
+from mcbench.pipeline.threads import limit_threads
+
+limit_threads(snakemake.threads)  # before any heavy import (numba, torch, OpenBLAS, OIDN read it)  # noqa: F821
+
+from mcbench.pipeline.logs import run_logged  # noqa: E402
+from mcbench.pipeline.figures import write_error_curves, write_speed_error  # noqa: E402
 
 # the two rules of workflow/rules/figures.smk
 labels = dict(snakemake.params.labels)

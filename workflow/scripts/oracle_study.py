@@ -1,7 +1,9 @@
-import os
+from mcbench.pipeline.threads import limit_threads
 
-os.environ.setdefault("NUMBA_NUM_THREADS", str(snakemake.threads))
-os.environ.setdefault("OMP_NUM_THREADS", str(snakemake.threads))
+limit_threads(snakemake.threads)  # before any heavy import (numba, torch, OpenBLAS, OIDN read it)  # noqa: F821
+
+import os  # noqa: E402
+
 os.environ["MCBENCH_WEIGHTS_DIR"] = os.path.abspath(snakemake.params.weights_dir)
 
 from mcbench.pipeline.logs import run_logged  # noqa: E402

@@ -1,7 +1,11 @@
-from pathlib import Path
+from mcbench.pipeline.threads import limit_threads
 
-from mcbench.pipeline.logs import run_logged
-from mcbench.pipeline.study import write_study, write_study_figures_of
+limit_threads(snakemake.threads)  # before any heavy import (numba, torch, OpenBLAS, OIDN read it)  # noqa: F821
+
+from pathlib import Path  # noqa: E402
+
+from mcbench.pipeline.logs import run_logged  # noqa: E402
+from mcbench.pipeline.study import write_study, write_study_figures_of  # noqa: E402
 
 # the two rules of workflow/rules/study.smk
 if snakemake.rule == "study_tables":

@@ -1,5 +1,9 @@
-from mcbench.pipeline.logs import run_logged
-from mcbench.pipeline.training import write_correlated_training_inputs
+from mcbench.pipeline.threads import limit_threads
+
+limit_threads(snakemake.threads)  # before any heavy import (numba, torch, OpenBLAS, OIDN read it)  # noqa: F821
+
+from mcbench.pipeline.logs import run_logged  # noqa: E402
+from mcbench.pipeline.training import write_correlated_training_inputs  # noqa: E402
 
 run_logged(snakemake.log[0], write_correlated_training_inputs, snakemake.wildcards.base, list(snakemake.input),
            list(snakemake.output), threads=snakemake.threads)
