@@ -2,7 +2,8 @@
 
 ``auto`` picks, in order, ``cuda_ad_rgb`` (Dr.Jit finds a CUDA GPU), ``llvm_ad_rgb`` (a
 libLLVM >= :data:`MIN_LLVM_MAJOR` is found, see :func:`find_libllvm`; older versions crash
-Dr.Jit 1.5) and ``scalar_rgb`` (single-lane and much slower, with a one-line notice on stderr). The variant is set once per process (:func:`pick_variant`).
+Dr.Jit 1.5) and ``scalar_rgb`` (single-lane and much slower, with a one-line notice on
+stderr). The variant is set once per process (:func:`pick_variant`).
 """
 
 from __future__ import annotations

@@ -2,6 +2,7 @@
 # Path patterns live in the rules' own output declarations (rules.X.output); the helpers here
 # expand those.
 
+import copy
 import functools
 import sys
 
@@ -11,13 +12,12 @@ from pathlib import Path
 sys.path.insert(0, str(Path(workflow.basedir)))  # methods/, scenes/, mcbench/ from a checkout
 
 from mcbench import NOISY, NOISY_LABEL, BenchError  # noqa: E402
-from mcbench.analysis.comparisons import comparison_role  # noqa: E402
 from mcbench.pipeline.config import config_digest, resolve_config  # noqa: E402
+from mcbench.pipeline.plan import plan_study  # noqa: E402
 from mcbench.analysis.metrics import ALL_METRICS  # noqa: E402
 from mcbench.analysis.pool import POOL  # noqa: E402
 from mcbench.analysis.study_figures import STUDY_FIGURES as STUDY_FIGURE_KEYS, curve_candidates, paper_recommended  # noqa: E402
 from mcbench.pipeline.resources import JobCost, estimate_job, job_request, load_job_costs  # noqa: E402
-from mcbench.render.seeds import training_seeds  # noqa: E402
 from mcbench.io.weights import COMMITTED_WEIGHTS, is_learned_method  # noqa: E402
 from mcbench.pipeline.registry import available_scenes, config_method_table, load_method, load_scene  # noqa: E402
 
@@ -25,6 +25,7 @@ from mcbench.pipeline.registry import available_scenes, config_method_table, loa
 # The whole configuration: the config file (config.yaml or the --configfile) plus the schema's
 # defaults, validated; errors name the file and the key.
 _CONFIG_SOURCE = ", ".join(str(f) for f in workflow.configfiles) or "config"
+_WRITTEN = copy.deepcopy(dict(config))
 _RESOLVED = resolve_config(dict(config), source=_CONFIG_SOURCE)
 config.clear()
 config.update(_RESOLVED)
@@ -35,56 +36,30 @@ RESULTS = "results"
 # names another folder (relative to the working directory).
 WEIGHTS_DIR = config["weights_dir"] or str(COMMITTED_WEIGHTS)
 
-METHODS = config_method_table(config, is_learned=is_learned_method)
-for _index, _scene in enumerate(config["scenes"]):
-    load_scene(_scene, config_key=f"scenes[{_index}]")
-SCENES = list(config["scenes"])
-SPPS = sorted(config["spp"])
-CANDIDATES = list(METHODS)
+# Everything the rules plan that depends on the config alone, checked before any job
+# (mcbench.pipeline.plan.plan_study; the tests call the same function). Errors name the file and
+# the key, and say so when the key holds a schema default the config never wrote.
+PLAN = plan_study(config, written=_WRITTEN, source=_CONFIG_SOURCE, is_learned=is_learned_method)
+METHODS = PLAN["methods"]
+SCENES = PLAN["scenes"]
+SPPS = PLAN["spps"]
+CANDIDATES = PLAN["candidates"]
 # The ranking pool. With study.pool: exactly the 39 candidates of Zheng et al. Sec. 5.3.1 the
 # config runs (mcbench.analysis.pool), in ID order; otherwise every candidate but the comparison methods
 # of Sec. 5.2 (one-hot selection, naive averages, ablations; ranked in comparisons.smk). Every
 # other method is an extra, scored in a pool that adds it alone (rule extras_table).
-POOL_STUDY = config["study"]["pool"]
-if POOL_STUDY:
-    RANKED = [c.name for c in POOL if c.name in METHODS]
-else:
-    RANKED = [name for name in CANDIDATES if comparison_role(METHODS[name]) is None]
-EXTRAS = [name for name in CANDIDATES if name not in RANKED]
-POOL_NOTE = ("" if not POOL_STUDY else
-             "Rows: the 39 candidates of Zheng et al. 2021 Sec. 5.3.1 in ID order (40 entries with the noisy "
-             "input, as the paper's Table 3); ensembles marked (filled) or (forced) are our choice of the "
-             "members the paper does not name (mcbench.analysis.pool)." if len(RANKED) == len(POOL) else
-             f"Partial pool: {len(RANKED)} of the 39 candidates (study.ensembles), {len(RANKED) + 1} entries "
-             f"with the noisy input, so the scores are on another scale than the paper's 40-entry Table 3.")
+POOL_STUDY = PLAN["pool_study"]
+RANKED = PLAN["ranked"]
+EXTRAS = PLAN["extras"]
+POOL_NOTE = PLAN["pool_note"]
 # progressive denoising's entries (combiners of module progressive) -> the method each mixes with
 # the noisy render (progressive.smk)
-PROGRESSIVE = {name: spec["inputs"][0] for name, spec in METHODS.items() if spec["module"] == "progressive"}
-LABELS = {NOISY: NOISY_LABEL, **{name: spec["label"] for name, spec in METHODS.items()}}
-METRIC_NAMES = list(config["metrics"])
-REFERENCE_CHUNKS = config["reference"]["chunks"]
-
-
-def _reference_spp_table(config):
-    """Reference spp per configured scene: ``reference.scene_spp[scene]`` or ``reference.spp``.
-    ``scene_spp`` may name scenes the config does not run (a narrowed ``scenes:`` keeps working),
-    but each must be a scene of scenes/."""
-    per_scene = config["reference"]["scene_spp"]
-    known = available_scenes()
-    for name in per_scene:
-        if name not in known:
-            raise BenchError(f"reference.scene_spp.{name}: no scene '{name}' in scenes/; "
-                             f"available: {', '.join(known)}")
-    table = {scene: int(per_scene.get(scene, config["reference"]["spp"])) for scene in SCENES}
-    for scene, spp in table.items():
-        key = f"reference.scene_spp.{scene}" if scene in per_scene else "reference.spp"
-        if spp % REFERENCE_CHUNKS or (spp // REFERENCE_CHUNKS) % 2:
-            raise BenchError(f"{key}: {spp} spp must split into {REFERENCE_CHUNKS} chunks (reference.chunks) "
-                             f"of an even spp each")
-    return table
-
-
-REFERENCE_SPP = _reference_spp_table(config)
+PROGRESSIVE = PLAN["progressive"]
+LABELS = PLAN["labels"]
+METRIC_NAMES = PLAN["metrics"]
+REFERENCE_CHUNKS = PLAN["reference_chunks"]
+# reference spp per configured scene: reference.scene_spp[scene] or reference.spp
+REFERENCE_SPP = PLAN["reference_spp"]
 
 
 wildcard_constraints:
@@ -97,16 +72,11 @@ wildcard_constraints:
 
 
 # Which methods share a job (config batch_methods): every method of a case in one job, in the
-# method table's order (denoisers, then combiners in config order: dependency order, checked
-# below); with batch_methods false, every method in a job of its own (rule run_method).
-BATCHES = {"methods": list(METHODS) if config["batch_methods"] else []}
-_position = {name: index for index, name in enumerate(METHODS)}
-for _name, _spec in METHODS.items():
-    for _input in _spec["inputs"]:
-        if _position[_input] > _position[_name]:
-            raise BenchError(f"method '{_name}' takes '{_input}', which comes after it in the method table")
+# method table's order (denoisers, then combiners in config order: dependency order, checked by
+# the plan); with batch_methods false, every method in a job of its own (rule run_method).
+BATCHES = PLAN["batches"]
 BATCHED = {name for names in BATCHES.values() for name in names}
-SINGLE_JOB_METHODS = [name for name in METHODS if name not in BATCHED]
+SINGLE_JOB_METHODS = PLAN["single_job_methods"]
 
 
 def method_output(name, wildcards, kind="exr"):
@@ -272,25 +242,15 @@ def render_cost_records(wildcards=None):
 
 # Training data and learned methods (rules in training.smk). Defaults: the schema's.
 
-TRAINING = {key: value for key, value in config["training"].items() if key not in ("networks", "combiners")}
-TRAINING_OVERRIDES = config["training"]["networks"]
-TRAINING_SEEDS = training_seeds(TRAINING)
+TRAINING = PLAN["training"]
+TRAINING_OVERRIDES = PLAN["training_overrides"]
+TRAINING_SEEDS = PLAN["training_seeds"]
 # train_<name> rules for the learned methods the config names (no other method module is imported)
-NETWORKS = sorted({spec["module"] for spec in METHODS.values() if spec["learned"]})
-# The crops of the learned combiners: a subset of the training scenes, checked when the config
-# has a learned combiner (a smaller training set for the denoisers alone stays valid).
-COMBINER_TRAINING = config["training"]["combiners"]
-if any(spec["learned"] and spec["kind"] == "combiner" for spec in METHODS.values()):
-    for _key in ("count", "fibre_count", "crops"):
-        if COMBINER_TRAINING[_key] > TRAINING[_key]:
-            raise BenchError(f"training.combiners.{_key}: {COMBINER_TRAINING[_key]} is more than "
-                             f"training.{_key} ({TRAINING[_key]}), and this config has a learned combiner")
-COMBINER_SEEDS = training_seeds({**TRAINING, "count": min(COMBINER_TRAINING["count"], TRAINING["count"]),
-                                 "fibre_count": min(COMBINER_TRAINING["fibre_count"], TRAINING["fibre_count"])})
-for _name in TRAINING_OVERRIDES:
-    if _name not in NETWORKS:
-        raise BenchError(f"training.networks.{_name}: not a learned method of this config; "
-                         f"learned: {', '.join(NETWORKS) or 'none'}")
+NETWORKS = PLAN["networks"]
+# The crops of the learned combiners: a subset of the training scenes, checked by the plan when
+# the config has a learned combiner (a smaller training set for the denoisers alone stays valid).
+COMBINER_TRAINING = PLAN["combiner_training"]
+COMBINER_SEEDS = PLAN["combiner_seeds"]
 
 
 def training_crop_files():

@@ -1,0 +1,337 @@
+"""What the rules plan for a configuration, decided when the DAG is parsed.
+
+:func:`plan_study` is everything ``workflow/rules/common.smk`` computes from the resolved config
+alone (the method table, the scenes and spp levels, the ranking pool and the extras, reference
+spp, batches, training seeds, the oracle's and the progressive curve's scene), with every check
+that stops a config before any job. The Snakefile reads its names from it (``PLAN``), so a test
+calling :func:`plan_study` checks the workflow's own logic without starting Snakemake.
+
+Errors are :class:`mcbench.BenchError` (or a subclass) whose message starts with the config's
+source and the offending key, e.g. ``config.yaml: study.ensembles[0]: ...``. An error at a key
+the config does not set (its value is the schema's default) says so and how to override it
+(:func:`default_note`): e.g. the default ``combiners`` naming a denoiser that the config's own
+``denoisers`` dropped.
+
+Checks here beyond the method table's (:func:`methods.method_table`):
+
+* every ``spp`` has a render seed code (:func:`mcbench.render.seeds.spp_code`: even up to 2048,
+  multiples of 2048 up to 2**21), else the render job would fail;
+* every reference has *more* samples than every image it scores: ``reference.spp`` (or a
+  scene's ``reference.scene_spp``) above the largest ``spp``; the oracle's and the progressive
+  curve's references (block-averaged over ``downscale``², so worth that many times more samples)
+  above ``oracle.spp`` and every ``progressive_curve.spp``. A reference with as many samples as
+  the render it judges is no reference: its own noise is as large as the error it measures;
+* ``progressive_curve.scene`` names a scene (with the key), the comparison tables' roles are
+  unique (:func:`mcbench.analysis.comparisons.find_comparisons`, which the comparison jobs
+  would otherwise raise hours later), ``training.first_seed + training.count`` fits the object
+  seeds, ``training.spp`` are powers of two 2..32768 (the training render seeds) and the
+  training crops fit ``training.resolution``.
+"""
+
+from __future__ import annotations
+
+import re
+
+from mcbench import NOISY, NOISY_LABEL, BenchError
+from mcbench.analysis.comparisons import comparison_role, find_comparisons
+from mcbench.analysis.pool import POOL
+from mcbench.pipeline.config import ConfigError, key_path, schema_defaults
+from mcbench.pipeline.oracle import oracle_size, usable_downscale
+from mcbench.pipeline.registry import available_scenes, config_method_table, load_method, load_scene
+from mcbench.render.seeds import FIBRE_SEED_BASE, spp_code, training_seeds
+
+__all__ = ["plan_study", "default_note", "defaulted_key"]
+
+# the largest spp a training render seed encodes (mcbench.render.seeds.training_render_seed)
+MAX_TRAINING_SPP = 1 << 15
+
+
+def plan_study(config: dict, *, written: dict | None = None, source: str = "config", is_learned=None) -> dict:
+    """The plan of a resolved ``config`` (:func:`mcbench.pipeline.config.resolve_config`).
+
+    ``written``: the config as its file gave it, before the defaults were filled in (to tell
+    the keys the user set from the schema's defaults in error messages; ``None``: not known).
+    ``source`` (the config file) prefixes every error. ``is_learned`` (a method module ->
+    bool; default :func:`mcbench.io.weights.is_learned_method`).
+
+    Returns a dict: ``methods`` (the method table, in dependency order), ``scenes``, ``spps``
+    (sorted), ``cases`` ((scene, spp) pairs), ``candidates``, ``pool_study``, ``ranked``,
+    ``extras``, ``pool_note``, ``progressive`` (PD entry -> its input), ``labels``,
+    ``metrics``, ``reference_chunks``, ``reference_spp`` (per scene), ``batches``,
+    ``single_job_methods``, ``training``, ``training_overrides``, ``training_seeds``,
+    ``networks``, ``combiner_training``, ``combiner_seeds``, ``oracle_scene``,
+    ``oracle_downscale``, ``progressive_scene``, ``progressive_downscale``.
+    """
+    if is_learned is None:
+        from mcbench.io.weights import is_learned_method as is_learned
+    try:
+        return _plan(config, is_learned)
+    except BenchError as error:
+        message = str(error)
+        if not message.startswith(f"{source}: "):
+            message = f"{source}: {message}"
+        error.args = (message + default_note(message[len(source) + 2:], written, config, source),)
+        raise
+
+
+def _plan(config: dict, is_learned) -> dict:
+    methods = config_method_table(config, is_learned=is_learned)
+    for index, scene in enumerate(config["scenes"]):
+        load_scene(scene, config_key=f"scenes[{index}]")
+    scenes = list(config["scenes"])
+    for index, spp in enumerate(config["spp"]):
+        try:
+            spp_code(spp)
+        except BenchError:
+            raise ConfigError(f"spp[{index}]: {spp} spp has no render seed code (mcbench.render.seeds); use an "
+                              f"even spp up to 2048 or a multiple of 2048 up to {2048 * 1024}") from None
+    spps = sorted(config["spp"])
+    candidates = list(methods)
+    # The ranking pool. With study.pool: exactly the 39 candidates of Zheng et al. Sec. 5.3.1 the
+    # config runs (mcbench.analysis.pool), in ID order; otherwise every candidate but the comparison
+    # methods of Sec. 5.2 (one-hot selection, naive averages, ablations; ranked in comparisons.smk).
+    # Every other method is an extra, scored in a pool that adds it alone (rule extras_table).
+    pool_study = config["study"]["pool"]
+    if pool_study:
+        ranked = [c.name for c in POOL if c.name in methods]
+    else:
+        ranked = [name for name in candidates if comparison_role(methods[name]) is None]
+    extras = [name for name in candidates if name not in ranked]
+    pool_note = ("" if not pool_study else
+                 "Rows: the 39 candidates of Zheng et al. 2021 Sec. 5.3.1 in ID order (40 entries with the noisy "
+                 "input, as the paper's Table 3); ensembles marked (filled) or (forced) are our choice of the "
+                 "members the paper does not name (mcbench.analysis.pool)." if len(ranked) == len(POOL) else
+                 f"Partial pool: {len(ranked)} of the 39 candidates (study.ensembles), {len(ranked) + 1} entries "
+                 f"with the noisy input, so the scores are on another scale than the paper's 40-entry Table 3.")
+    _check_comparisons(methods)
+    # progressive denoising's entries (combiners of module progressive) -> the method each mixes
+    # with the noisy render (progressive.smk)
+    progressive = {name: spec["inputs"][0] for name, spec in methods.items() if spec["module"] == "progressive"}
+    labels = {NOISY: NOISY_LABEL, **{name: spec["label"] for name, spec in methods.items()}}
+    reference_chunks = config["reference"]["chunks"]
+    reference_spp = _reference_spp_table(config, scenes, reference_chunks)
+    _check_reference_above_spp(config, reference_spp)
+
+    # Which methods share a job (config batch_methods): every method of a case in one job, in the
+    # method table's order (dependency order, checked here); else one job per method.
+    batches = {"methods": list(methods) if config["batch_methods"] else []}
+    position = {name: index for index, name in enumerate(methods)}
+    for name, spec in methods.items():
+        for input_name in spec["inputs"]:
+            if position[input_name] > position[name]:
+                raise BenchError(f"method '{name}' takes '{input_name}', which comes after it in the method table")
+    batched = {name for names in batches.values() for name in names}
+    single_job_methods = [name for name in methods if name not in batched]
+
+    training = {key: value for key, value in config["training"].items() if key not in ("networks", "combiners")}
+    training_overrides = config["training"]["networks"]
+    _check_training(config["training"])
+    training_seeds_ = training_seeds(training)
+    networks = sorted({spec["module"] for spec in methods.values() if spec["learned"]})
+    # The crops of the learned combiners: a subset of the training scenes, checked when the config
+    # has a learned combiner (a smaller training set for the denoisers alone stays valid).
+    combiner_training = config["training"]["combiners"]
+    if any(spec["learned"] and spec["kind"] == "combiner" for spec in methods.values()):
+        for key in ("count", "fibre_count", "crops"):
+            if combiner_training[key] > training[key]:
+                raise BenchError(f"training.combiners.{key}: {combiner_training[key]} is more than "
+                                 f"training.{key} ({training[key]}), and this config has a learned combiner")
+    combiner_seeds = training_seeds({**training, "count": min(combiner_training["count"], training["count"]),
+                                     "fibre_count": min(combiner_training["fibre_count"], training["fibre_count"])})
+    for name in training_overrides:
+        if name not in networks:
+            raise BenchError(f"training.networks.{name}: not a learned method of this config; "
+                             f"learned: {', '.join(networks) or 'none'}")
+
+    oracle_scene, oracle_downscale = _oracle(config, scenes, reference_spp)
+    progressive_scene, progressive_downscale = _progressive_curve(config, scenes, reference_spp, progressive)
+    return {
+        "methods": methods, "scenes": scenes, "spps": spps,
+        "cases": [(scene, spp) for scene in scenes for spp in spps],
+        "candidates": candidates, "pool_study": pool_study, "ranked": ranked, "extras": extras,
+        "pool_note": pool_note, "progressive": progressive, "labels": labels, "metrics": list(config["metrics"]),
+        "reference_chunks": reference_chunks, "reference_spp": reference_spp,
+        "batches": batches, "single_job_methods": single_job_methods,
+        "training": training, "training_overrides": training_overrides, "training_seeds": training_seeds_,
+        "networks": networks, "combiner_training": combiner_training, "combiner_seeds": combiner_seeds,
+        "oracle_scene": oracle_scene, "oracle_downscale": oracle_downscale,
+        "progressive_scene": progressive_scene, "progressive_downscale": progressive_downscale,
+    }
+
+
+def _reference_spp_table(config: dict, scenes: list[str], chunks: int) -> dict[str, int]:
+    """Reference spp per configured scene: ``reference.scene_spp[scene]`` or ``reference.spp``.
+    ``scene_spp`` may name scenes the config does not run (a narrowed ``scenes:`` keeps working),
+    but each must be a scene of scenes/."""
+    per_scene = config["reference"]["scene_spp"]
+    known = available_scenes()
+    for name in per_scene:
+        if name not in known:
+            raise BenchError(f"reference.scene_spp.{name}: no scene '{name}' in scenes/; "
+                             f"available: {', '.join(known)}")
+    table = {scene: int(per_scene.get(scene, config["reference"]["spp"])) for scene in scenes}
+    for scene, spp in table.items():
+        key = f"reference.scene_spp.{scene}" if scene in per_scene else "reference.spp"
+        if spp % chunks or (spp // chunks) % 2:
+            raise BenchError(f"{key}: {spp} spp must split into {chunks} chunks (reference.chunks) "
+                             f"of an even spp each")
+    return table
+
+
+def _check_reference_above_spp(config: dict, reference_spp: dict[str, int]) -> None:
+    """Every scene's reference has more samples than the largest noisy render it scores."""
+    top = max(config["spp"])
+    where = f"spp[{config['spp'].index(top)}]"
+    per_scene = config["reference"]["scene_spp"]
+    for scene, spp in reference_spp.items():
+        if spp <= top:
+            key = f"reference.scene_spp.{scene}" if scene in per_scene else "reference.spp"
+            raise BenchError(f"{key}: the reference of '{scene}' has {spp} spp, not more than the {top}-spp renders "
+                             f"it scores ({where}); a reference needs more samples than every image it judges: "
+                             f"raise {key} or lower spp")
+
+
+def _check_comparisons(methods: dict) -> None:
+    """The comparison tables need one method per role and input set (find_comparisons); the error
+    names both entries' config keys instead of stopping the comparison jobs after the run."""
+    try:
+        find_comparisons(methods)
+    except BenchError as error:
+        names = re.findall(r"'([A-Za-z][A-Za-z0-9_]*)'", str(error))[:2]
+        keys = [methods[name]["config_key"] for name in names if name in methods]
+        if len(keys) == 2:
+            raise BenchError(f"{keys[1]}: {error} (also {keys[0]}); give one of them other inputs or "
+                             f"remove it") from None
+        raise
+
+
+def _check_training(training: dict) -> None:
+    """The training section's values that only the training jobs would refuse."""
+    first, count = training["first_seed"], training["count"]
+    if first + count > FIBRE_SEED_BASE:
+        raise BenchError(f"training.count: training.first_seed {first} + training.count {count} passes "
+                         f"{FIBRE_SEED_BASE}, where the fibre scenes' seeds start; lower either")
+    for index, spp in enumerate(training["spp"]):
+        if spp & (spp - 1) or spp > MAX_TRAINING_SPP:
+            raise BenchError(f"training.spp[{index}]: {spp} is not a power of two 2..{MAX_TRAINING_SPP} "
+                             f"(the training renders' seeds encode log2(spp))")
+    width, height = training["resolution"]
+    crop = training["crop"]
+    if crop > min(width, height):
+        raise BenchError(f"training.crop: a {crop}x{crop} crop does not fit training.resolution {width}x{height}")
+    cells = (width // crop) * (height // crop)
+    for key, crops in (("training.crops", training["crops"]),
+                       ("training.combiners.crops", training["combiners"]["crops"])):
+        if crops > cells:
+            raise BenchError(f"{key}: {crops} disjoint {crop}x{crop} crops do not fit training.resolution "
+                             f"{width}x{height} (at most {cells})")
+
+
+def _oracle(config: dict, scenes: list[str], reference_spp: dict[str, int]) -> tuple[str, int]:
+    """The oracle study's scene and downscale (oracle.smk), checked."""
+    oracle = config["oracle"]
+    scene = oracle["scene"] or scenes[0]
+    if scene not in scenes:
+        raise BenchError(f"oracle.scene: '{scene}' is not one of the config's scenes "
+                         f"({', '.join(scenes)}); its reference is rendered only for those")
+    module = load_scene(scene, config_key="oracle.scene")
+    downscale = usable_downscale(config["resolution"], module.RESOLUTION, oracle["downscale"])
+    oracle_size(config["resolution"], module.RESOLUTION, downscale)
+    for index, name in enumerate(oracle["denoisers"]):
+        load_method(name, kind="denoiser", config_key=f"oracle.denoisers[{index}]")
+    worth = reference_spp[scene] * downscale ** 2
+    if oracle["spp"] >= worth:
+        raise BenchError(f"oracle.spp: {oracle['spp']} spp is not below the {worth} spp its reference is worth "
+                         f"('{scene}': {reference_spp[scene]} spp averaged over {downscale}x{downscale} blocks); "
+                         f"lower oracle.spp or raise the reference's spp")
+    return scene, downscale
+
+
+def _progressive_curve(config: dict, scenes: list[str], reference_spp: dict[str, int],
+                       progressive: dict) -> tuple[str, int]:
+    """The progressive curve's scene and downscale (progressive.smk), checked; its scene and
+    levels only matter when the config has a progressive entry (the curve runs only then)."""
+    curve = config["progressive_curve"]
+    scene = curve["scene"] or scenes[0]
+    if progressive and scene not in scenes:
+        raise BenchError(f"progressive_curve.scene: '{scene}' is not one of the config's scenes "
+                         f"({', '.join(scenes)}); its reference is rendered only for those")
+    module = load_scene(scene, config_key="progressive_curve.scene")
+    downscale = usable_downscale(config["resolution"], module.RESOLUTION, curve["downscale"])
+    load_method(curve["base"], kind="denoiser", config_key="progressive_curve.base")
+    if progressive:
+        worth = reference_spp[scene] * downscale ** 2
+        top = max(curve["spp"])
+        if top >= worth:
+            raise BenchError(f"progressive_curve.spp[{curve['spp'].index(top)}]: {top} spp is not below the {worth} "
+                             f"spp the curve's reference is worth ('{scene}': {reference_spp[scene]} spp averaged "
+                             f"over {downscale}x{downscale} blocks); lower the curve's spp or raise the reference's")
+    return scene, downscale
+
+
+# --------------------------------------------------------------------------- defaults in errors
+
+_KEY = re.compile(r"^(?:config key '(?P<quoted>[^']+)'|(?P<plain>[A-Za-z_][A-Za-z0-9_]*(?:\[\d+\]|\.[^\s:.\[\]()']+)*))")
+_PART = re.compile(r"\[(\d+)\]|\.?([^.\[\]]+)")
+
+
+def _key_parts(key: str) -> list:
+    return [int(index) if index else name for index, name in _PART.findall(key)]
+
+
+def defaulted_key(message: str, written: dict | None, resolved: dict | None = None) -> list | None:
+    """The key path (a list of parts) of the schema default that the key leading ``message``
+    (``"combiners[3].inputs[1]: ..."``, ``"config key 'scenes[0]': ..."``, ``"study.pool (#27
+    ens27).name: ..."``) lies in, when the config as written (``written``) does not set it;
+    ``None`` when the config sets it (or ``written`` is not known)."""
+    if not isinstance(written, dict):
+        return None
+    match = _KEY.match(message)
+    if not match:
+        return None
+    parts = _key_parts(match.group("quoted") or match.group("plain"))
+    node = written
+    for depth, part in enumerate(parts):
+        if isinstance(node, dict):
+            if part not in node:
+                return _default_prefix(parts, depth, resolved)
+            node = node[part]
+        elif isinstance(node, list) and isinstance(part, int) and 0 <= part < len(node):
+            node = node[part]
+        else:
+            return None
+    return None
+
+
+def _default_prefix(parts: list, depth: int, resolved: dict | None) -> list | None:
+    """``parts[:depth + 1]`` (the first key the config does not set) extended through the
+    default's objects as far as the key goes (``reference.spp``, not ``reference``), stopping at
+    a list (``combiners``, not ``combiners[3].inputs[1]``); ``None`` if it has no default."""
+    node = schema_defaults() if resolved is None else resolved
+    for index, part in enumerate(parts):
+        if not isinstance(node, dict) or part not in node:
+            return None if index <= depth else parts[:index]
+        node = node[part]
+        if index >= depth and not isinstance(node, dict):
+            return parts[:index + 1]
+    return parts
+
+
+def _describe_default(parts: list, resolved: dict | None) -> str:
+    node = schema_defaults() if resolved is None else resolved
+    for part in parts:
+        node = node[part]
+    if isinstance(node, (list, dict)) and len(node) > 4:
+        return f"the schema's default ({len(node)} entries)"
+    return f"the schema's default {node!r}"
+
+
+def default_note(message: str, written: dict | None, resolved: dict | None = None, source: str = "config") -> str:
+    """`` (combiners is not set in <source>, so it is the schema's default ...; set it ...)``
+    when the key leading ``message`` holds a value the config never wrote, else ``""``."""
+    parts = defaulted_key(message, written, resolved)
+    if parts is None:
+        return ""
+    key = key_path(parts)
+    return (f" [{key} is not set in {source}: it is {_describe_default(parts, resolved)} from "
+            f"workflow/schemas/config.schema.yaml; set {key} in the config to override it]")
