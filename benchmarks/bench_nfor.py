@@ -1,7 +1,7 @@
 """Time NFOR (methods/nfor.py) per image at 128², 256², 512² on synthetic inputs, against the
 implementation before the speed-ups (``benchmarks/baseline.py``) in the same run.
 
-Inputs: the piecewise-smooth synthetic scene of tests/test_nfor.py (two albedo regions, a disk
+Inputs: the piecewise-smooth synthetic scene of tests/methods/test_nfor.py (two albedo regions, a disk
 with another normal and depth) with Gaussian noise of sigma 0.1 per half buffer
 (tests/conftest.py's ``build_render_buffers``). A 24² run of each implementation first
 compiles / loads the numba kernels, so the timings exclude JIT. Prints per size the wall and

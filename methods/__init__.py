@@ -41,7 +41,7 @@ from typing import Callable
 
 from mcbench import NOISY, NOISY_LABEL, BenchError  # NOISY*: re-exported
 from mcbench.io.buffers import denoise_each_buffer  # re-exported: single-image methods call it
-from mcbench.analysis.pool import expand_methods
+from mcbench.analysis.pool import candidate, expand_methods
 
 __all__ = ["KINDS", "NOISY", "NOISY_LABEL", "UnknownMethodError", "available_methods", "load_method",
            "denoise_each_buffer", "single_image_function", "method_parameters", "check_params", "method_table", "config_method_table"]
@@ -196,6 +196,7 @@ def method_table(denoisers: list, combiners: list, *, is_learned: Callable[[Modu
         raise ValueError("method_table: keys must name every denoiser and combiner entry")
     entries = [("denoiser", key, {"name": e} if isinstance(e, str) else dict(e)) for key, e in zip(keys[0], denoisers)]
     entries += [("combiner", key, dict(e)) for key, e in zip(keys[1], combiners)]
+    explicit_label = {}
     for kind, key, entry in entries:
         name = entry["name"]
         if name == NOISY:
@@ -210,16 +211,36 @@ def method_table(denoisers: list, combiners: list, *, is_learned: Callable[[Modu
             if input_name not in table:
                 raise BenchError(f"{key}.inputs[{position}]: '{input_name}' is not a denoiser or an "
                                  f"earlier combiner of the config")
+            if input_name in inputs[:position]:
+                raise BenchError(f"{key}.inputs[{position}]: '{input_name}' is already "
+                                 f"inputs[{inputs.index(input_name)}]; each input once")
+        expected = getattr(module, "INPUTS", None)
+        if kind == "combiner" and expected is not None and len(inputs) != expected:
+            raise BenchError(f"{key}.inputs: {module.__name__.split('.')[-1]} combines exactly {expected} "
+                             f"input(s), got {len(inputs)}")
         table[name] = {"kind": kind, "module": module.__name__.split(".")[-1], "params": params,
                        "inputs": inputs, "label": entry.get("label") or _default_label(module, inputs, params),
                        "learned": bool(is_learned(module)), "config_key": key}
+        explicit_label[name] = bool(entry.get("label"))
     labels = {NOISY_LABEL: NOISY}
     for name, spec in table.items():
         if spec["label"] in labels:
-            raise BenchError(f"{spec['config_key']}.label: '{spec['label']}' is also the label of "
-                             f"'{labels[spec['label']]}'; table rows must have distinct labels")
+            other = labels[spec["label"]]
+            if _from_pool(spec["config_key"]) and other in table and not _from_pool(table[other]["config_key"]):
+                name, other = other, name        # blame the config's own line, not the pool's
+            key, label = table[name]["config_key"], table[name]["label"]
+            if explicit_label[name]:
+                raise BenchError(f"{key}.label: '{label}' is also the label of '{other}'; table rows must "
+                                 f"have distinct labels")
+            raise BenchError(f"{key}: its default label '{label}' is also the label of '{other}'; table rows "
+                             f"must have distinct labels: give it a label")
         labels[spec["label"]] = name
     return table
+
+
+def _from_pool(config_key: str) -> bool:
+    """Whether a method-table entry comes from the candidate pool (``study.pool (#k name)``)."""
+    return config_key.startswith("study.pool")
 
 
 def config_method_table(config: dict, *, is_learned: Callable[[ModuleType], bool]) -> dict:
@@ -227,5 +248,11 @@ def config_method_table(config: dict, *, is_learned: Callable[[ModuleType], bool
     candidate pool merged in when ``study.pool`` is set (:func:`mcbench.analysis.pool.expand_methods`),
     errors naming the config key (or ``study.pool (#k name)``) of the entry at fault."""
     denoisers, combiners = expand_methods(config)
+    pool_names = {(e if isinstance(e, str) else e["name"]): key for key, e in denoisers + combiners if _from_pool(key)}
+    for key, entry in denoisers + combiners:
+        name = entry if isinstance(entry, str) else entry.get("name")
+        if not _from_pool(key) and name in pool_names:
+            raise BenchError(f"{key}.name: '{name}' is the name of candidate #{candidate(name).id} of the pool "
+                             f"(study.pool); choose another name")
     return method_table([e for _, e in denoisers], [e for _, e in combiners], is_learned=is_learned,
                         keys=([k for k, _ in denoisers], [k for k, _ in combiners]))

@@ -264,7 +264,7 @@ def relmse_corrected(image, reference, reference_variance) -> float:
     noise floor (``mcbench.analysis.reports.reference_relmse_floor``), which at high spp can exceed the
     candidates' own errors and reorders them; the corrected one does not. Not clamped at 0: a
     candidate better than the reference's noise floor may score slightly below 0 (clamping would
-    bias it upwards). tests/test_metrics.py checks the unbiasedness on synthetic data.
+    bias it upwards). tests/analysis/test_metrics.py checks the unbiasedness on synthetic data.
     """
     return float(np.mean(relmse_corrected_map(image, reference, reference_variance)))
 

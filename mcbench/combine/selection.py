@@ -61,7 +61,7 @@ __all__ = ["NFOR_MSE_FILTER", "SBF_MSE_FILTER", "POST_FILTER", "half_buffer_mse"
            "one_hot_selection", "filter_selection_maps", "blend", "check_finite_arrays"]
 
 # NFOR's MSE filter (Bitterli et al. 2016 Sec. 5.3; keep equal to methods/nfor.py's MSE_FILTER,
-# NLM_ALPHA and NLM_EPSILON -- tests/test_selection.py checks it)
+# NLM_ALPHA and NLM_EPSILON -- tests/combine/test_selection.py checks it)
 NFOR_MSE_FILTER = dict(radius=9, patch_radius=1, k=1.0, alpha=1.0, epsilon=1e-10)
 # SBF-style cross-bilateral pre-filter of the MSE maps: Sec. 4.2's numbers (our choice, see above)
 SBF_MSE_FILTER = dict(radius=7, sigma_spatial=3.0, sigma_color=2.0, sigma_albedo=0.25, sigma_normal=0.15)

@@ -30,7 +30,7 @@ slowly. We clip alpha to the whole feasible segment of the line through w and e_
 [-w_i / (1 - w_i), 1]: a negative alpha is the same closed form moving weight *off* denoiser
 i, down to w_i = 0 (exactly 0 at the bound), and w is renormalised after each update against
 rounding. Every step is still the exact minimiser of Eq. 13 on its line, so the objective
-decreases monotonically as in the paper's argument (tests/test_ensemble.py compares how many
+decreases monotonically as in the paper's argument (tests/combine/test_ensemble.py compares how many
 problems reach the optimum with and without away steps).
 **Departure (random numbers):** a counter-based splitmix64 generator seeded from
 (seed, problem index in the image), not ``np.random``: inside numba ``prange`` loops

@@ -108,7 +108,7 @@ def filter_band(values, y0, y1, guide, guide_variance, v0, albedo, normal, *, ra
     the whole image's result (:func:`mcbench.filters.bilateral.cross_bilateral_filter_vectors`,
     :func:`mcbench.filters.bilateral.gaussian_blur`: same sums in the same order), the outlier pass's
     window statistics start their running sums at the tile (float64; differences ~1e-16
-    relative, tests/test_ensemble.py)."""
+    relative, tests/combine/test_ensemble.py)."""
     height = values.shape[1]
     (o0, o1), (f0, f1), (vv0, vv1) = tile_rows(
         y0, y1, height, radius=radius, blur=guide_variance_blur == "gaussian9",

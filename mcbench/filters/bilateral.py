@@ -78,7 +78,7 @@ def _exp_neg_row(er, kr, c, m):
     """kr[i] = exp(-er[i]) for i < m, er >= 0, 0 from the cutoff c[0] on; a loop that vectorises (the
     C library's exp does not): exp(-e) = 2^-n exp(-f) with n = round(e / ln 2) (n < 128) and
     |f| <= ln(2) / 2, exp(-f) by its Taylor series to degree 12 (Horner), 2^-n from the bits of
-    n. Relative error below 1e-7 in float32 and 5e-15 in float64 (tests/test_bilateral.py)."""
+    n. Relative error below 1e-7 in float32 and 5e-15 in float64 (tests/filters/test_bilateral.py)."""
     cutoff = c[0]
     log2e = c[1]
     hi = c[2]
@@ -403,7 +403,7 @@ def gaussian_blur(image, *, kernel_size: int = 9, rows: tuple[int, int] | None =
     borders reflected without repeating the edge pixel (OpenCV's default BORDER_REFLECT_101,
     NumPy's ``pad`` mode "reflect"; an axis of length 1 is constant): rows first, then columns,
     each output the sum of tap x value from k = 0 up (the order of the NumPy formulation
-    ``out += tap * shifted``, so the result is the same bit for bit; tests/test_bilateral.py).
+    ``out += tap * shifted``, so the result is the same bit for bit; tests/filters/test_bilateral.py).
 
     A tile: ``image`` holds the rows ``first_row`` .. ``first_row + T - 1`` of an image of
     ``height`` rows (default: the whole image), and ``rows=(r0, r1)`` asks for the blurred rows

@@ -24,7 +24,7 @@ per-channel mixing parameter, ``z = x + α (y − x)`` (Eq. 11).
   ``z̄_p = z_{M_p} + Σ κ z_q`` (Eq. 14), ``t_p = (z̄_p − x̄_p) / (sqrt(Var[x̄_p]) + ε)`` (Eq. 17)
   and ``α′_p = (1 − Φ(a (|t_p| − c))) α_p`` (Eq. 18), a = 2, c = 4.2, Φ the standard normal CDF.
 
-Choices where the paper is silent or ambiguous (each tested in ``tests/test_progressive.py``):
+Choices where the paper is silent or ambiguous (each tested in ``tests/methods/test_progressive.py``):
 
 * **σ_s** (Eq. 15): the paper's "min(sqrt(Var[x̄]), 1) × 10², where x̄ is the image mean" is
   read as Var[x̄] = the image mean of the per-pixel variance of the mean (mean over pixels and

@@ -10,12 +10,24 @@ tests) gets them:
 
 * an ``integer`` must be a YAML integer: ``4.0`` is refused (JSON Schema counts it as an
   integer; a render at "4.0 spp" would be named ``spp4.0``);
-* errors name the config key as a path, e.g. ``combiners[3].params.solvr`` or ``spp[0]``.
+* every mapping key is a string: YAML reads an unquoted ``1``, ``yes``, ``no`` or ``null`` key as
+  a number, a boolean or null (and a mix of those with strings cannot even be hashed into the
+  config's digest);
+* every number is finite: ``.nan`` and ``.inf`` pass JSON Schema's bounds (NaN compares false);
+* errors name the config key as a path, e.g. ``combiners[3].params.solvr`` or ``spp[0]``; an
+  error inside a ``oneOf`` (a denoiser as a name or a mapping, ``resolution`` as null or a
+  pair, ...) is reported at the branch that fits the value's type, e.g. ``resolution[0]``;
+* ``study.ensembles`` takes ensemble IDs (9-39): a base ID (1-8) is refused naming the base
+  (the bases come with the ensembles that take them, or all of them with ``ensembles: null``).
+
+What needs more than the config itself (the method and scene registries, several keys at
+once) is checked by :func:`mcbench.pipeline.plan.plan_study`.
 """
 
 from __future__ import annotations
 
 import copy
+import math
 from functools import lru_cache
 from pathlib import Path
 
@@ -24,7 +36,7 @@ import yaml
 from mcbench import BenchError
 
 __all__ = ["SCHEMA_PATH", "ConfigError", "load_schema", "schema_defaults", "resolve_config",
-           "read_config_file", "key_path", "config_digest"]
+           "read_config_file", "parse_config_text", "key_path", "config_digest"]
 
 SCHEMA_PATH = Path(__file__).resolve().parents[2] / "workflow" / "schemas" / "config.schema.yaml"
 
@@ -98,6 +110,58 @@ def _validator(schema: dict):
     return jsonschema.validators.extend(base, type_checker=strict_integer)(schema)
 
 
+def _check_keys_and_numbers(value, path: list, source: str) -> None:
+    """ConfigError at the first mapping key that is not a string or number that is not finite."""
+    if isinstance(value, dict):
+        for key, sub in value.items():
+            if not isinstance(key, str):
+                where = key_path(path) if path else "<config>"
+                raise ConfigError(f"{source}: {where}: key {key!r} is not a string (YAML reads an unquoted "
+                                  f"{key!r} as {type(key).__name__}); quote it or use a name")
+            _check_keys_and_numbers(sub, path + [key], source)
+    elif isinstance(value, list):
+        for index, sub in enumerate(value):
+            _check_keys_and_numbers(sub, path + [index], source)
+    elif isinstance(value, float) and not math.isfinite(value):
+        raise ConfigError(f"{source}: {key_path(path)}: {value} is not a finite number")
+
+
+def _branch_error(error):
+    """The error to report for ``error``: inside a ``oneOf``/``anyOf``, the deepest error of the
+    branch whose type fits the value (``resolution[0]: 8 is less than the minimum of 11``
+    rather than ``resolution: [8, 8] is not valid under any of the given schemas``); when no
+    branch's type fits, the error with the types named."""
+    while error.context:
+        depth = len(error.absolute_path)
+        branches: dict = {}
+        for sub in error.context:
+            branches.setdefault(sub.relative_schema_path[0], []).append(sub)
+        fitting = [subs for subs in branches.values()
+                   if not any(e.validator == "type" and len(e.absolute_path) == depth for e in subs)]
+        if not fitting:
+            types = [e.validator_value for subs in branches.values() for e in subs
+                     if e.validator == "type" and len(e.absolute_path) == depth]
+            names = [t for value in types for t in (value if isinstance(value, list) else [value])]
+            error.message = f"{error.instance!r} is not of type {' or '.join(repr(t) for t in dict.fromkeys(names))}"
+            return error
+        error = max(fitting[0], key=lambda e: len(e.absolute_path))
+    return error
+
+
+def _message(error) -> str:
+    """The message of a schema error, with what a bare bound does not say."""
+    path = list(error.absolute_path)
+    if (path[:2] == ["study", "ensembles"] and len(path) == 3 and error.validator == "minimum"
+            and isinstance(error.instance, int)):
+        from mcbench.analysis.pool import BASES, ENSEMBLE_IDS
+
+        what = (f"base #{error.instance} ({BASES[error.instance]}), not an ensemble" if error.instance in BASES
+                else "not an ensemble")
+        return (f"{error.instance} is {what}: study.ensembles takes ensemble IDs {ENSEMBLE_IDS[0]}-"
+                f"{ENSEMBLE_IDS[-1]} and brings the bases they take (null: the whole pool, bases included)")
+    return error.message
+
+
 def resolve_config(config: dict | None, *, source: str = "config",
                    schema_path: str | Path = SCHEMA_PATH) -> dict:
     """Validate ``config`` against the schema and return it with every default filled in.
@@ -109,12 +173,13 @@ def resolve_config(config: dict | None, *, source: str = "config",
         config = {}
     if not isinstance(config, dict):
         raise ConfigError(f"{source}: the configuration must be a mapping of keys, got {type(config).__name__}")
+    _check_keys_and_numbers(config, [], source)
     schema = load_schema(schema_path)
     resolved = _fill_defaults(copy.deepcopy(config), schema, schema)
     errors = sorted(_validator(schema).iter_errors(resolved), key=lambda e: (len(e.absolute_path), str(e.path)))
     if errors:
-        error = errors[0]
-        raise ConfigError(f"{source}: {key_path(error.absolute_path)}: {error.message}")
+        error = _branch_error(errors[0])
+        raise ConfigError(f"{source}: {key_path(error.absolute_path)}: {_message(error)}")
     return resolved
 
 
@@ -133,9 +198,18 @@ def read_config_file(path: str | Path) -> dict:
     path = Path(path)
     try:
         with open(path) as handle:
-            raw = yaml.safe_load(handle)
+            text = handle.read()
     except OSError as exc:
         raise ConfigError(f"{path}: cannot read config file ({exc.strerror})") from exc
+    except UnicodeDecodeError as exc:
+        raise ConfigError(f"{path}: not UTF-8 text ({exc.reason} at byte {exc.start})") from exc
+    return resolve_config(parse_config_text(text, source=str(path)), source=str(path))
+
+
+def parse_config_text(text: str, *, source: str = "config"):
+    """The config a YAML text holds (``yaml.safe_load``, as Snakemake reads a config file), not
+    yet resolved; invalid YAML is a :class:`ConfigError` naming ``source``."""
+    try:
+        return yaml.safe_load(text)
     except yaml.YAMLError as exc:
-        raise ConfigError(f"{path}: not valid YAML ({exc})") from exc
-    return resolve_config(raw, source=str(path))
+        raise ConfigError(f"{source}: not valid YAML ({exc})") from exc

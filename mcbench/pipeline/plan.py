@@ -178,14 +178,18 @@ def _reference_spp_table(config: dict, scenes: list[str], chunks: int) -> dict[s
     return table
 
 
+def _reference_key(config: dict, scene: str) -> str:
+    """The key that sets ``scene``'s reference spp."""
+    return f"reference.scene_spp.{scene}" if scene in config["reference"]["scene_spp"] else "reference.spp"
+
+
 def _check_reference_above_spp(config: dict, reference_spp: dict[str, int]) -> None:
     """Every scene's reference has more samples than the largest noisy render it scores."""
     top = max(config["spp"])
     where = f"spp[{config['spp'].index(top)}]"
-    per_scene = config["reference"]["scene_spp"]
     for scene, spp in reference_spp.items():
         if spp <= top:
-            key = f"reference.scene_spp.{scene}" if scene in per_scene else "reference.spp"
+            key = _reference_key(config, scene)
             raise BenchError(f"{key}: the reference of '{scene}' has {spp} spp, not more than the {top}-spp renders "
                              f"it scores ({where}); a reference needs more samples than every image it judges: "
                              f"raise {key} or lower spp")
@@ -243,7 +247,7 @@ def _oracle(config: dict, scenes: list[str], reference_spp: dict[str, int]) -> t
     if oracle["spp"] >= worth:
         raise BenchError(f"oracle.spp: {oracle['spp']} spp is not below the {worth} spp its reference is worth "
                          f"('{scene}': {reference_spp[scene]} spp averaged over {downscale}x{downscale} blocks); "
-                         f"lower oracle.spp or raise the reference's spp")
+                         f"lower oracle.spp or raise {_reference_key(config, scene)}")
     return scene, downscale
 
 
@@ -265,7 +269,8 @@ def _progressive_curve(config: dict, scenes: list[str], reference_spp: dict[str,
         if top >= worth:
             raise BenchError(f"progressive_curve.spp[{curve['spp'].index(top)}]: {top} spp is not below the {worth} "
                              f"spp the curve's reference is worth ('{scene}': {reference_spp[scene]} spp averaged "
-                             f"over {downscale}x{downscale} blocks); lower the curve's spp or raise the reference's")
+                             f"over {downscale}x{downscale} blocks); lower the curve's spp or raise "
+                             f"{_reference_key(config, scene)}")
     return scene, downscale
 
 
@@ -326,12 +331,25 @@ def _describe_default(parts: list, resolved: dict | None) -> str:
     return f"the schema's default {node!r}"
 
 
+def _mentioned_keys(message: str) -> list[str]:
+    """The config keys ``message`` names after its leading one: paths with a part below a
+    top-level key (``reference.chunks``, ``spp[8]``, ``training.count``)."""
+    tops = "|".join(sorted(schema_defaults(), key=len, reverse=True))
+    return re.findall(rf"(?<![\w.'\[])((?:{tops})(?:\.[A-Za-z_][A-Za-z0-9_]*|\[\d+\])+)", message)
+
+
 def default_note(message: str, written: dict | None, resolved: dict | None = None, source: str = "config") -> str:
-    """`` (combiners is not set in <source>, so it is the schema's default ...; set it ...)``
-    when the key leading ``message`` holds a value the config never wrote, else ``""``."""
-    parts = defaulted_key(message, written, resolved)
-    if parts is None:
-        return ""
-    key = key_path(parts)
-    return (f" [{key} is not set in {source}: it is {_describe_default(parts, resolved)} from "
-            f"workflow/schemas/config.schema.yaml; set {key} in the config to override it]")
+    """`` [combiners is not set in <source>: it is the schema's default ...; set combiners in
+    the config to override it]`` for the key leading ``message`` and each other key it names
+    (``reference.chunks``, ``spp[8]``) that holds a value the config never wrote, else ``""``."""
+    notes = []
+    for text in [message, *_mentioned_keys(message.partition(": ")[2])]:
+        parts = defaulted_key(text, written, resolved)
+        if parts is None:
+            continue
+        key = key_path(parts)
+        note = (f" [{key} is not set in {source}: it is {_describe_default(parts, resolved)} from "
+                f"workflow/schemas/config.schema.yaml; set {key} in the config to override it]")
+        if note not in notes:
+            notes.append(note)
+    return "".join(notes)

@@ -33,7 +33,7 @@ Requests
 ``RUNTIME_MARGIN`` x the estimate in whole minutes, at least ``MIN_RUNTIME_MIN`` (a cluster
 node is often slower than the workstation the records come from, and SLURM kills a job at its
 limit but only queues a larger request longer). A job whose request exceeds ``JOB_MEMORY_LIMIT_MB``
-(2 GiB) at the default sizes is a bug in the job, not a resource to raise (``tests/test_resources.py``
+(2 GiB) at the default sizes is a bug in the job, not a resource to raise (``tests/pipeline/test_resources.py``
 checks every rule of the default config).
 """
 

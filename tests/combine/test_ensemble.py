@@ -606,7 +606,7 @@ def test_combine_end_to_end(filter_, make_render_buffers):
 # ---------------------------------------------------------------------------------------
 # the output before the float32, block-wise rewrite (issue 14)
 # ---------------------------------------------------------------------------------------
-BEFORE = Path(__file__).parent / "data" / "ensemble_blend_before.npz"
+BEFORE = Path(__file__).resolve().parents[1] / "data" / "ensemble_blend_before.npz"
 
 
 @pytest.mark.parametrize("n", [3, 5])

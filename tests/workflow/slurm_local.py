@@ -1,7 +1,7 @@
-"""A single-node SLURM on this machine, for the cluster test (tests/test_slurm.py) and by hand:
+"""A single-node SLURM on this machine, for the cluster test (tests/workflow/test_slurm.py) and by hand:
 
-    python tests/slurm_local.py start STATE_DIR     # prints the daemons' process ids, waits for the node
-    python tests/slurm_local.py stop STATE_DIR      # stops them by those process ids
+    python tests/workflow/slurm_local.py start STATE_DIR     # prints the daemons' process ids, waits for the node
+    python tests/workflow/slurm_local.py stop STATE_DIR      # stops them by those process ids
 
 Debian's ``slurm-wlm`` and ``munge`` (``setup.sh`` installs them when run as root). One node,
 this machine, runs ``slurmctld`` and ``slurmd``; ``munged`` authenticates them. Choices, each
@@ -41,7 +41,7 @@ from pathlib import Path
 SLURM_CONF = Path("/etc/slurm/slurm.conf")
 GRES_CONF = Path("/etc/slurm/gres.conf")
 MUNGE_KEY = Path("/etc/munge/munge.key")
-MARKER = "# written by mcbench tests/slurm_local.py"
+MARKER = "# written by mcbench tests/slurm_local.py"  # (its old path: kept, so configs written before still count)
 DAEMONS = ("munged", "slurmctld", "slurmd")
 PARTITION = "debug"
 
@@ -57,7 +57,7 @@ def unavailable_reason() -> str | None:
         return f"SLURM tools not installed ({', '.join(missing)}): run setup.sh as root (Debian slurm-wlm, munge)"
     for path in (SLURM_CONF, GRES_CONF):
         if path.exists() and MARKER not in path.read_text(errors="replace"):
-            return f"{path} exists and was not written by tests/slurm_local.py; not touching a real cluster's config"
+            return f"{path} exists and was not written by tests/workflow/slurm_local.py; not touching a real cluster's config"
     return None
 
 

@@ -22,7 +22,7 @@ from mcbench.analysis import viewer
 from mcbench.pipeline import viewer as viewer_step
 from mcbench.io.exr import write_layers
 
-PAGE = Path(__file__).resolve().parents[1] / "workflow" / "report" / "viewer"
+PAGE = Path(__file__).resolve().parents[2] / "workflow" / "report" / "viewer"
 
 
 def aces_srgb(x):

@@ -17,7 +17,7 @@ from mcbench.training_data import (crop_boxes, random_scene, render_target, scen
 from mcbench.render.variants import pick_variant
 from scenes import available_scenes, load_scene
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 LEVELS = (4, 16)
 TARGET_SPP = 256
 RESOLUTION = (32, 24)

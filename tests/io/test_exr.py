@@ -1,11 +1,10 @@
-"""EXR I/O round trips, bad-input errors that name the file or key, and the method registry."""
+"""EXR I/O round trips, bad-input errors that name the file or key, and the render buffers' views."""
 
 import numpy as np
 import pytest
 
 from mcbench.io.buffers import REQUIRED_LAYERS, RenderBuffers
 from mcbench.io.exr import ExrError, NonFiniteError, read_layers, read_metadata, write_layers
-from methods import UnknownMethodError, available_methods, load_method
 
 
 @pytest.fixture
@@ -70,15 +69,6 @@ def test_missing_layer_is_named(tmp_path, render_layers):
 def test_mismatched_layer_shapes_are_refused(tmp_path):
     with pytest.raises(ValueError, match="bad.exr.*'b'"):
         write_layers(tmp_path / "bad.exr", {"a": np.zeros((4, 4, 3)), "b": np.zeros((4, 5, 3))})
-
-
-def test_registry_finds_methods_and_names_bad_keys():
-    assert {"oidn", "jbf", "ensemble"} <= set(available_methods())
-    assert load_method("oidn", kind="denoiser").KIND == "denoiser"
-    with pytest.raises(UnknownMethodError, match=r"denoisers\[3\].*'oidm'"):
-        load_method("oidm", config_key="denoisers[3]")
-    with pytest.raises(UnknownMethodError, match="combiners.*not a combiner"):
-        load_method("oidn", kind="combiner", config_key="combiners[0]")
 
 
 def test_half_buffer_view_uses_its_own_features(render_layers):

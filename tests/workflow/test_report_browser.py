@@ -20,11 +20,11 @@ from pathlib import Path
 
 import pytest
 
-from conftest import run_snakemake
+from tests.conftest import run_snakemake
 
 pytestmark = pytest.mark.slow
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 CHROMIUM_NAMES = ("chromium", "chromium-browser")
 # the viewer's DOM contract (issue 17): controls and displays the test relies on
 VIEWER_CONTROLS = ("scene", "spp", "image-a", "image-b", "mode", "exposure", "flip")

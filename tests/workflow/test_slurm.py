@@ -1,4 +1,4 @@
-"""The smoke config run end to end through a real SLURM (tests/slurm_local.py: slurmctld and
+"""The smoke config run end to end through a real SLURM (tests/workflow/slurm_local.py: slurmctld and
 slurmd on this machine) with the project's profile, ``profiles/slurm``: every job is submitted
 with sbatch, and the tables equal a local run's.
 
@@ -20,8 +20,8 @@ import pandas as pd
 import pytest
 import yaml
 
-import slurm_local
-from conftest import REPO, SMOKE_CONFIG
+import tests.workflow.slurm_local as slurm_local
+from tests.conftest import REPO, SMOKE_CONFIG
 
 pytestmark = pytest.mark.slow
 

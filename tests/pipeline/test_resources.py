@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from conftest import REPO
+from tests.conftest import REPO
 from mcbench import BenchError
 from mcbench.pipeline.resources import (JOB_COSTS_PATH, JOB_MEMORY_LIMIT_MB, MEMORY_MARGIN, MIN_MEM_MB, MIN_RUNTIME_MIN,
                                RUNTIME_MARGIN, JobCost, estimate_job, fit_job_cost, job_request, load_job_costs,

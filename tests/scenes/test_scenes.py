@@ -12,7 +12,7 @@ from mcbench.render.renderer import render_buffers
 from mcbench.render.variants import pick_variant
 from scenes import available_scenes, load_scene
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 SCENES = available_scenes()
 
 

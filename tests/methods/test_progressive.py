@@ -319,7 +319,7 @@ def test_initial_network_starts_near_alpha_one_half():
 # --- the combiner -------------------------------------------------------------------------------
 
 def hard_cases(make_render_buffers):
-    from tests.test_method_contract import COMBINER_CASES, hard_case
+    from tests.methods.test_contract import COMBINER_CASES, hard_case
 
     return {case: hard_case(case, make_render_buffers) for case in COMBINER_CASES}
 
@@ -423,7 +423,7 @@ def test_stacks_over_an_ensemble(make_render_buffers):
     proxy, the documented choice): finite, each image from its own samples."""
     import methods.ensemble as ensemble
     import methods.progressive as progressive
-    from tests.test_method_contract import synthetic_inputs
+    from tests.methods.test_contract import synthetic_inputs
 
     buffers = make_render_buffers(height=16, width=14, seed=6, bins=True)
     ens = ensemble.combine(buffers, synthetic_inputs(buffers))

@@ -17,7 +17,7 @@ from mcbench.analysis.comparisons import (ablation_cases, ablation_table, beats_
                                  comparison_role, find_comparisons, write_ablation_table, write_comparison_ranking,
                                  write_onehot_tables)
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 SCENES, SPPS = ("s1", "s2"), (4, 8)
 CASES = [(s, n) for s in SCENES for n in SPPS]
 

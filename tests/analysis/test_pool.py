@@ -9,7 +9,7 @@ import pytest
 from mcbench.analysis import pool
 from mcbench.pipeline.config import resolve_config
 
-SHARED_POOL = Path(__file__).resolve().parents[2] / "shared" / "study" / "candidate-pool.md"
+SHARED_POOL = Path(__file__).resolve().parents[3] / "shared" / "study" / "candidate-pool.md"
 
 
 def _shared_text():

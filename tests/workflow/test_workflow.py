@@ -18,7 +18,7 @@ import pandas as pd
 import pytest
 import yaml
 
-from conftest import REPO, SMOKE_CONFIG as SMOKE, run_snakemake as snakemake
+from tests.conftest import REPO, SMOKE_CONFIG as SMOKE, run_snakemake as snakemake
 
 pytestmark = pytest.mark.slow
 

@@ -15,7 +15,7 @@ import pytest
 
 from mcbench import BenchError
 from mcbench.io import weights
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_importing_learned_methods_does_not_import_torch():
