@@ -66,7 +66,6 @@ from mcbench.render.seeds import MAX_PROGRESSIVE_CURVE_LEVELS, MAX_PROGRESSIVE_C
 from mcbench.pipeline.oracle import oracle_size
 
 COLUMNS = ("spp", "entry", "label", "relmse", "relmse_corrected", "smape", "seconds")
-DIVERGENCES = ("none", "oidn", "jbf", "kpcn", "mcgan", "optix_ae", "wskpn")   # methods.progressive.DivergenceBase
 
 
 def entry_names(base: str) -> list[str]:
@@ -262,12 +261,13 @@ def run_consistency_curve(scene: str, reference_path: str, *, table_csv: str, ta
     width, height = curve_size(resolution, module.RESOLUTION, downscale)
     downscale = int(downscale)
     base_module = load_method(base, kind="denoiser", config_key="progressive_curve.base")
-    if divergence not in DIVERGENCES:
-        raise BenchError(f"config key 'progressive_curve.divergence': '{divergence}' is not one of "
-                         f"{', '.join(DIVERGENCES)}")
     combiner = load_method("progressive", kind="combiner", config_key="progressive_curve")
+    divergences = combiner.DivergenceBase.__args__    # the names the plugin's ``divergence`` param takes
+    if divergence not in divergences:
+        raise BenchError(f"config key 'progressive_curve.divergence': '{divergence}' is not one of "
+                         f"{', '.join(divergences)}")
     if divergence != "none":
-        single_image_function(divergence, choices=DIVERGENCES)     # its error names the method
+        single_image_function(divergence, choices=divergences)     # its error names the method
     mu, reference_variance = block_reference(reference_path, width, height, downscale)
     floor = reference_floor(mu, reference_variance)
 

@@ -271,3 +271,19 @@ def test_scalar_pixel_seed_ranges_are_disjoint():
 def test_curve_seed_refuses_out_of_range_fields(kwargs, error, match):
     with pytest.raises(error, match=match):
         progressive_curve_seed(**kwargs)
+
+
+def test_the_schema_offers_exactly_the_plugins_divergence_bases():
+    """The schema's enum of ``progressive_curve.divergence`` (checked at parse time) is the
+    plugin's ``DivergenceBase``: the one list the plugin owns, repeated in the schema for the
+    early error, must not drift."""
+    import typing
+
+    import yaml
+
+    import methods.progressive as progressive
+    from mcbench.pipeline.config import SCHEMA_PATH
+
+    schema = yaml.safe_load(SCHEMA_PATH.read_text())
+    enum = schema["properties"]["progressive_curve"]["properties"]["divergence"]["enum"]
+    assert list(enum) == list(typing.get_args(progressive.DivergenceBase))
