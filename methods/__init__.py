@@ -30,6 +30,7 @@ Adding a method is one new file here plus one line in ``config.yaml``.
 
 from __future__ import annotations
 
+import functools
 import importlib
 import inspect
 import math
@@ -140,6 +141,13 @@ def _describe(hint) -> str:
     return getattr(hint, "__name__", str(hint))
 
 
+@functools.lru_cache(maxsize=None)
+def _type_hints(function: Callable) -> dict:
+    """``typing.get_type_hints(function)``, once per function (a config checks one method's
+    params dozens of times: the pool's 31 ensembles)."""
+    return typing.get_type_hints(function)
+
+
 def check_params(module: ModuleType, params: dict, *, config_key: str) -> None:
     """Refuse params that ``module``'s ``denoise``/``combine`` does not take, values outside the
     annotated type or ``Literal`` choices, and missing required parameters. Errors name the key,
@@ -150,7 +158,7 @@ def check_params(module: ModuleType, params: dict, *, config_key: str) -> None:
     known = method_parameters(module)
     function = getattr(module, KINDS[module.KIND])
     try:
-        hints = typing.get_type_hints(function)
+        hints = _type_hints(function)
     except Exception as exc:   # an annotation that does not evaluate is the module's bug
         raise BenchError(f"methods/{name}.py: cannot read the annotations of {function.__name__}() ({exc})") from exc
     for key, value in params.items():
@@ -196,14 +204,18 @@ def method_table(denoisers: list, combiners: list, *, is_learned: Callable[[Modu
         raise ValueError("method_table: keys must name every denoiser and combiner entry")
     entries = [("denoiser", key, {"name": e} if isinstance(e, str) else dict(e)) for key, e in zip(keys[0], denoisers)]
     entries += [("combiner", key, dict(e)) for key, e in zip(keys[1], combiners)]
-    explicit_label = {}
+    explicit_label, loaded = {}, {}
     for kind, key, entry in entries:
         name = entry["name"]
         if name == NOISY:
             raise BenchError(f"{key}.name: '{NOISY}' is reserved for the noisy input's row; choose another name")
         if name in table:
             raise BenchError(f"{key}.name: duplicate method name '{name}'")
-        module = load_method(entry.get("method", name), kind=kind, config_key=f"{key}.method" if "method" in entry else key)
+        module_name = entry.get("method", name)
+        module = loaded.get((module_name, kind))
+        if module is None:
+            module = loaded[module_name, kind] = load_method(
+                module_name, kind=kind, config_key=f"{key}.method" if "method" in entry else key)
         params = dict(entry.get("params") or {})
         check_params(module, params, config_key=f"{key}.params")
         inputs = list(entry.get("inputs", []))

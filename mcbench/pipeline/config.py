@@ -14,6 +14,8 @@ tests) gets them:
   a number, a boolean or null (and a mix of those with strings cannot even be hashed into the
   config's digest);
 * every number is finite: ``.nan`` and ``.inf`` pass JSON Schema's bounds (NaN compares false);
+* labels, ``weights_dir`` and ``gpu_model`` are one line of text (the schema's :data:`ONE_LINE`
+  pattern: a line break splits a table row, a NUL byte is no path);
 * errors name the config key as a path, e.g. ``combiners[3].params.solvr`` or ``spp[0]``; an
   error inside a ``oneOf`` (a denoiser as a name or a mapping, ``resolution`` as null or a
   pair, ...) is reported at the branch that fits the value's type, e.g. ``resolution[0]``;
@@ -39,6 +41,10 @@ __all__ = ["SCHEMA_PATH", "ConfigError", "load_schema", "schema_defaults", "reso
            "read_config_file", "parse_config_text", "key_path", "config_digest"]
 
 SCHEMA_PATH = Path(__file__).resolve().parents[2] / "workflow" / "schemas" / "config.schema.yaml"
+
+
+#: The schema's pattern of one line of text (labels, weights_dir, gpu_model): no control character.
+ONE_LINE = "^[^\\x00-\\x1f\\x7f]*$"
 
 
 class ConfigError(BenchError):
@@ -101,6 +107,11 @@ def key_path(parts) -> str:
     return text or "<config>"
 
 
+@lru_cache(maxsize=None)
+def _cached_validator(path: str):
+    return _validator(load_schema(path))
+
+
 def _validator(schema: dict):
     import jsonschema
 
@@ -159,6 +170,8 @@ def _message(error) -> str:
                 else "not an ensemble")
         return (f"{error.instance} is {what}: study.ensembles takes ensemble IDs {ENSEMBLE_IDS[0]}-"
                 f"{ENSEMBLE_IDS[-1]} and brings the bases they take (null: the whole pool, bases included)")
+    if error.validator == "pattern" and error.validator_value == ONE_LINE:
+        return f"{error.instance!r} holds a control character (a line break, tab or NUL); write one line of text"
     return error.message
 
 
@@ -176,7 +189,8 @@ def resolve_config(config: dict | None, *, source: str = "config",
     _check_keys_and_numbers(config, [], source)
     schema = load_schema(schema_path)
     resolved = _fill_defaults(copy.deepcopy(config), schema, schema)
-    errors = sorted(_validator(schema).iter_errors(resolved), key=lambda e: (len(e.absolute_path), str(e.path)))
+    errors = sorted(_cached_validator(str(schema_path)).iter_errors(resolved),
+                    key=lambda e: (len(e.absolute_path), str(e.path)))
     if errors:
         error = _branch_error(errors[0])
         raise ConfigError(f"{source}: {key_path(error.absolute_path)}: {_message(error)}")

@@ -52,12 +52,17 @@ def limit_threads(threads) -> int:
     """Hold this process's thread pools to ``threads`` (see the module docstring); returns it.
 
     Sets the environment (for libraries loaded later and for child processes), then the runtime
-    thread count of numba and torch if they are already imported."""
+    thread count of numba and torch if they are already imported (with numba imported, its
+    ``NUMBA_NUM_THREADS`` is left as it is: numba stops on a changed value once its pool runs)."""
     threads = int(threads)
-    os.environ.update(thread_environment(threads))
+    environment = thread_environment(threads)
     numba = sys.modules.get("numba")
     if numba is not None:
+        # numba refuses a changed NUMBA_NUM_THREADS once its pool has started (it re-reads the
+        # environment before each compilation): leave the variable, narrow the pool at run time
+        environment.pop("NUMBA_NUM_THREADS")
         numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
+    os.environ.update(environment)
     torch = sys.modules.get("torch")
     if torch is not None:
         torch.set_num_threads(threads)

@@ -245,7 +245,27 @@ def test_write_steps_write_csv_and_markdown(tmp_path):
     assert all("nan" not in Path(p).read_text().lower() for p in out.values())
 
 
-def test_rule_script_runs_each_step_without_snakemake(tmp_path):
+@pytest.fixture
+def job_threads_restored(monkeypatch):
+    """The rule script holds this process's thread pools to its job's threads
+    (:func:`mcbench.pipeline.threads.limit_threads`): put the environment and numba's pool back."""
+    import os
+
+    import numba
+
+    from mcbench.pipeline.threads import THREAD_COUNT_VARIABLES, WAIT_VARIABLES
+
+    for name in (*THREAD_COUNT_VARIABLES, *WAIT_VARIABLES):
+        if name in os.environ:
+            monkeypatch.setenv(name, os.environ[name])
+        else:
+            monkeypatch.delenv(name, raising=False)
+    threads = numba.get_num_threads()
+    yield
+    numba.set_num_threads(threads)
+
+
+def test_rule_script_runs_each_step_without_snakemake(tmp_path, job_threads_restored):
     metrics_csv, timings_csv = write_inputs(tmp_path)
     labels = {name: s["label"] for name, s in METHODS.items()}
     params = SimpleNamespace(methods=METHODS, labels=labels)

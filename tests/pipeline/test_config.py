@@ -14,7 +14,7 @@ from mcbench import BenchError
 from mcbench.pipeline.config import ConfigError, key_path, load_schema, resolve_config, schema_defaults
 from mcbench.analysis.metrics import ALL_METRICS, DSSIM_MIN_SIZE
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 CONFIGS = sorted((REPO / "workflow" / "configs").glob("*.yaml")) + [REPO / "config.yaml"]
 
 
