@@ -117,6 +117,14 @@ def _pool_entries(pool: bool, ids):
     return denoisers, combiners
 
 
+def _labelled(draw, entry: dict, default_label: str, labels: set) -> str:
+    """The entry's label: its default, or (drawn, or needed to stay unique) one of its own, set in ``entry``."""
+    if draw(st.booleans()) or default_label in labels:
+        entry["label"] = f"{entry['name']} {draw(LABEL_TEXT)}".strip()
+        return entry["label"]
+    return default_label
+
+
 @st.composite
 def valid_configs(draw, *, max_scenes: int = 4, max_spp: int = 4, max_denoisers: int = 5, max_combiners: int = 6,
                   small: bool = False):
@@ -159,10 +167,7 @@ def valid_configs(draw, *, max_scenes: int = 4, max_spp: int = 4, max_denoisers:
                 name = f"d{index}_{module}{draw(NAME_TAIL)}"
                 params = draw(params_strategy(module))
                 entry = {"name": name, "method": module, **({"params": params} if params or draw(st.booleans()) else {})}
-                label = _default_label(module, [], params)
-                if draw(st.booleans()) or label in labels:
-                    label = f"{name} {draw(LABEL_TEXT)}".strip()
-                    entry["label"] = label
+                label = _labelled(draw, entry, _default_label(module, [], params), labels)
                 denoisers.append(entry)
                 names.append(name)
                 labels.add(label)
@@ -203,10 +208,7 @@ def valid_configs(draw, *, max_scenes: int = 4, max_spp: int = 4, max_denoisers:
                 roles.add((frozenset(inputs), role))
             name = f"c{index}_{module[:4]}{draw(NAME_TAIL)}"
             entry = {"name": name, "method": module, "inputs": inputs, **({"params": params} if params else {})}
-            label = _default_label(module, inputs, params)
-            if draw(st.booleans()) or label in labels:
-                label = f"{name} {draw(LABEL_TEXT)}".strip()
-                entry["label"] = label
+            label = _labelled(draw, entry, _default_label(module, inputs, params), labels)
             labels.add(label)
             combiners.append(entry)
             names.append(name)
