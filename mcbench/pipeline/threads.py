@@ -40,6 +40,8 @@ THREAD_COUNT_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_TH
 #: ... and those that make idle threads sleep and leave cores unpinned.
 WAIT_VARIABLES = {"OMP_WAIT_POLICY": "PASSIVE", "OIDN_SET_AFFINITY": "0"}
 
+_given: int | None = None   # the count of the last limit_threads call in this process
+
 
 def thread_environment(threads: int) -> dict[str, str]:
     """The environment variables (name -> value) that hold every pool of a job to ``threads``."""
@@ -54,6 +56,7 @@ def limit_threads(threads) -> int:
     Sets the environment (for libraries loaded later and for child processes), then the runtime
     thread count of numba and torch if they are already imported (with numba imported, its
     ``NUMBA_NUM_THREADS`` is left as it is: numba stops on a changed value once its pool runs)."""
+    global _given
     threads = int(threads)
     environment = thread_environment(threads)
     numba = sys.modules.get("numba")
@@ -66,6 +69,7 @@ def limit_threads(threads) -> int:
     torch = sys.modules.get("torch")
     if torch is not None:
         torch.set_num_threads(threads)
+    _given = threads
     return threads
 
 
@@ -83,7 +87,7 @@ def os_thread_count() -> int:
 def thread_report() -> str:
     """One line for a job's log: the threads it was given (by :func:`limit_threads`), the process's
     OS threads now, and the pool size of numba and torch when they are loaded."""
-    parts = [f"threads given {os.environ.get('NUMBA_NUM_THREADS', 'unset')}", f"OS threads {os_thread_count()}"]
+    parts = [f"threads given {'unset' if _given is None else _given}", f"OS threads {os_thread_count()}"]
     numba = sys.modules.get("numba")
     if numba is not None:
         parts.append(f"numba {numba.get_num_threads()}")
