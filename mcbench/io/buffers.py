@@ -30,7 +30,7 @@ from typing import Callable
 import numpy as np
 
 from mcbench import BenchError
-from mcbench.io.exr import check_finite, read_layers, read_metadata
+from mcbench.io.exr import check_finite, check_resolution, read_layers, read_metadata
 
 BUFFER_SUFFIXES = {"full": "", "a": "_a", "b": "_b"}
 #: Index of each image of a case in seeds that run per image (e.g. SURE's perturbations).
@@ -128,6 +128,7 @@ class RenderBuffers:
             wanted = list(dict.fromkeys(("color", *layers)))
             layers = read_layers(path, wanted)          # ExrError naming the file and the layer
             check_finite(path, layers)
+            check_resolution(path, layers["color"].shape)
             return cls(layers=layers, spp=int(read_metadata(path).get("spp", 0)), source=str(path))
         layers = read_layers(path)
         missing = [n for n in REQUIRED_LAYERS if n not in layers]
@@ -135,6 +136,7 @@ class RenderBuffers:
             from mcbench.io.exr import ExrError
             raise ExrError(f"{path}: not a render file, missing layer(s) {missing}")
         check_finite(path, layers)
+        check_resolution(path, layers["color"].shape)
         meta = read_metadata(path)
         spp = int(meta.get("spp", 0))
         return cls(layers=layers, spp=spp, source=str(path))

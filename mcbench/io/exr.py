@@ -3,7 +3,12 @@
 A file holds named layers: a 3-channel layer ``color`` is stored as the channels
 ``color.R``, ``color.G``, ``color.B``; a 1-channel layer ``depth`` as ``depth``.
 Writes are atomic (temporary file in the same folder, then ``os.replace``), so a run
-killed mid-write never leaves a truncated EXR behind that Snakemake would trust.
+killed mid-write never leaves a truncated EXR behind that Snakemake would trust. Every file
+:func:`write_layers` writes carries a checksum of its size, layer names, ``mcbench.*``
+attributes and pixels (header attribute ``mcbench.crc32``, :func:`mcbench.io.checksums.exr_checksum`),
+and every reader here checks it: a flipped bit that leaves a valid EXR with a wrong pixel is
+refused (:class:`mcbench.io.checksums.ChecksumError`) like a truncated file. Files without the
+attribute (written elsewhere) are read unchecked.
 """
 
 from __future__ import annotations
@@ -15,8 +20,10 @@ import numpy as np
 import OpenEXR
 
 from mcbench import BenchError
+from mcbench.io.checksums import CHECKSUM_ATTRIBUTE, ChecksumError, exr_checksum, layer_crc
 
 __all__ = ["ExrError", "NonFiniteError", "read_layers", "write_layers", "read_metadata", "check_finite",
+           "check_resolution",
            "LayerRows", "layer_rows"]
 
 
@@ -60,11 +67,20 @@ def write_layers(path: str | os.PathLike, layers: dict[str, np.ndarray],
             raise ValueError(f"{path}: layer '{name}' is {array.shape[:2]}, other layers are {shape}")
         channels[name] = array
     header = {"compression": COMPRESSIONS[compression], "type": OpenEXR.scanlineimage}
-    for key, value in (metadata or {}).items():
-        header[f"mcbench.{key}"] = str(value)
+    attributes = {f"mcbench.{key}": str(value) for key, value in (metadata or {}).items()}
+    attributes.pop(f"mcbench.{CHECKSUM_ATTRIBUTE}", None)
+    attributes[f"mcbench.{CHECKSUM_ATTRIBUTE}"] = exr_checksum(
+        width=shape[1], height=shape[0], metadata=attributes,
+        layer_crcs={name: layer_crc(array) for name, array in channels.items()})
+    header.update(attributes)
     def save(tmp):
-        with OpenEXR.File(header, channels) as exr:
-            exr.write(tmp)
+        try:
+            with OpenEXR.File(header, channels) as exr:
+                exr.write(tmp)
+        except OSError:
+            raise
+        except Exception as exc:   # the bindings raise a bare Exception, e.g. on a full disk
+            raise ExrError(f"{path}: cannot write EXR ({exc})") from exc
 
     from mcbench.io.tables import write_atomically   # at call time: readers of EXRs need no tables module
 
@@ -96,9 +112,54 @@ def read_layers(path: str | os.PathLike, names: list[str] | None = None,
         missing = [n for n in wanted if n not in available]
         if missing:
             raise ExrError(f"{path}: missing layer(s) {missing}; file has {sorted(available)}")
+        _check_checksum(path, exr.header(), {n: layer_crc(p) for n, p in available.items()})
+        _check_pixel_types(path, {n: np.asarray(p).dtype for n, p in available.items()})
         # asarray: a float32 layer is the decoder's own array (no copy; the layers not wanted
         # are freed with the file), so reading peaks at one copy of the file's pixels, not two
         return {n: np.asarray(available[n], dtype=dtype) for n in wanted}
+
+
+def _recorded_checksum(header: dict) -> tuple[str | None, dict[str, str]]:
+    """The checksum an EXR header records and its ``mcbench.*`` attributes (prefix kept)."""
+    attributes = {str(k): v.decode("utf-8", "replace") if isinstance(v, bytes) else str(v)
+                  for k, v in header.items() if str(k).startswith("mcbench.")}
+    return attributes.get(f"mcbench.{CHECKSUM_ATTRIBUTE}"), attributes
+
+
+def _check_checksum(path: Path, header: dict, layer_crcs: dict[str, int]) -> None:
+    """Refuse the EXR at ``path`` when its header records a checksum its content does not match."""
+    recorded, attributes = _recorded_checksum(header)
+    if recorded is None:
+        return
+    window = header["dataWindow"]
+    if hasattr(window, "min"):                       # the scanline API's Box2i
+        width, height = window.max.x - window.min.x + 1, window.max.y - window.min.y + 1
+    else:                                            # the File API's pair of (x, y) arrays
+        (x0, y0), (x1, y1) = window
+        width, height = int(x1) - int(x0) + 1, int(y1) - int(y0) + 1
+    actual = exr_checksum(width=width, height=height, layer_crcs=layer_crcs, metadata=attributes)
+    if actual != recorded:
+        raise ChecksumError(f"{path}: content does not match its checksum (mcbench.{CHECKSUM_ATTRIBUTE} "
+                            f"{recorded}, computed {actual}): the file was damaged after it was "
+                            f"written; rerun the job that writes it")
+
+
+def _check_pixel_types(path: Path, dtypes: dict) -> None:
+    """Refuse an EXR whose pixels are not 32-bit floats (the harness writes only those: a half or
+    integer layer is another program's file, or damage)."""
+    odd = sorted(name for name, dtype in dtypes.items() if np.dtype(dtype) != np.float32)
+    if odd:
+        raise ExrError(f"{path}: layer(s) {odd} hold {np.dtype(dtypes[odd[0]]).name} pixels; the harness "
+                       f"reads 32-bit float EXRs (convert the file, or rerun the job that writes it)")
+
+
+def check_resolution(path: str | os.PathLike, shape: tuple[int, ...]) -> None:
+    """Refuse a render or reference whose pixels (``shape`` (H, W, ...)) disagree with the
+    ``resolution`` (``WxH``) its header records (a cropped or resized file). Only renders and
+    references record their own size there (a training crop records its scene's)."""
+    recorded = read_metadata(path).get("resolution")
+    if recorded and recorded != f"{shape[1]}x{shape[0]}":
+        raise ExrError(f"{path}: {shape[1]}x{shape[0]} pixels, but its header records resolution {recorded}")
 
 
 class _FileRows:
@@ -195,12 +256,15 @@ class LayerRows:
         return whole if dtype is None else whole.astype(dtype, copy=False)
 
 
-def layer_rows(path: str | os.PathLike, names: list[str] | None = None) -> dict[str, LayerRows]:
+def layer_rows(path: str | os.PathLike, names: list[str] | None = None, *,
+               finite: bool = False) -> dict[str, LayerRows]:
     """The named layers (all when ``names`` is None) of an EXR as :class:`LayerRows`, read by
     rows when indexed; only the header is read here. A layer is the channels ``name.R``,
     ``name.G``, ``name.B`` (3-channel, as :func:`write_layers` stores it) or the single channel
     ``name``. Raises :class:`ExrError` naming the file when it is missing or corrupt, or lacks
-    a layer."""
+    a layer. A file with a checksum is read through once, :data:`STREAM_ROWS` rows at a time, to
+    check it (:class:`mcbench.io.checksums.ChecksumError`); with ``finite`` that pass also refuses
+    NaN/Inf pixels in the layers asked for (:class:`NonFiniteError` naming the file and layer)."""
     path = Path(path)
     if not path.exists():
         raise ExrError(f"{path}: EXR file is missing")
@@ -227,16 +291,51 @@ def layer_rows(path: str | os.PathLike, names: list[str] | None = None) -> dict[
     missing = [n for n in wanted if n not in layers]
     if missing:
         raise ExrError(f"{path}: missing layer(s) {missing}; file has {sorted(layers)}")
+    float_type = 2   # Imath.PixelType.FLOAT
+    types = {channel: getattr(getattr(info, "type", None), "v", float_type) for channel, info in header["channels"].items()}
+    numpy_type = {0: np.uint32, 1: np.float16, float_type: np.float32}
+    _check_pixel_types(path, {n: numpy_type.get(max((types.get(c, float_type) for c in chans),
+                                                    key=lambda v: v != float_type), np.float64)
+                              for n, chans in layers.items()})
+    recorded = _recorded_checksum(header)[0] is not None
+    if recorded or finite:
+        crcs, bad = _streamed_layer_crcs(path, layers, shape, y0)
+        if recorded:
+            _check_checksum(path, header, crcs)
+        if finite and any(bad[n] for n in wanted):
+            raise NonFiniteError(f"{path}: " + "; ".join(f"layer '{n}' has {bad[n]} pixel(s) with NaN/Inf"
+                                                         for n in wanted if bad[n]))
     reader = _FileRows(path, {n: layers[n] for n in wanted}, shape[1], y0)
     return {n: LayerRows(reader, n, shape + ((3,) if len(layers[n]) == 3 else ()))
             for n in wanted}
 
 
+STREAM_ROWS = 64  # rows per read when a file is checked by rows (bounded memory at any size)
+
+
+def _streamed_layer_crcs(path: Path, layers: dict[str, list[str]], shape: tuple[int, int],
+                         first_row: int) -> tuple[dict[str, int], dict[str, int]]:
+    """Each layer's pixel CRC (:func:`mcbench.io.checksums.layer_crc`) of the whole file and its
+    count of pixels with a NaN/Inf, read :data:`STREAM_ROWS` rows at a time, so that a file read by
+    rows is checked without holding it."""
+    reader = _FileRows(path, layers, shape[1], first_row)
+    crcs, bad = dict.fromkeys(layers, 0), dict.fromkeys(layers, 0)
+    for y0 in range(0, shape[0], STREAM_ROWS):
+        y1 = min(shape[0], y0 + STREAM_ROWS)
+        for name in layers:
+            block = reader.rows(name, y0, y1)
+            crcs[name] = layer_crc(block if len(layers[name]) == 3 else block[..., 0], crcs[name])
+            bad[name] += int((~np.isfinite(block)).any(axis=2).sum())
+    return crcs, bad
+
+
 def read_metadata(path: str | os.PathLike) -> dict[str, str]:
-    """Return the ``mcbench.*`` header attributes of an EXR (prefix stripped)."""
+    """Return the ``mcbench.*`` header attributes of an EXR (prefix stripped), its checksum
+    excepted. Reads the header only, so it checks no checksum: read the layers for that."""
     path = Path(path)
     with _open(path, header_only=True) as exr:      # the pixels are not decoded
-        return {k[len("mcbench."):]: str(v) for k, v in exr.header().items() if k.startswith("mcbench.")}
+        return {k[len("mcbench."):]: str(v) for k, v in exr.header().items()
+                if k.startswith("mcbench.") and k != f"mcbench.{CHECKSUM_ATTRIBUTE}"}
 
 
 def check_finite(path: str | os.PathLike, layers: dict[str, np.ndarray]) -> None:

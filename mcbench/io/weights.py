@@ -9,7 +9,9 @@ only when it is called.
   (:data:`WEIGHTS_KEYS`): plain tensors and containers only, so it loads with
   ``torch.load(..., weights_only=True)``, which never runs code from the file.
 * ``<name>.json`` -- the training record (data, settings, losses, machine; see
-  :mod:`mcbench.nn.train`).
+  :mod:`mcbench.nn.train`), with the SHA-256 of ``<name>.pt`` (:data:`WEIGHTS_DIGEST_KEY`):
+  :func:`load_weights` refuses a weights file that does not match it, since a flipped bit in a
+  tensor leaves a file torch loads without complaint.
 * Training checkpoints use the same format with the keys :data:`CHECKPOINT_KEYS` (plus the
   critic's states for adversarial training).
 
@@ -33,6 +35,8 @@ RECORD_SUFFIX = ".json"
 WEIGHTS_KEYS = ("arch", "state_dict")
 CHECKPOINT_KEYS = ("arch", "settings", "step", "seconds", "network", "optimizer", "history")
 LEARNED_ATTRIBUTES = ("NETWORK", "TRAINING", "build_network")
+#: Key of a training record holding the SHA-256 of its weights file (checked by :func:`load_weights`).
+WEIGHTS_DIGEST_KEY = "weights_sha256"
 
 # Sentences of torch's load errors that advise loading unsafely (or filing a torch issue); they
 # are dropped from our messages, which must never suggest running code from a weights file.
@@ -83,6 +87,39 @@ def safe_failure_reason(error: BaseException) -> str:
     return type(error).__name__ + (f": {' '.join(kept)}" if kept else "")
 
 
+def file_sha256(path: str | Path) -> str:
+    """The SHA-256 of a file's bytes, as 64 hex digits (read in 1 MiB blocks)."""
+    import hashlib
+
+    digest = hashlib.sha256()
+    with open(path, "rb") as handle:
+        for block in iter(lambda: handle.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def check_weights_digest(path: str | Path) -> None:
+    """Refuse weights ``path`` (``<name>.pt``) when its training record ``<name>.json`` beside it
+    records a SHA-256 (:data:`WEIGHTS_DIGEST_KEY`) its bytes do not match; a file without a record
+    or a record without the key (a checkpoint, weights trained elsewhere) is not checked."""
+    from mcbench.io.tables import read_json
+
+    path = Path(path)
+    record_file = path.with_suffix(RECORD_SUFFIX)
+    if path.suffix != WEIGHTS_SUFFIX or not record_file.exists():
+        return
+    expected = read_json(record_file).get(WEIGHTS_DIGEST_KEY)      # BenchError naming a damaged record
+    if expected is None:
+        return
+    try:
+        actual = file_sha256(path)
+    except OSError as exc:
+        raise BenchError(f"{path}: cannot read weights ({exc.strerror or exc})") from exc
+    if actual != expected:
+        raise BenchError(f"{path}: weights do not match the SHA-256 recorded in {record_file.name} "
+                         f"(damaged, or replaced without its record): restore it (git checkout) or retrain")
+
+
 def load_weights(path: str | Path, *, required: tuple[str, ...] = WEIGHTS_KEYS, what: str = "weights") -> dict:
     """The dict saved in ``path`` (weights or a checkpoint), loaded on the CPU with
     ``torch.load(..., weights_only=True)``.
@@ -96,6 +133,7 @@ def load_weights(path: str | Path, *, required: tuple[str, ...] = WEIGHTS_KEYS, 
     path = Path(path)
     if not path.is_file():
         raise BenchError(f"{path}: {what} file is missing")
+    check_weights_digest(path)
     try:
         blob = torch.load(path, weights_only=True, map_location="cpu")
     except Exception as error:  # torch raises UnpicklingError, RuntimeError, EOFError, OSError, ...

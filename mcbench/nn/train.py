@@ -56,7 +56,8 @@ from mcbench.io.tables import read_json, write_json
 from mcbench.nn.data import CropSet, crop_paths, load_crops, sample_batch, validation_batches
 from mcbench.nn.losses import LOSSES
 from mcbench.progress import eta_seconds, progress_line
-from mcbench.io.weights import CHECKPOINT_KEYS, check_learned_method, load_weights, method_name, record_path, weights_path
+from mcbench.io.weights import (CHECKPOINT_KEYS, WEIGHTS_DIGEST_KEY, check_learned_method, file_sha256, load_weights,
+                                method_name, record_path, weights_path)
 
 DEFAULT_SETTINGS = {
     "steps": 4000,
@@ -317,7 +318,8 @@ def train_network(module: ModuleType, data: list[str | Path] | CropSet, weights_
         "finished": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
     }
     _save_atomic({"arch": module.NETWORK, "state_dict": network.state_dict()}, Path(weights_out))
-    write_json(record_out, record)
+    record[WEIGHTS_DIGEST_KEY] = file_sha256(weights_out)
+    write_json(record_out, record, checksum=False)   # committed beside the weights: a checkout may change it
     log(f"{name}: done in {seconds:.0f} s, validation {settings['loss']} {final['loss']:.5f}")
     return record
 

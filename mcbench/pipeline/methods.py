@@ -113,20 +113,26 @@ def reads_rows(modules) -> bool:
 
 
 def _render_by_rows(path: str, layers: tuple[str, ...] | None) -> RenderBuffers:
-    """A render whose layers (``color`` and ``layers``) are :class:`mcbench.io.exr.LayerRows`: only
-    the header is read here; the method checks the rows it reads for NaN/Inf."""
+    """A render whose layers (``color`` and ``layers``) are :class:`mcbench.io.exr.LayerRows`,
+    after one pass over the file by rows that checks its checksum and refuses NaN/Inf (naming the
+    file and layer); the pixels are not held."""
     from mcbench.io.exr import layer_rows
 
+    from mcbench.io.exr import check_resolution
+
     names = list(dict.fromkeys(["color", *(layers or ())]))
-    return RenderBuffers(layers=layer_rows(path, names), spp=int(read_metadata(path).get("spp", 0)), source=path)
+    rows = layer_rows(path, names, finite=True)
+    check_resolution(path, rows["color"].shape)
+    return RenderBuffers(layers=rows, spp=int(read_metadata(path).get("spp", 0)), source=path)
 
 
 def _denoised_by_rows(path: str) -> Denoised:
     """A method's output as :class:`mcbench.io.exr.LayerRows` of ``color``, ``color_a``, ``color_b``
-    (read by rows when the method indexes them; no extras: a READS_ROWS method reads none)."""
+    (read by rows when the method indexes them, after a pass that checks the checksum and refuses
+    NaN/Inf; no extras: a READS_ROWS method reads none)."""
     from mcbench.io.exr import layer_rows
 
-    layers = layer_rows(path, ["color", "color_a", "color_b"])
+    layers = layer_rows(path, ["color", "color_a", "color_b"], finite=True)
     return Denoised(full=layers["color"], a=layers["color_a"], b=layers["color_b"], source=path)
 
 

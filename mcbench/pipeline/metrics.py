@@ -11,7 +11,7 @@ import time
 
 from mcbench import NOISY, BenchError
 from mcbench.io.buffers import Denoised, RenderBuffers
-from mcbench.io.exr import check_finite, read_layers, write_layers
+from mcbench.io.exr import check_finite, check_resolution, read_layers, write_layers
 from mcbench.io.tables import read_json, read_table, write_csv
 from mcbench.analysis.metrics import METRICS, REFERENCE_METRICS
 
@@ -36,6 +36,7 @@ def compute_case_metrics(scene: str, spp: int, reference_path: str, render_path:
     needs_variance = any(metric in REFERENCE_METRICS for metric in metrics)
     reference = read_layers(reference_path, ["color", "variance"] if needs_variance else ["color"])
     check_finite(reference_path, reference)
+    check_resolution(reference_path, reference["color"].shape)
     reference_variance = reference.get("variance")
     reference = reference["color"]
     images = {NOISY: RenderBuffers.load(render_path).color}
@@ -73,7 +74,7 @@ def read_case_metrics(path: str, *, candidates: list[str], metric_names: list[st
     and metric once with a finite value, and only the case ``(scene, spp)`` when given."""
     from mcbench.analysis.ranking import check_complete
 
-    frame = read_table(path)
+    frame = read_table(path, columns=("scene", "spp", "candidate", "metric", "value"))
     check_complete(frame, candidates=candidates, metric_names=metric_names,
                    cases=None if case is None else [case], source=path)
     if case is not None and len(frame.groupby(["scene", "spp"])) != 1:
@@ -96,11 +97,38 @@ def gather_tables(paths: list[str], output_path: str, *, candidates: list[str], 
     return frame
 
 
+#: The fields of a method's timing record (written by mcbench.pipeline.methods.run_methods) and their types.
+TIMING_FIELDS = {"scene": str, "spp": int, "method": str, "module": str, "kind": str, "seconds": float,
+                 "width": int, "height": int, "threads": int, "machine": str}
+
+
+def timing_record(path: str) -> dict:
+    """One timing record, refused (naming the file) unless it holds every field of
+    :data:`TIMING_FIELDS` with its type: whole numbers for counts (positive sizes and threads),
+    a finite, non-negative number of seconds."""
+    import math
+
+    record = read_json(path)
+    for key, kind in TIMING_FIELDS.items():
+        value = record.get(key)
+        numeric = isinstance(value, (int, float)) and not isinstance(value, bool)
+        if kind is str:
+            good = isinstance(value, str)
+        elif kind is int:
+            good = numeric and float(value).is_integer() and (value >= 0 if key == "spp" else value > 0)
+        else:
+            good = numeric and math.isfinite(value) and value >= 0
+        if not good:
+            raise BenchError(f"{path}: timing record has {key}={value!r}; expected "
+                             f"{'a non-negative number' if kind is float else kind.__name__}")
+    return record
+
+
 def gather_timings(paths: list[str], output_path: str) -> pd.DataFrame:
     """Collect the per-job timing JSONs into ``timings.csv`` (one row per method run)."""
     import pandas as pd
 
-    frame = pd.DataFrame([read_json(p) for p in paths])
+    frame = pd.DataFrame([timing_record(p) for p in paths])
     columns = ["scene", "spp", "method", "module", "kind", "seconds", "width", "height", "threads", "machine"]
     frame = frame[[c for c in columns if c in frame.columns]].sort_values(["method", "scene", "spp"])
     write_csv(output_path, frame)

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 
 
-from mcbench.io.exr import check_finite, read_layers, read_metadata, write_layers
+from mcbench.io.exr import check_finite, check_resolution, read_layers, read_metadata, write_layers
 
 
 def render_noisy(scene: str, spp: int, output_path: str, *, resolution=None, variant: str = "auto",
@@ -40,6 +40,7 @@ def merge_reference(chunk_paths: list[str], output_path: str) -> None:
     for path in chunk_paths:
         layers = read_layers(path)
         check_finite(path, layers)
+        check_resolution(path, layers["color"].shape)
         chunks.append((layers, read_metadata(path)))
     layers, metadata = merge_reference_chunks(chunks)
     write_layers(output_path, layers, metadata=metadata)

@@ -11,7 +11,7 @@ from pathlib import Path
 
 
 from mcbench import BenchError
-from mcbench.io.exr import check_finite, read_layers, read_metadata
+from mcbench.io.exr import check_finite, check_resolution, read_layers, read_metadata
 from mcbench.io.tables import read_table, write_csv, write_text
 
 if TYPE_CHECKING:  # pandas is imported inside the steps that build tables
@@ -32,7 +32,7 @@ def write_rankings(metrics_csv: str, metric: str, csv_path: str, md_path: str, *
     from mcbench.analysis.metrics import METRIC_LABELS
     from mcbench.analysis.ranking import check_complete, format_latex, format_markdown, ranking_table
 
-    metrics = read_table(metrics_csv)
+    metrics = read_table(metrics_csv, columns=("scene", "spp", "candidate", "metric", "value"))
     # the ranking pool: the comparison methods' rows are ranked in their own tables
     metrics = metrics[metrics["candidate"].isin(candidates)]
     check_complete(metrics[metrics["metric"] == metric], candidates=candidates, metric_names=[metric],
@@ -115,6 +115,7 @@ def write_scene_table(metrics_csv: str, reference_paths: dict[str, str], referen
     for scene, path in reference_paths.items():
         layers = read_layers(path, ["color", "variance"])
         check_finite(path, layers)
+        check_resolution(path, layers["color"].shape)
         floors[scene] = reference_relmse_floor(layers["color"], layers["variance"])
         module = load_scene(scene)
         meta = read_metadata(path)

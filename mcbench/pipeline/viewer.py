@@ -7,7 +7,8 @@ from pathlib import Path
 
 
 from mcbench import NOISY, BenchError
-from mcbench.io.exr import check_finite, read_layers
+from mcbench.io.checksums import crc32_hex
+from mcbench.io.exr import check_finite, check_resolution, read_layers
 from mcbench.io.tables import read_json, read_table, write_json
 
 
@@ -24,6 +25,7 @@ def write_viewer_case(scene: str, spp: int, reference_path: str, render_path: st
 
     reference = read_layers(reference_path, ["color"])
     check_finite(reference_path, reference)
+    check_resolution(reference_path, reference["color"].shape)
     reference = reference["color"]
     sources = {NOISY: render_path, **candidate_paths}
     images, weights = {}, {}
@@ -43,8 +45,70 @@ def write_viewer_case(scene: str, spp: int, reference_path: str, render_path: st
         flip_maps = read_layers(flip_maps_path, list(sources))
         check_finite(flip_maps_path, flip_maps)
     fragment = write_case_images(case_dir, reference=reference, images=images, weights=weights, flip_maps=flip_maps)
-    write_json(Path(case_dir) / CASE_RECORD, {"scene": scene, "spp": int(spp), **fragment})
+    checksums = {name: crc32_hex(Path(case_dir, name).read_bytes()) for name in sorted(_fragment_files(fragment))}
+    write_json(Path(case_dir) / CASE_RECORD, {"scene": scene, "spp": int(spp), **fragment, FILE_CHECKSUMS: checksums})
     return fragment
+
+
+#: Key of a viewer case record holding the CRC-32 of each image file it names (checked on assembly).
+FILE_CHECKSUMS = "files_crc32"
+
+
+def _fragment_files(fragment: dict) -> set[str]:
+    """The image files a case's manifest fragment names (tone-mapped images, error and weight maps)."""
+    files = {f for per_ev in fragment["images"].values() for f in per_ev.values()}
+    files.update(f for per_metric in fragment["errors"].values() for f in per_metric.values())
+    files.update(w["file"] for maps in fragment["weights"].values() for w in maps)
+    return files
+
+
+def _check_case_record(record: dict, record_path: Path) -> None:
+    """Refuse a case record whose fields do not have the shape :func:`write_viewer_case` writes."""
+    def strings(mapping) -> bool:
+        return isinstance(mapping, dict) and all(isinstance(k, str) and isinstance(v, str) for k, v in mapping.items())
+
+    sizes = [record.get("width"), record.get("height")]
+    problems = []
+    if not all(isinstance(v, int) and not isinstance(v, bool) and v > 0 for v in sizes):
+        problems.append(f"width/height {sizes}")
+    for key in ("images", "errors"):
+        value = record.get(key)
+        if not (isinstance(value, dict) and all(strings(files) for files in value.values())):
+            problems.append(f"'{key}'")
+    weights = record.get("weights")
+    if not (isinstance(weights, dict) and all(isinstance(maps, list) and all(strings(m) and set(m) == {"input", "file"}
+                                                                         for m in maps)
+                                           for maps in weights.values())):
+        problems.append("'weights'")
+    if problems:
+        raise BenchError(f"{record_path}: not a viewer case record (bad {', '.join(problems)}); rerun the job "
+                         f"that writes it")
+
+
+def _check_case_files(case_dir: Path, record: dict, record_path: Path) -> None:
+    """Refuse a case folder whose images are missing, differ from the checksums of its record or
+    are not of the record's size."""
+    from PIL import Image
+
+    _check_case_record(record, record_path)
+    checksums = record.get(FILE_CHECKSUMS)
+    files = _fragment_files(record)
+    if not isinstance(checksums, dict) or set(checksums) != files:
+        raise BenchError(f"{record_path}: the case record's checksums ({FILE_CHECKSUMS}) do not list its "
+                         f"images; rerun the job that writes {case_dir}")
+    for name in sorted(files):
+        path = case_dir / name
+        try:
+            data = path.read_bytes()
+        except OSError as exc:
+            raise BenchError(f"{path}: cannot read the viewer image ({exc.strerror or exc})") from exc
+        if crc32_hex(data) != checksums[name]:
+            raise BenchError(f"{path}: the viewer image does not match its checksum in {record_path} "
+                             f"(damaged after it was written); rerun the job that writes {case_dir}")
+        with Image.open(path) as image:                 # the header only
+            if image.size != (record["width"], record["height"]):
+                raise BenchError(f"{path}: the viewer image is {image.size[0]}x{image.size[1]}, its record "
+                                 f"{record_path} says {record['width']}x{record['height']}")
 
 
 def write_viewer(metrics_csv: str, case_dirs: list[str], output_dir: str, *, cases: list[tuple[str, int]],
@@ -58,18 +122,17 @@ def write_viewer(metrics_csv: str, case_dirs: list[str], output_dir: str, *, cas
 
     if len(case_dirs) != len(cases):
         raise BenchError(f"{output_dir}: {len(case_dirs)} case folders for {len(cases)} cases")
-    metrics = read_table(metrics_csv)
+    metrics = read_table(metrics_csv, columns=("scene", "spp", "candidate", "metric", "value"))
     entries = [NOISY] + list(candidates)
     fragments, numbers = {}, {}
     for (scene, spp), case_dir in zip(cases, case_dirs):
         record_path = Path(case_dir) / CASE_RECORD
-        try:
-            record = read_json(record_path)
-        except (OSError, ValueError) as exc:
-            raise BenchError(f"{record_path}: cannot read the viewer case record ({exc})") from exc
+        record = read_json(record_path)                      # BenchError naming the file
         if (record.get("scene"), record.get("spp")) != (scene, int(spp)):
             raise BenchError(f"{record_path}: holds case ({record.get('scene')}, {record.get('spp')}), "
                              f"expected ({scene}, {spp})")
+        _check_case_files(Path(case_dir), record, record_path)
+        record = {key: value for key, value in record.items() if key != FILE_CHECKSUMS}
         fragments[(scene, int(spp))] = record
         numbers[(scene, int(spp))] = case_numbers(metrics, scene=scene, spp=int(spp), entries=entries,
                                                   metric_names=metric_names, source=metrics_csv)
