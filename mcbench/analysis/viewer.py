@@ -340,14 +340,21 @@ def manifest_script(manifest: dict) -> str:
     return "window.MCBENCH_VIEWER = " + json.dumps(manifest, allow_nan=False, sort_keys=True) + ";\n"
 
 
+def case_files(case: dict) -> set[str]:
+    """The image files one case's fragment (of :func:`write_case_images` or the manifest) names:
+    tone-mapped images, error maps and weight maps."""
+    files = {f for per_ev in case["images"].values() for f in per_ev.values()}
+    files.update(f for per_metric in case["errors"].values() for f in per_metric.values())
+    files.update(w["file"] for maps in case["weights"].values() for w in maps)
+    return files
+
+
 def manifest_files(manifest: dict) -> list[str]:
     """Every file the manifest names (legends, images, error and weight maps), sorted."""
     files = {scale["legend"] for scale in manifest["scales"].values()}
     for per_spp in manifest["cases"].values():
         for case in per_spp.values():
-            files.update(f for per_ev in case["images"].values() for f in per_ev.values())
-            files.update(f for per_metric in case["errors"].values() for f in per_metric.values())
-            files.update(w["file"] for maps in case["weights"].values() for w in maps)
+            files.update(case_files(case))
     return sorted(files)
 
 

@@ -128,16 +128,17 @@ class RenderBuffers:
             wanted = list(dict.fromkeys(("color", *layers)))
             layers = read_layers(path, wanted)          # ExrError naming the file and the layer
             check_finite(path, layers)
-            check_resolution(path, layers["color"].shape)
-            return cls(layers=layers, spp=int(read_metadata(path).get("spp", 0)), source=str(path))
+            meta = read_metadata(path)
+            check_resolution(path, layers["color"].shape, meta)
+            return cls(layers=layers, spp=int(meta.get("spp", 0)), source=str(path))
         layers = read_layers(path)
         missing = [n for n in REQUIRED_LAYERS if n not in layers]
         if missing:
             from mcbench.io.exr import ExrError
             raise ExrError(f"{path}: not a render file, missing layer(s) {missing}")
         check_finite(path, layers)
-        check_resolution(path, layers["color"].shape)
         meta = read_metadata(path)
+        check_resolution(path, layers["color"].shape, meta)
         spp = int(meta.get("spp", 0))
         return cls(layers=layers, spp=spp, source=str(path))
 

@@ -112,7 +112,8 @@ def read_layers(path: str | os.PathLike, names: list[str] | None = None,
         missing = [n for n in wanted if n not in available]
         if missing:
             raise ExrError(f"{path}: missing layer(s) {missing}; file has {sorted(available)}")
-        _check_checksum(path, exr.header(), {n: layer_crc(p) for n, p in available.items()})
+        if _recorded_checksum(exr.header())[0] is not None:     # no CRC work on outside files
+            _check_checksum(path, exr.header(), {n: layer_crc(p) for n, p in available.items()})
         _check_pixel_types(path, {n: np.asarray(p).dtype for n, p in available.items()})
         # asarray: a float32 layer is the decoder's own array (no copy; the layers not wanted
         # are freed with the file), so reading peaks at one copy of the file's pixels, not two
@@ -153,11 +154,12 @@ def _check_pixel_types(path: Path, dtypes: dict) -> None:
                        f"reads 32-bit float EXRs (convert the file, or rerun the job that writes it)")
 
 
-def check_resolution(path: str | os.PathLike, shape: tuple[int, ...]) -> None:
+def check_resolution(path: str | os.PathLike, shape: tuple[int, ...], metadata: dict | None = None) -> None:
     """Refuse a render or reference whose pixels (``shape`` (H, W, ...)) disagree with the
     ``resolution`` (``WxH``) its header records (a cropped or resized file). Only renders and
-    references record their own size there (a training crop records its scene's)."""
-    recorded = read_metadata(path).get("resolution")
+    references record their own size there (a training crop records its scene's). ``metadata``:
+    the file's :func:`read_metadata`, when the caller has it (else the header is read)."""
+    recorded = (read_metadata(path) if metadata is None else metadata).get("resolution")
     if recorded and recorded != f"{shape[1]}x{shape[0]}":
         raise ExrError(f"{path}: {shape[1]}x{shape[0]} pixels, but its header records resolution {recorded}")
 
@@ -291,11 +293,10 @@ def layer_rows(path: str | os.PathLike, names: list[str] | None = None, *,
     missing = [n for n in wanted if n not in layers]
     if missing:
         raise ExrError(f"{path}: missing layer(s) {missing}; file has {sorted(layers)}")
-    float_type = 2   # Imath.PixelType.FLOAT
-    types = {channel: getattr(getattr(info, "type", None), "v", float_type) for channel, info in header["channels"].items()}
-    numpy_type = {0: np.uint32, 1: np.float16, float_type: np.float32}
-    _check_pixel_types(path, {n: numpy_type.get(max((types.get(c, float_type) for c in chans),
-                                                    key=lambda v: v != float_type), np.float64)
+    # Imath.PixelType values: 0 UINT, 1 HALF, 2 FLOAT; a layer takes the type of its first non-float channel
+    numpy_type = {0: np.uint32, 1: np.float16, 2: np.float32}
+    channel_type = {c: numpy_type.get(getattr(info.type, "v", 2), np.float64) for c, info in header["channels"].items()}
+    _check_pixel_types(path, {n: next((channel_type[c] for c in chans if channel_type[c] != np.float32), np.float32)
                               for n, chans in layers.items()})
     recorded = _recorded_checksum(header)[0] is not None
     if recorded or finite:

@@ -122,8 +122,9 @@ def _render_by_rows(path: str, layers: tuple[str, ...] | None) -> RenderBuffers:
 
     names = list(dict.fromkeys(["color", *(layers or ())]))
     rows = layer_rows(path, names, finite=True)
-    check_resolution(path, rows["color"].shape)
-    return RenderBuffers(layers=rows, spp=int(read_metadata(path).get("spp", 0)), source=path)
+    meta = read_metadata(path)
+    check_resolution(path, rows["color"].shape, meta)
+    return RenderBuffers(layers=rows, spp=int(meta.get("spp", 0)), source=path)
 
 
 def _denoised_by_rows(path: str) -> Denoised:

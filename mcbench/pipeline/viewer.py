@@ -45,21 +45,15 @@ def write_viewer_case(scene: str, spp: int, reference_path: str, render_path: st
         flip_maps = read_layers(flip_maps_path, list(sources))
         check_finite(flip_maps_path, flip_maps)
     fragment = write_case_images(case_dir, reference=reference, images=images, weights=weights, flip_maps=flip_maps)
-    checksums = {name: crc32_hex(Path(case_dir, name).read_bytes()) for name in sorted(_fragment_files(fragment))}
+    from mcbench.analysis.viewer import case_files
+
+    checksums = {name: crc32_hex(Path(case_dir, name).read_bytes()) for name in sorted(case_files(fragment))}
     write_json(Path(case_dir) / CASE_RECORD, {"scene": scene, "spp": int(spp), **fragment, FILE_CHECKSUMS: checksums})
     return fragment
 
 
 #: Key of a viewer case record holding the CRC-32 of each image file it names (checked on assembly).
 FILE_CHECKSUMS = "files_crc32"
-
-
-def _fragment_files(fragment: dict) -> set[str]:
-    """The image files a case's manifest fragment names (tone-mapped images, error and weight maps)."""
-    files = {f for per_ev in fragment["images"].values() for f in per_ev.values()}
-    files.update(f for per_metric in fragment["errors"].values() for f in per_metric.values())
-    files.update(w["file"] for maps in fragment["weights"].values() for w in maps)
-    return files
 
 
 def _check_case_record(record: dict, record_path: Path) -> None:
@@ -90,9 +84,11 @@ def _check_case_files(case_dir: Path, record: dict, record_path: Path) -> None:
     are not of the record's size."""
     from PIL import Image
 
+    from mcbench.analysis.viewer import case_files
+
     _check_case_record(record, record_path)
     checksums = record.get(FILE_CHECKSUMS)
-    files = _fragment_files(record)
+    files = case_files(record)
     if not isinstance(checksums, dict) or set(checksums) != files:
         raise BenchError(f"{record_path}: the case record's checksums ({FILE_CHECKSUMS}) do not list its "
                          f"images; rerun the job that writes {case_dir}")
