@@ -49,15 +49,19 @@ Weight filter (Sec. 4.2) and blend
 Raw combined images z, z^A, z^B, Var[z] ~ (z^A - z^B)^2 / 2 guide a cross-bilateral filter
 (Eq. 32-34) of all N x C weight maps with one kernel per pixel (z / Var[z], albedo, normal);
 the filtered weights combine the inputs' full, A and B images (Eq. 35).
-**Departures (defaults):** the authors' public code's passes around the filter are on by
-default: Var[z] blurred with a 9 x 9 Gaussian (``guide_variance_blur="gaussian9"``) and
-outliers of each filtered weight map (beyond 2.5 standard deviations of their 7 x 7 window)
-replaced by the window's mean, then re-projected onto the simplex (``outlier_removal=True``):
-the best variant measured with ``benchmarks/bench_postprocess.py``. ``colour_distance="sum"``
-sums Eq. 33 over the channels as the public code does (default: the mean).
-``mcbench.combine.weight_filter.PAPER_FILTER`` (``guide_variance_blur="none",
-outlier_removal=False``) is the paper's filter alone. Details:
-:mod:`mcbench.combine.weight_filter`.
+**Departures (defaults):** where the text is silent the authors' public code decides (never the
+error on the test scenes): Var[z] blurred with a 9 x 9 Gaussian (``guide_variance_blur=
+"gaussian9"``), the code's outlier pass on each filtered weight map (a pixel with any channel
+2.5 or more standard deviations from its 48 neighbours' mean takes the map's 7 x 7 blur,
+``outlier_removal="public_code"``), then re-projected onto the simplex; windows reflected at
+the borders (``filter_border="reflect101"``); Eq. 33's denominator floored at 1e-6
+(``variance_sum_floor``). Eq. 33 sums over the channels (``colour_distance="sum"``, the text and
+the code). Eq. 32 stays the text's: the normal as rendered (the code standardises it,
+``normal_features="standardised"``) and 2 sigma^2 in each feature term (the code divides by
+sigma, its slip: ``weight_filter.public_code_sigmas``). ``weight_filter.PAPER_FILTER`` is the
+paper's filter alone, ``weight_filter.PUBLIC_CODE_FILTER`` the code's. Details:
+:mod:`mcbench.combine.weight_filter`; the comparison with the code's output:
+``tests/combine/test_ensemble_golden.py``.
 
 Precision and memory: the solvers' geometry is float64; the weight filter works in float32
 (relative rounding 1e-7, far below what a weight map shows) but for its colour term, and the
@@ -74,7 +78,8 @@ import numpy as np
 
 from mcbench.combine import weight_filter
 from mcbench.combine.blending import blend_band, combine_with
-from mcbench.combine.ensemble_weights import (CHANNELS, ENSEMBLE_DEFAULTS, GUIDE_VARIANCE_BLURS,
+from mcbench.combine.ensemble_weights import (CHANNELS, ENSEMBLE_DEFAULTS, FILTER_BORDERS,
+                                              GUIDE_VARIANCE_BLURS, NORMAL_FEATURES, OUTLIER_PASSES,
                                               WEIGHTS, check_choices, check_shapes,
                                               nonfinite_pixels, raise_nonfinite, solve_block)
 from mcbench.combine.simplex_solvers import MAX_ITERATIONS, SOLVERS, STARTS, TOLERANCE
@@ -90,7 +95,8 @@ RENDER_LAYERS = ("color_a", "color_b", "albedo", "normal")
 # job may hand it mcbench.io.exr.LayerRows (layers read from their files by rows) instead of arrays
 READS_ROWS = True
 # the choices combine() validates (owned by mcbench.combine; here for its annotations):
-# SOLVERS, STARTS, WEIGHTS, CHANNELS, GUIDE_VARIANCE_BLURS, COLOUR_DISTANCES
+# SOLVERS, STARTS, WEIGHTS, CHANNELS, GUIDE_VARIANCE_BLURS, COLOUR_DISTANCES, OUTLIER_PASSES,
+# FILTER_BORDERS, NORMAL_FEATURES
 
 BLOCK_PIXELS = 1 << 16   # pixels per block of rows that combine() solves at once (memory bound)
 
@@ -183,8 +189,11 @@ def combine(buffers: RenderBuffers, inputs: list[Denoised], *,
             sigma_normal: float = FILTER_PARAMETERS["sigma_normal"],
             guide_variance_blur: Literal[GUIDE_VARIANCE_BLURS] = (
                 ENSEMBLE_DEFAULTS["guide_variance_blur"]),
-            outlier_removal: bool = ENSEMBLE_DEFAULTS["outlier_removal"],
+            outlier_removal: Literal[OUTLIER_PASSES] = ENSEMBLE_DEFAULTS["outlier_removal"],
             colour_distance: Literal[COLOUR_DISTANCES] = ENSEMBLE_DEFAULTS["colour_distance"],
+            filter_border: Literal[FILTER_BORDERS] = ENSEMBLE_DEFAULTS["filter_border"],
+            normal_features: Literal[NORMAL_FEATURES] = ENSEMBLE_DEFAULTS["normal_features"],
+            variance_sum_floor: float = ENSEMBLE_DEFAULTS["variance_sum_floor"],
             start: Literal[STARTS] = ENSEMBLE_DEFAULTS["start"]) -> Denoised:
     """Ensemble of the ``inputs`` (Sec. 4): solve raw weights from the half buffers, filter
     them (unless ``filter=False``, an ablation), and combine (Eq. 35).
@@ -196,10 +205,10 @@ def combine(buffers: RenderBuffers, inputs: list[Denoised], *,
     ``filter=False`` keeps the raw weights. See
     :func:`mcbench.combine.ensemble_weights.solve_weights`. The authors' public code's passes
     around the filter (see :func:`mcbench.combine.weight_filter.filter_weights`):
-    ``guide_variance_blur``, ``outlier_removal``, ``colour_distance``; the defaults
-    (:data:`mcbench.combine.ensemble_weights.ENSEMBLE_DEFAULTS`) blur and remove outliers, the
-    best variant measured on the default study, and ``guide_variance_blur="none",
-    outlier_removal=False`` is the paper's filter alone. ``start``: the iterative solver's start
+    ``guide_variance_blur``, ``outlier_removal``, ``colour_distance``, ``filter_border``,
+    ``normal_features``, ``variance_sum_floor``; the defaults
+    (:data:`mcbench.combine.ensemble_weights.ENSEMBLE_DEFAULTS`) follow the text, and the code
+    where the text is silent (the module docstring). ``start``: the iterative solver's start
     (the paper's random one by default).
 
     Memory: one pass down the image in bands of
@@ -225,7 +234,11 @@ def combine(buffers: RenderBuffers, inputs: list[Denoised], *,
     if not inputs:
         raise ValueError("the ensemble needs at least one input")
     check_choices(solver=solver, weights=weights, channels=channels, start=start,
-                  guide_variance_blur=guide_variance_blur, colour_distance=colour_distance)
+                  guide_variance_blur=guide_variance_blur, colour_distance=colour_distance,
+                  outlier_removal=outlier_removal, filter_border=filter_border,
+                  normal_features=normal_features)
+    if not (np.isfinite(variance_sum_floor) and variance_sum_floor >= 0):
+        raise ValueError(f"ensemble variance_sum_floor must be finite and >= 0, got {variance_sum_floor!r}")
     xa, xb = buffers.color_a, buffers.color_b
     shape = tuple(np.shape(xa))
     for i, d in enumerate(inputs):
@@ -244,12 +257,15 @@ def combine(buffers: RenderBuffers, inputs: list[Denoised], *,
                     options=dict(solver=solver, seed=seed, max_iterations=max_iterations,
                                  tolerance=tolerance, weights=weights, channels=channels,
                                  start=start))
-    passes = dict(radius=radius, blur=guide_variance_blur == "gaussian9", outliers=outlier_removal)
+    passes = dict(radius=radius, blur=guide_variance_blur == "gaussian9", outliers=outlier_removal != "none")
+    statistics = (weight_filter.normal_statistics(buffers.normal)
+                  if filter and normal_features == "standardised" else None)
     options = dict(radius=radius, sigma_spatial=sigma_spatial, sigma_color=sigma_color,
                    sigma_albedo=sigma_albedo, sigma_normal=sigma_normal,
                    nonnegative=weights == "simplex", guide_variance_blur=guide_variance_blur,
                    outlier_removal=outlier_removal, colour_distance=colour_distance,
-                   dtype=np.float32)
+                   filter_border=filter_border, normal_statistics=statistics,
+                   variance_sum_floor=variance_sum_floor, dtype=np.float32)
     step = max(1, weight_filter.FILTER_BLOCK_PIXELS // max(wd, 1))
     for y0 in range(0, h, step):
         y1 = min(h, y0 + step)

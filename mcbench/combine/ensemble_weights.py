@@ -38,27 +38,42 @@ from mcbench.combine.simplex_solvers import (MAX_EXACT_N, MAX_ITERATIONS, SOLVER
                                              unconstrained_least_squares, unconstrained_weights)
 from mcbench.filters.bilateral import COLOUR_DISTANCES
 
-__all__ = ["WEIGHTS", "CHANNELS", "GUIDE_VARIANCE_BLURS", "CHOICES", "ENSEMBLE_DEFAULTS",
+__all__ = ["WEIGHTS", "CHANNELS", "GUIDE_VARIANCE_BLURS", "OUTLIER_PASSES", "FILTER_BORDERS",
+           "NORMAL_FEATURES", "CHOICES", "ENSEMBLE_DEFAULTS",
            "check_choices", "check_shapes", "check_finite", "nonfinite_pixels", "raise_nonfinite",
            "solve_block", "solve_weights"]
 
 WEIGHTS = ("simplex", "unconstrained")
 CHANNELS = ("rgb", "single")
 GUIDE_VARIANCE_BLURS = ("none", "gaussian9")   # the weight filter's guide-variance blur
+#: the weight filter's outlier pass: none, ours (a value -> its neighbours' mean), the public code's
+OUTLIER_PASSES = ("none", "neighbour_mean", "public_code")
+#: the weight filter's window at the image borders: clipped, or reflected as the public code does
+FILTER_BORDERS = ("clip", "reflect101")
+#: the normal feature: as rendered, or standardised per channel as the public code does
+NORMAL_FEATURES = ("raw", "standardised")
 #: every choice option of the ensemble and its values
 CHOICES = {"solver": SOLVERS, "weights": WEIGHTS, "channels": CHANNELS,
            "guide_variance_blur": GUIDE_VARIANCE_BLURS, "colour_distance": COLOUR_DISTANCES,
-           "start": STARTS}
+           "outlier_removal": OUTLIER_PASSES, "filter_border": FILTER_BORDERS,
+           "normal_features": NORMAL_FEATURES, "start": STARTS}
 #: The ensemble's (``methods/ensemble.py``'s combine()) defaults of the options that change what
 #: is solved or filtered. The first four are the paper's method (changing one is an ablation,
-#: Sec. 5.2.1-5.2.4); the public code's passes around the weight filter are on (the guide
-#: variance's blur and the outlier removal: the best variant measured with
-#: ``benchmarks/bench_postprocess.py``; see :mod:`mcbench.combine.weight_filter`); the iterative
-#: solver starts at random as in the paper. ``mcbench.analysis.comparisons`` reads them to tell
-#: an ablation or a variant from the full method.
+#: Sec. 5.2.1-5.2.4). The weight filter's details follow the paper's text where it decides and
+#: the authors' public code where the text is silent (LuisaGroup/Ensemble-Denoising; never chosen
+#: by their error on the test scenes): Eq. 33's ||.||^2 sums over the channels (text and code);
+#: the guide variance is blurred (9 x 9), the filtered maps pass the code's outlier pass
+#: (``remove_outliers<3>``, whole pixel -> 7 x 7 blur), windows reflect at the borders and Eq.
+#: 33's denominator is floored at 1e-6 as the code does (the text says none of these). Eq. 32
+#: is the text's: the feature g is the rendered buffer (the code standardises the normal first)
+#: and each term divides by 2 sigma^2 (the code divides by sigma, listed as its slip); both are
+#: switches (``normal_features``, the sigmas) and docs/fidelity_ensemble.md measures them. The iterative solver
+#: starts at random as in the paper. ``mcbench.analysis.comparisons`` reads them to tell an
+#: ablation or a variant from the full method.
 ENSEMBLE_DEFAULTS = {"weights": "simplex", "channels": "rgb", "solver": "iterative", "filter": True,
-                     "guide_variance_blur": "gaussian9", "outlier_removal": True,
-                     "colour_distance": "mean", "start": "random"}
+                     "guide_variance_blur": "gaussian9", "outlier_removal": "public_code",
+                     "colour_distance": "sum", "filter_border": "reflect101",
+                     "normal_features": "raw", "variance_sum_floor": 1e-6, "start": "random"}
 
 
 def nonfinite_pixels(arrays) -> int:

@@ -1,6 +1,7 @@
 """Generic cross (joint) bilateral filter, Zheng et al. 2021 Eq. 32-34, and the smoothing passes
 the authors' public code puts around it (a Gaussian blur of the guide variance, outlier
-removal: :func:`gaussian_blur`, :func:`remove_outliers`).
+removal: :func:`gaussian_blur`, :func:`remove_outliers` (ours), :func:`remove_outlier_pixels` (as the code
+is written), :func:`reflect101_tile` for its reflected borders).
 
 Used by the ensemble's weight-map filter (``methods/ensemble.py``), the one-hot selection's
 filters (``mcbench/combine/selection.py``) and the joint-bilateral base denoiser. All maps share one
@@ -126,7 +127,7 @@ def _cbf_bands(values, channels, guide, guide_var, feats, spatial, consts, exp_c
     (Cg, H, W) planar float64 (Cg = 0 for no colour term); feats (F, H, W) planar, pre-scaled so
     that the feature term is sum_f (f_p - f_q)^2; spatial (r + 1, 2r + 1): |d|^2 / (2 sigma_s^2)
     for the offset (dy, dx - r); consts (float64): [colour scale 1/(2 sigma_g^2) (/ Cg for the
-    mean), variance floor, impossible term]; exp_consts (:func:`_exp_constants`), values, feats,
+    mean), variance floor, impossible term, lower bound of v_p + v_q (0: none)]; exp_consts (:func:`_exp_constants`), values, feats,
     spatial in the working dtype. Only the output rows out0 .. out1 - 1 are computed (the other
     rows are read as neighbours: a tile with its halo); each pixel's sums are added in the same
     order whatever the bands and rows (upper pixel row ascending, then dy, dx), so a row's result
@@ -138,6 +139,7 @@ def _cbf_bands(values, channels, guide, guide_var, feats, spatial, consts, exp_c
     colour_scale = consts[0]
     floor = consts[1]
     impossible = consts[2]
+    den_min = consts[3]
     zero = consts[0] - consts[0]            # float64, for the guide's term
     one = spatial[0, 0] * 0 + 1             # the working dtype
     out = np.empty((G, out1 - out0, WC), values.dtype)
@@ -184,7 +186,7 @@ def _cbf_bands(values, channels, guide, guide_var, feats, spatial, consts, exp_c
                             u = np.uint64(i)
                             num = guide[c, y, op + u] - guide[c, y2, oq + u]
                             num = num * num
-                            den = guide_var[c, y, op + u] + guide_var[c, y2, oq + u]
+                            den = max(guide_var[c, y, op + u] + guide_var[c, y2, oq + u], den_min)
                             term = num / den if den > floor else (zero if num == zero else impossible)
                             erow[i] += colour_scale * term
                     _exp_neg_row(erow, krow, exp_consts, m)
@@ -245,6 +247,7 @@ def _planar(array, name, shape, dtype) -> np.ndarray:
 def cross_bilateral_filter_vectors(values, guide, guide_variance, features, feature_sigmas,
                                    sigma_spatial, sigma_guide, radius, *,
                                    colour_distance: Literal["mean", "sum"] = "mean",
+                                   variance_sum_floor: float = 0.0,
                                    dtype=np.float64, rows: tuple[int, int] | None = None
                                    ) -> np.ndarray:
     """Filter G maps of per-pixel C-vectors, values (G, H, W, C), with one shared kernel per pixel
@@ -255,8 +258,12 @@ def cross_bilateral_filter_vectors(values, guide, guide_variance, features, feat
     ``rows=(r0, r1)``: only the output rows r0 .. r1 - 1 (the others are read as neighbours,
     e.g. a tile's halo of ``radius`` rows): the result equals those rows of the whole filter
     bit for bit when the arrays hold every row within ``radius`` of them (or the image ends
-    there). Returns (G, H, W, C) (or (G, r1 - r0, W, C)) of ``dtype`` (float32 or float64)."""
+    there). ``variance_sum_floor``: Eq. 33's denominator is max(v_p,c + v_q,c, floor) (the
+    public code's 1e-6, ``filter.h:197``; 0, the default: no floor, only the zero-variance guard).
+    Returns (G, H, W, C) (or (G, r1 - r0, W, C)) of ``dtype`` (float32 or float64)."""
     dtype = np.dtype(dtype)
+    if not (variance_sum_floor >= 0 and np.isfinite(variance_sum_floor)):
+        raise ValueError(f"variance_sum_floor must be finite and >= 0, got {variance_sum_floor}")
     if dtype not in (np.float32, np.float64):
         raise ValueError(f"dtype must be float32 or float64, got {dtype}")
     if colour_distance not in COLOUR_DISTANCES:
@@ -300,7 +307,7 @@ def cross_bilateral_filter_vectors(values, guide, guide_variance, features, feat
     offsets = np.arange(-radius, radius + 1)
     spatial = ((np.arange(radius + 1)[:, None] ** 2 + offsets[None, :] ** 2)
                / (2.0 * float(sigma_spatial) ** 2)).astype(dtype)
-    consts = np.array([colour_scale, VARIANCE_FLOOR, _IMPOSSIBLE])
+    consts = np.array([colour_scale, VARIANCE_FLOOR, _IMPOSSIBLE, float(variance_sum_floor)])
     r0, r1 = (0, H) if rows is None else (int(rows[0]), int(rows[1]))
     if not 0 <= r0 <= r1 <= H:
         raise ValueError(f"rows {rows} outside the {H} rows of the values")
@@ -349,13 +356,23 @@ def cross_bilateral_filter(values, guide, guide_variance, features, feature_sigm
 # ---------------------------------------------------------------------------------------
 # the passes the authors' public code puts around the filter (public-code-facts.md, 1-2)
 # ---------------------------------------------------------------------------------------
+#: OpenCV's fixed Gaussian taps: ``getGaussianKernel(k, 0)`` for k = 1 .. 9 returns these tables
+#: (multiples of 1/256; measured with OpenCV 4.6, Debian 12's, which built the public code for
+#: tests/data/golden/ensemble_cpp), not the sigma rule of larger sizes
+OPENCV_SMALL_KERNELS = {1: (256,), 3: (64, 128, 64), 5: (16, 64, 96, 64, 16), 7: (8, 28, 56, 72, 56, 28, 8),
+                        9: (4, 13, 30, 51, 60, 51, 30, 13, 4)}
+
+
 def gaussian_kernel(kernel_size: int) -> np.ndarray:
-    """The normalised 1-D Gaussian of OpenCV's ``GaussianBlur`` with sigma 0 (for sizes above 7,
-    where OpenCV computes it): sigma = 0.3 ((kernel_size - 1) / 2 - 1) + 0.8 (1.7 for 9), taps
-    exp(-x^2 / (2 sigma^2)) at x = -(k - 1)/2 .. (k - 1)/2 divided by their sum. (kernel_size,)
-    float64."""
+    """The normalised 1-D Gaussian of OpenCV's ``GaussianBlur`` with sigma 0: for sizes up to 9
+    OpenCV's fixed table (:data:`OPENCV_SMALL_KERNELS`, /256; for 9 it is the sigma-1.7 Gaussian
+    rounded to 1/256, for 7 the public code's outlier blur [1, 3.5, 7, 9, 7, 3.5, 1] / 32), above 9
+    sigma = 0.3 ((kernel_size - 1) / 2 - 1) + 0.8 and taps exp(-x^2 / (2 sigma^2)) at
+    x = -(k - 1)/2 .. (k - 1)/2 divided by their sum. (kernel_size,) float64."""
     if kernel_size < 1 or kernel_size % 2 == 0:
         raise ValueError(f"kernel_size must be odd and positive, got {kernel_size}")
+    if kernel_size in OPENCV_SMALL_KERNELS:
+        return np.array(OPENCV_SMALL_KERNELS[kernel_size], dtype=np.float64) / 256.0
     sigma = 0.3 * ((kernel_size - 1) / 2 - 1) + 0.8
     x = np.arange(kernel_size) - (kernel_size - 1) / 2
     taps = np.exp(-x ** 2 / (2 * sigma ** 2))
@@ -395,6 +412,26 @@ def _reflect_index(length: int, r: int) -> np.ndarray:
     """Source index of each of the length + 2 r padded positions: BORDER_REFLECT_101 (NumPy's
     "reflect", repeated for short axes), "edge" for an axis of length 1. int64."""
     return np.pad(np.arange(length), r, mode="reflect" if length > 1 else "edge")
+
+
+def reflect101_tile(array, *, radius: int, first_row: int = 0, height: int | None = None,
+                    rows: tuple[int, int] | None = None, row_axis: int = 0) -> np.ndarray:
+    """Rows r0 - radius .. r1 + radius - 1 and columns -radius .. W + radius - 1 of an image,
+    out-of-image positions reflected without repeating the edge (OpenCV's BORDER_REFLECT_101,
+    :func:`_reflect_index`): the padding under which a clipped-window filter of those rows equals
+    the public code's reflected windows (``cv::borderInterpolate``). ``array`` holds the rows
+    ``first_row`` .. ``first_row + T - 1`` (along ``row_axis``; columns along the next axis) of
+    an image of ``height`` rows (default: the tile is the image); ``rows=(r0, r1)`` default: the
+    tile's rows. Every source row must be in the tile, else ``ValueError``. A copy, same dtype."""
+    a = np.asarray(array)
+    t_rows, width = a.shape[row_axis], a.shape[row_axis + 1]
+    height = first_row + t_rows if height is None else int(height)
+    r0, r1 = (first_row, first_row + t_rows) if rows is None else (int(rows[0]), int(rows[1]))
+    idx0 = _reflect_index(height, radius)[r0:r1 + 2 * radius] - first_row
+    if idx0.size and (idx0.min() < 0 or idx0.max() >= t_rows):
+        raise ValueError(f"reflected rows {r0}:{r1} (radius {radius}) need image rows outside the tile "
+                         f"{first_row}:{first_row + t_rows}")
+    return np.take(np.take(a, idx0, axis=row_axis), _reflect_index(width, radius), axis=row_axis + 1)
 
 
 def gaussian_blur(image, *, kernel_size: int = 9, rows: tuple[int, int] | None = None,
@@ -529,4 +566,58 @@ def remove_outliers(maps, *, radius: int = 3, threshold: float = 2.5) -> np.ndar
     if stacked.ndim != 4:
         raise ValueError(f"maps must be (G, H, W, C) or (H, W, C), got shape {np.shape(maps)}")
     out = _outlier_kernel(stacked, int(radius), float(threshold))
+    return out if a.ndim == 4 else out[0]
+
+
+def remove_outlier_pixels(maps, *, radius: int = 3, threshold: float = 2.5, first_row: int = 0,
+                          height: int | None = None, rows: tuple[int, int] | None = None) -> np.ndarray:
+    """The public code's outlier pass over filtered maps as it is written (``filter.h:83-136``,
+    ``remove_outliers<3>(f, 2.5)`` at ``main.cpp:165``), per map: with m_c and s_c the mean and
+    sqrt((1 - 1/n) (E[x^2] - E[x]^2)) of channel c over the n = (2 radius + 1)^2 - 1 other pixels
+    of the window (borders reflected, BORDER_REFLECT_101), a pixel where *any* channel has
+    |v_c - m_c| >= threshold s_c takes, in all channels, the map's (2 radius + 1)^2 Gaussian blur
+    (:func:`gaussian_blur`, OpenCV's sigma-0 kernel: for 7 x 7 its fixed taps
+    [1, 3.5, 7, 9, 7, 3.5, 1] / 32, borders reflected); the others keep their value. A negative
+    E[x^2] - E[x]^2 (rounding) gives s_c = NaN there, which no comparison passes, as in the C++.
+    Statistics and blur in float64 (the C++: float32), O((2 radius + 1)^2) per value.
+
+    maps : (G, T, W, C) or (T, W, C): the rows ``first_row`` .. ``first_row + T - 1`` of maps of
+    ``height`` rows (default: whole maps); ``rows=(r0, r1)``: the output rows (default: the
+    tile's), every row within ``radius`` of them (reflected) must be in the tile. Returns
+    (G, r1 - r0, W, C) (or without G) of the maps' dtype (float32 or float64); the caller
+    re-projects weights onto their constraint (a replaced pixel's weights need not sum to 1)."""
+    a = np.asarray(maps)
+    dtype = a.dtype if a.dtype in (np.float32, np.float64) else np.dtype(np.float64)
+    stacked = a if a.ndim == 4 else a[None]
+    if stacked.ndim != 4:
+        raise ValueError(f"maps must be (G, H, W, C) or (H, W, C), got shape {np.shape(maps)}")
+    g_maps, t_rows, width, channels = stacked.shape
+    height = first_row + t_rows if height is None else int(height)
+    r0, r1 = (first_row, first_row + t_rows) if rows is None else (int(rows[0]), int(rows[1]))
+    padded = reflect101_tile(np.asarray(stacked, np.float64), radius=radius, first_row=first_row,
+                             height=height, rows=(r0, r1), row_axis=1)
+    n_rows, k = r1 - r0, 2 * radius + 1
+    total = np.zeros((g_maps, n_rows, width, channels))
+    total_sq = np.zeros_like(total)
+    for dy in range(k):
+        for dx in range(k):
+            if dy == radius and dx == radius:
+                continue
+            v = padded[:, dy:dy + n_rows, dx:dx + width]
+            total += v
+            total_sq += v * v
+    n = k * k - 1
+    mean = total / n
+    spread = (1.0 - 1.0 / n) * (total_sq / n - mean * mean)
+    with np.errstate(invalid="ignore"):
+        sigma = np.where(spread >= 0, np.sqrt(np.maximum(spread, 0.0)), np.nan)
+        centre = padded[:, radius:radius + n_rows, radius:radius + width]
+        outlier = (np.abs(centre - mean) >= threshold * sigma).any(axis=-1)
+    out = centre.copy()
+    for g in range(g_maps):
+        if outlier[g].any():
+            blurred = gaussian_blur(stacked[g], kernel_size=k, rows=(r0, r1), first_row=first_row,
+                                    height=height)
+            out[g][outlier[g]] = blurred[outlier[g]]
+    out = out.astype(dtype)
     return out if a.ndim == 4 else out[0]

@@ -519,25 +519,41 @@ def test_filter_weights_simplex_and_constant_fixed_point(make_render_buffers):
     np.testing.assert_allclose(wc, const, atol=1e-12)
 
 
+def _reflect101(i, n):
+    """cv::borderInterpolate(i, n, BORDER_REFLECT_101) for |overshoot| < n."""
+    return -i if i < 0 else 2 * (n - 1) - i if i >= n else i
+
+
 def brute_force_weight_filter(weights, y_full, y_a, y_b, albedo, normal, *, radius, sigma_s,
-                              sigma_z, sigma_albedo, sigma_normal):
+                              sigma_z, sigma_albedo, sigma_normal, colour="sum", border="clip",
+                              den_floor=0.0):
     """Sec. 4.2 written out pixel by pixel. weights, y_*: (N, H, W, C). The guide is the raw
     combination z = sum_i w_i y_i of the full outputs, Var[z] = (z^A - z^B)^2 / 2 from the
-    half outputs; kappa (Eq. 32) with D^2 of Eq. 33 read as the mean over channels of
-    (z_p - z_q)^2 / (Var_p + Var_q) (the project's documented reading for RGB); Eq. 34 is the
-    kappa-weighted mean of the weight vectors over the clipped square window."""
+    half outputs; kappa (Eq. 32) with D^2 of Eq. 33 = sum (``colour="sum"``, the text's
+    ||.||^2) or mean over channels of (z_p - z_q)^2 / max(Var_p + Var_q, den_floor); Eq. 34 is
+    the kappa-weighted mean of the weight vectors over the square window, clipped at the
+    borders (``border="clip"``) or with out-of-image positions reflected (``"reflect101"``,
+    OpenCV's BORDER_REFLECT_101: a pixel may count twice)."""
     n, h, w, c = weights.shape
     z = np.einsum("nhwc,nhwc->hwc", weights, y_full)
     var = 0.5 * (np.einsum("nhwc,nhwc->hwc", weights, y_a)
                  - np.einsum("nhwc,nhwc->hwc", weights, y_b)) ** 2
+    reduce = np.sum if colour == "sum" else np.mean
     out = np.zeros_like(weights)
     for py in range(h):
         for px in range(w):
             total, norm = np.zeros((n, c)), 0.0
-            for qy in range(max(0, py - radius), min(h, py + radius + 1)):
-                for qx in range(max(0, px - radius), min(w, px + radius + 1)):
-                    d2 = np.mean((z[py, px] - z[qy, qx]) ** 2 / (var[py, px] + var[qy, qx]))
-                    kappa = (np.exp(-((py - qy) ** 2 + (px - qx) ** 2) / (2 * sigma_s ** 2))
+            for dy in range(-radius, radius + 1):
+                for dx in range(-radius, radius + 1):
+                    qy, qx = py + dy, px + dx
+                    if border == "clip":
+                        if not (0 <= qy < h and 0 <= qx < w):
+                            continue
+                    else:
+                        qy, qx = _reflect101(qy, h), _reflect101(qx, w)
+                    d2 = reduce((z[py, px] - z[qy, qx]) ** 2
+                                / np.maximum(var[py, px] + var[qy, qx], den_floor))
+                    kappa = (np.exp(-(dy ** 2 + dx ** 2) / (2 * sigma_s ** 2))
                              * np.exp(-d2 / (2 * sigma_z ** 2))
                              * np.exp(-np.sum((albedo[py, px] - albedo[qy, qx]) ** 2)
                                       / (2 * sigma_albedo ** 2))
@@ -547,6 +563,33 @@ def brute_force_weight_filter(weights, y_full, y_a, y_b, albedo, normal, *, radi
                     norm += kappa
             out[:, py, px] = total / norm
     return out
+
+
+def test_reflected_borders_and_the_variance_floor_match_brute_force():
+    """filter_border="reflect101" and variance_sum_floor (the public code's windows and Eq. 33
+    floor) equal the brute-force loop with reflected windows and max(v_p + v_q, floor); clipped
+    windows or no floor give another result (the test has power). Tiny variances put the floor in
+    its range."""
+    rng = np.random.default_rng(32)
+    n, h, w, radius = 3, 9, 10, 3
+    weights = rng.dirichlet(np.ones(n), size=(h, w, 3)).transpose(3, 0, 1, 2)
+    truth = 0.5 + 0.001 * rng.uniform(size=(h, w, 3))     # smooth: colour distances ~ noise
+    y_full = truth + rng.normal(0, 0.0005, (n, h, w, 3))
+    y_a = y_full + rng.normal(0, 0.0005, (n, h, w, 3))
+    y_b = y_full + rng.normal(0, 0.0005, (n, h, w, 3))
+    albedo = rng.uniform(0.4, 0.6, (h, w, 3))
+    normal = rng.normal(size=(h, w, 3)) * 0.05 + [0.0, 0.0, 1.0]
+    params = dict(sigma_s=3.0, sigma_z=2.0, sigma_albedo=0.25, sigma_normal=0.15)
+    expected = brute_force_weight_filter(weights, y_full, y_a, y_b, albedo, normal, radius=radius,
+                                         border="reflect101", den_floor=1e-6, **params)
+    got = filter_weights(weights, y_full, y_a, y_b, albedo, normal, radius=radius, sigma_spatial=3.0,
+                         sigma_color=2.0, sigma_albedo=0.25, sigma_normal=0.15,
+                         filter_border="reflect101", variance_sum_floor=1e-6)
+    np.testing.assert_allclose(got, expected, rtol=1e-9, atol=1e-12)
+    for other in (dict(border="clip", den_floor=1e-6), dict(border="reflect101", den_floor=0.0)):
+        wrong = brute_force_weight_filter(weights, y_full, y_a, y_b, albedo, normal, radius=radius,
+                                          **other, **params)
+        assert np.abs(wrong - expected).max() > 1e-3, other
 
 
 @pytest.mark.parametrize("radius", [7, 2])
@@ -615,13 +658,14 @@ def test_combine_matches_the_output_before_the_rewrite(n, solver, make_render_bu
                                                        monkeypatch):
     """tests/data/ensemble_blend_before.npz holds combine()'s full, A and B blends on this
     deterministic case as computed by the float64, whole-image code before issue 14 (commit
-    9ec8741, the paper's filter alone: PAPER_FILTER). The float32 filter and the block-wise solve (blocks of 5 rows here, so blocks
-    and filter bands both cut the 32 x 36 image) must stay within 1e-6 relMSE of it."""
+    9ec8741, the paper's filter alone with Eq. 33 averaged over the channels, our reading then).
+    The float32 filter and the block-wise solve (blocks of 5 rows here, so blocks and filter
+    bands both cut the 32 x 36 image) must stay within 1e-6 relMSE of it."""
     monkeypatch.setattr(E, "BLOCK_PIXELS", 5 * 36)
     before = np.load(BEFORE)
     buffers, inputs, _ = synthetic_scene(make_render_buffers, np.random.default_rng(100 + n),
                                          H=32, W=36, n=n)
-    out = E.combine(buffers, inputs, solver=solver, **PAPER_FILTER)
+    out = E.combine(buffers, inputs, solver=solver, **dict(PAPER_FILTER, colour_distance="mean"))
     for which in ("full", "a", "b"):
         expected = before[f"{solver}_n{n}_{which}"].astype(np.float64)
         got = out.image(which).astype(np.float64)

@@ -17,7 +17,7 @@ import qpsolvers
 from mcbench.combine.blending import blend, combine_with
 from mcbench.combine.ensemble_weights import CHANNELS, WEIGHTS, solve_weights
 from mcbench.combine.simplex_solvers import SOLVERS, objective
-from mcbench.combine.weight_filter import PAPER_FILTER, filter_weights
+from mcbench.combine.weight_filter import PAPER_FILTER, PUBLIC_CODE_FILTER, filter_weights
 from mcbench.io.buffers import Denoised
 from methods import ensemble as E
 
@@ -407,10 +407,10 @@ def test_unconstrained_filter_keeps_negative_weights(make_render_buffers):
 
 def test_defaults_are_the_measured_filter(make_render_buffers):
     """The defaults (iterative solver, simplex, per-channel weights, filter with the public
-    code's guide-variance blur and outlier removal, the measured best: methods/ensemble.py
-    docstring) give exactly the output of the explicit defaults and of the solve -> filter
-    (float32, as combine) -> blend path, bit for bit; the paper's filter alone
-    (PAPER_FILTER) is the same path without the two passes."""
+    code's details where the text is silent: guide-variance blur, its outlier pass, reflected
+    borders, the 1e-6 floor; methods/ensemble.py docstring) give exactly the output of the
+    explicit defaults and of the solve -> filter (float32, as combine) -> blend path, bit for
+    bit; the paper's filter alone (PAPER_FILTER) is the same path without them."""
     rng = np.random.default_rng(12)
     H, W, n = 14, 15, 3
     truth = rng.uniform(0.2, 1.0, (H, W, 3))
@@ -424,14 +424,15 @@ def test_defaults_are_the_measured_filter(make_render_buffers):
                          tolerance=1e-9, filter=True, weights="simplex", channels="rgb",
                          radius=7, sigma_spatial=3.0, sigma_color=2.0, sigma_albedo=0.25,
                          sigma_normal=0.15, guide_variance_blur="gaussian9",
-                         outlier_removal=True, colour_distance="mean", start="random")
+                         outlier_removal="public_code", colour_distance="sum", filter_border="reflect101",
+                         normal_features="raw", variance_sum_floor=1e-6, start="random")
     paper = E.combine(buffers, inputs, **PAPER_FILTER)
     y_full, y_a, y_b = (np.stack([np.asarray(getattr(d, k), np.float64) for d in inputs])
                         for k in ("full", "a", "b"))
     raw = solve_weights(buffers.color_a, buffers.color_b, y_a, y_b, solver="iterative")
-    for got, passes in ((default, dict(guide_variance_blur="gaussian9", outlier_removal=True)),
-                        (explicit, dict(guide_variance_blur="gaussian9", outlier_removal=True)),
-                        (paper, PAPER_FILTER)):
+    code_details = dict(guide_variance_blur="gaussian9", outlier_removal="public_code", filter_border="reflect101",
+                        variance_sum_floor=1e-6)
+    for got, passes in ((default, code_details), (explicit, code_details), (paper, PAPER_FILTER)):
         filt = filter_weights(raw, y_full, y_a, y_b, buffers.albedo, buffers.normal,
                                 dtype=np.float32, **passes)
         for which in ("full", "a", "b"):
@@ -444,8 +445,9 @@ def test_defaults_are_the_measured_filter(make_render_buffers):
         rtol=1e-6, atol=1e-7)
     # the options do change the result (the comparison above has power)
     for change in (dict(weights="unconstrained"), dict(channels="single"), dict(filter=False),
-                   dict(guide_variance_blur="none"), dict(outlier_removal=False),
-                   dict(colour_distance="sum"), dict(start="pair")):
+                   dict(guide_variance_blur="none"), dict(outlier_removal="none"),
+                   dict(outlier_removal="neighbour_mean"), dict(colour_distance="mean"),
+                   dict(filter_border="clip"), dict(normal_features="standardised"), dict(start="pair")):
         assert not np.array_equal(E.combine(buffers, inputs, **change).full, default.full), change
 
 
@@ -458,10 +460,11 @@ def test_unknown_options_name_the_choices():
 
 
 @pytest.mark.parametrize("params", [dict(PAPER_FILTER, guide_variance_blur="gaussian9"),
-                                    dict(PAPER_FILTER, outlier_removal=True),
-                                    dict(PAPER_FILTER, colour_distance="sum"),
-                                    dict(guide_variance_blur="gaussian9", outlier_removal=True,
-                                         colour_distance="sum")])
+                                    dict(PAPER_FILTER, outlier_removal="neighbour_mean"),
+                                    dict(PAPER_FILTER, outlier_removal="public_code"),
+                                    dict(PAPER_FILTER, colour_distance="mean"),
+                                    dict(PAPER_FILTER, filter_border="reflect101"),
+                                    dict(PUBLIC_CODE_FILTER)])
 def test_postprocessing_keeps_the_constraint(params, make_render_buffers):
     """The public code's passes: finite weights on the simplex (and summing to one when
     unconstrained) on the firefly case, and the filter without them is what they change."""
@@ -497,7 +500,7 @@ def test_outlier_removal_that_empties_a_pixel_keeps_the_filtered_weights():
     flat = np.full((H, W, 3), 0.5)
     kwargs = dict(sigma_spatial=0.01, radius=1)
     plain = filter_weights(w, y, y, y, flat, flat, **kwargs)
-    cleaned = filter_weights(w, y, y, y, flat, flat, outlier_removal=True, **kwargs)
+    cleaned = filter_weights(w, y, y, y, flat, flat, outlier_removal="neighbour_mean", **kwargs)
     np.testing.assert_allclose(plain, w, atol=1e-12)
     np.testing.assert_array_equal(cleaned[:, 4, 4], plain[:, 4, 4])
     assert np.isfinite(cleaned).all()

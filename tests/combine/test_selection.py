@@ -181,7 +181,7 @@ def test_post_filter_and_blend_are_the_ensembles(make_render_buffers):
     p = FILTER_PARAMETERS
     filtered = cross_bilateral_filter(np.moveaxis(s, 3, 1).reshape(n * c, h, w), guide, variance,
                                       [buffers.albedo, buffers.normal], [p["sigma_albedo"], p["sigma_normal"]],
-                                      p["sigma_spatial"], p["sigma_color"], p["radius"])
+                                      p["sigma_spatial"], p["sigma_color"], p["radius"], colour_distance="sum")
     clipped = np.maximum(np.moveaxis(filtered.reshape(n, c, h, w), 1, 3), 0.0)
     assert np.array_equal(soft, clipped / clipped.sum(axis=0, keepdims=True))
 
