@@ -9,7 +9,8 @@ an ensemble job, with its wall time, CPU seconds (user + system: what a loaded m
 least) and peak RSS (``os.wait4`` of the child). Printed:
 
 1. 1024^2, N = 2, 4, 8, ``solver=iterative`` and ``exact``: wall, peak RSS and the phases, beside
-   the authors' C++ program on the same kind of inputs (``../shared/study/public-code-facts.md``:
+   the authors' C++ program run on the same case in the same minute with ``--cpp PATH`` (else quoted from
+   ``../shared/study/public-code-facts.md``, an earlier run:
    9.0 / 13.0 / 20.4 s, 274 / 395 / 635 MiB) as ratios (target: wall <= 0.25x, RSS <= 1.2x).
    Three jobs per line, one after the other: ``rows`` (the job reading the render and the
    inputs by rows, the path proposed for ``run_methods``), ``eager`` (every layer read whole,
@@ -177,6 +178,35 @@ def run_job(render: Path, inputs: list[Path], output: Path, *, script: Path | No
                 rss_mib=usage.ru_maxrss / 1024.0, load=os.getloadavg()[0])
 
 
+def run_cpp(program: str, render: Path, inputs: list[Path], folder: Path, *, solver: str = "brute") -> dict:
+    """The authors' program (``--cpp``) on the same case: its inputs written once in its layout
+    (:func:`mcbench.io.exchange.write_case`, not timed), then one process ``-m d0,d1,... -s
+    solver -q`` with its wall seconds, CPU seconds and peak RSS (MiB) from ``os.wait4``, as
+    :func:`run_job` measures ours, and the 1-minute load after it."""
+    from mcbench.io.buffers import Denoised
+    from mcbench.io.exchange import write_case as write_authors_case
+    from mcbench.io.exr import read_layers
+
+    names = [f"d{i}" for i in range(len(inputs))]
+    if not (folder / "colorA.exr").exists():
+        layers = read_layers(render, ["color_a", "color_b", "albedo", "normal"])
+        outputs = {}
+        for name, path in zip(names, inputs):
+            images = read_layers(path, ["color", "color_a", "color_b"])
+            outputs[name] = Denoised(images["color"], images["color_a"], images["color_b"])
+        write_authors_case(folder, layers, outputs, extra_files=False)
+    command = [program, "-i", str(folder), "-o", str(folder / "out"), "-m", ",".join(names), "-s", solver, "-q"]
+    start = time.perf_counter()
+    child = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+                             env=dict(os.environ, OPENCV_IO_ENABLE_OPENEXR="1"))
+    _, status, usage = os.wait4(child.pid, 0)
+    wall = time.perf_counter() - start
+    if os.waitstatus_to_exitcode(status):
+        raise RuntimeError(f"{' '.join(command)} failed:\n{child.stderr.read()[-3000:]}")
+    return dict(wall_s=wall, cpu_s=usage.ru_utime + usage.ru_stime, rss_mib=usage.ru_maxrss / 1024.0,
+                load=os.getloadavg()[0])
+
+
 def fitted_exponent(xs, ys) -> float:
     """Least-squares slope of log y against log x."""
     return float(np.polyfit(np.log(xs), np.log(ys), 1)[0])
@@ -186,8 +216,9 @@ def numpy_weight_filter(weights, y_full, y_a, y_b, albedo, normal, *, radius=7, 
                         sigma_color=2.0, sigma_albedo=0.25, sigma_normal=0.15):
     """Eq. 32-34 in vectorised NumPy (float64), the baseline for the numba filter: for each window
     offset the kernel of every pixel at once on zero-padded shifted images (out-of-image
-    neighbours get kappa 0); the colour distance is the channel mean of Eq. 33 (zero-variance
-    guard as :mod:`mcbench.filters.bilateral`). weights, y_*: (N, H, W, C); returns (N, H, W, C)."""
+    neighbours get kappa 0); the colour distance of Eq. 33 (zero-variance
+    guard as :mod:`mcbench.filters.bilateral`) summed over the channels (Eq. 33, the paper's filter
+    alone, ``weight_filter.PAPER_FILTER``). weights, y_*: (N, H, W, C); returns (N, H, W, C)."""
     z = np.einsum("nhwc,nhwc->hwc", weights, y_full)
     var = 0.5 * (np.einsum("nhwc,nhwc->hwc", weights, y_a) - np.einsum("nhwc,nhwc->hwc", weights, y_b)) ** 2
     n, h, w, c = weights.shape
@@ -209,7 +240,7 @@ def numpy_weight_filter(weights, y_full, y_a, y_b, albedo, normal, *, radius=7, 
             safe = den > 1e-20
             term = np.where(safe, num / np.where(safe, den, 1.0), np.where(num == 0, 0.0, np.inf))
             e = ((dy * dy + dx * dx) / (2 * sigma_spatial ** 2)
-                 + term.mean(axis=2, keepdims=True) / (2 * sigma_color ** 2)
+                 + term.sum(axis=2, keepdims=True) / (2 * sigma_color ** 2)
                  + ((albedo - ap[window]) ** 2).sum(2, keepdims=True) / (2 * sigma_albedo ** 2)
                  + ((normal - np_[window]) ** 2).sum(2, keepdims=True) / (2 * sigma_normal ** 2))
             kappa = np.exp(-e) * inside[window]
@@ -248,6 +279,10 @@ def main(argv=None):
     ap.add_argument("--baseline", default=BASELINE_COMMIT,
                     help=f"commit whose job runs beside today's in 1. (default {BASELINE_COMMIT})")
     ap.add_argument("--no-baseline", action="store_true", help="skip the baseline and eager jobs")
+    ap.add_argument("--cpp", default=os.environ.get("MCBENCH_ENSEMBLE_CPP"),
+                    help="the authors' built EnsembleDenoising (tests/data/golden/ensemble_cpp/README.md): "
+                         "run beside each job of 1. on the same case, in the same minute (default "
+                         "$MCBENCH_ENSEMBLE_CPP; without it the C++ figures are quoted from an earlier run)")
     args = ap.parse_args(argv)
     sys.path.insert(0, str(HERE))
     main_size = 256 if args.quick else 1024
@@ -281,7 +316,9 @@ def main(argv=None):
             results[key] = run_job(render, inputs, root / "out.exr", solver=solver)
         return results[key]
 
-    print(f"\n1. whole process at {main_size}^2 (C++ reference: public-code-facts.md, 1024^2; target "
+    cpp_source = (f"measured beside each job: {args.cpp}, solver brute" if args.cpp
+                  else "quoted from public-code-facts.md, 1024^2, an earlier run")
+    print(f"\n1. whole process at {main_size}^2 (C++ {cpp_source}; target "
           f"wall <= {WALL_TARGET}x, RSS <= {RSS_TARGET}x)")
     print(f"{'N':>2} {'solver':>9} {'job':>5} {'wall_s':>7} {'cpu_s':>6} {'import':>7} {'read':>6} "
           f"{'jit':>5} {'combine':>8} {'write':>6} {'RSS_MiB':>8} {'C++_s':>6} {'x_C++':>6} "
@@ -289,8 +326,15 @@ def main(argv=None):
     worst = 0.0
     for n in ns:
         for solver in ("iterative", "exact"):
-            cpp_s, cpp_mib = CPP_REFERENCE[n]
             render, inputs = case(main_size, n)
+            if args.cpp:
+                cpp = run_cpp(args.cpp, render, inputs, root / f"cpp_s{main_size}_n{n}")
+                cpp_s, cpp_mib = cpp["wall_s"], cpp["rss_mib"]
+                print(f"{n:>2} {'C++':>9} {'brute':>5} {cpp['wall_s']:7.2f} {cpp['cpu_s']:6.2f} "
+                      f"{'':>7} {'':>6} {'':>5} {'':>8} {'':>6} {cpp['rss_mib']:8.0f} {'':>6} {'':>6} "
+                      f"{'':>7} {'':>5} {cpp['load']:5.2f}", flush=True)
+            else:
+                cpp_s, cpp_mib = CPP_REFERENCE[n]
             runs = {"rows": job(main_size, n, solver)}
             if base_script:
                 runs["eager"] = run_job(render, inputs, root / "eager.exr", eager=True,
