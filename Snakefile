@@ -34,6 +34,7 @@ include: "workflow/rules/comparisons.smk"
 include: "workflow/rules/oracle.smk"
 include: "workflow/rules/study.smk"
 include: "workflow/rules/progressive.smk"
+include: "workflow/rules/export.smk"
 
 
 rule all:
