@@ -33,7 +33,7 @@ from mcbench import BenchError
 __all__ = ["BASES", "BASE_LABELS", "LEARNED_IDS", "CLASSICAL_IDS", "DC_IDS", "DC_COMBINERS", "ENSEMBLES",
            "Candidate", "POOL", "POOL_IDS", "ENSEMBLE_IDS", "candidate", "candidate_name", "pool_names",
            "members_of", "is_homogeneous", "has_dc", "PAPER_TABLE3", "PAPER_TABLE3_SPP", "PAPER_RECOMMENDATIONS",
-           "SPP_BANDS", "spp_band_members", "pool_methods", "expand_methods", "PoolError"]
+           "PAPER_NAMED_IDS", "FEWER_THAN", "SPP_BANDS", "spp_band_members", "pool_methods", "expand_methods", "PoolError"]
 
 
 class PoolError(BenchError):
@@ -173,12 +173,18 @@ _T3 = {
 PAPER_TABLE3: dict[int, dict[object, float]] = {
     cid: {**dict(zip(PAPER_TABLE3_SPP, row[:-1])), "Avg.": row[-1]} for cid, row in _T3.items()}
 
-# The paper's recommendations (Sec. 5.3.5-5.3.6), by ensemble ID.
+# The paper's recommendations (Sec. 5.3.5-5.3.6), by ensemble ID. Sec. 5.3.6: #27 "the overall
+# best choice"; "if users would like to use fewer base denoisers, combination #20 ... is also a
+# good choice" -- read by the study both as the second place overall and as the best ensemble
+# with fewer members than #27 (``fewer``: size < FEWER_THAN).
 PAPER_RECOMMENDATIONS: dict[str, dict[object, object]] = {
     "size": {2: 10, 3: 20, 4: 27},
     "band": {"low": 20, "medium": 27, "high": 18},
-    "overall": {"best": 27, "second": 20},
+    "overall": {"best": 27, "second": 20, "fewer": 20},
 }
+FEWER_THAN = 4                  # the size of #27, the paper's overall best
+# The ensembles the paper itself names (source "paper"; 12 of the 31).
+PAPER_NAMED_IDS: tuple[int, ...] = tuple(i for i, (_, source) in ENSEMBLES.items() if source == "paper")
 # spp bands of Sec. 5.3.5, inclusive: "Low (4-32 spp)", "Medium (32-256 spp)", "High (>256 spp)".
 # 32 spp is in both low and medium, as the paper's text has it (our reading, kept literal).
 SPP_BANDS: dict[str, tuple[float, float]] = {"low": (4, 32), "medium": (32, 256), "high": (257, math.inf)}
