@@ -13,6 +13,12 @@ A method module declares
 * optionally ``RENDER_LAYERS``: the render layers the method reads (a tuple of names; absent:
   all). A job whose methods all declare it reads only their union (``mcbench.pipeline.methods``),
   which saves most of a large render's memory.
+* optionally ``check_config(params, *, config_key)``: checks of param values that no annotation
+  describes (raise ``ValueError`` naming ``config_key``), run when the DAG is parsed;
+  ``WARM_UP = False``: no untimed warm-up run on a crop before the timed run; ``TIMES_ITSELF =
+  True`` with ``program_seconds()``: the recorded time is what it reports (an external program's
+  wall time). A keyword parameter ``name`` receives the method's config name unless the config
+  sets it (``methods/external.py`` names its files with it).
 
 Config parameters are the keyword-only parameters of ``denoise``/``combine``, each annotated
 (``int``, ``float``, ``bool``, ``str`` or ``typing.Literal[...]`` for a choice): when the DAG is
@@ -171,6 +177,12 @@ def check_params(module: ModuleType, params: dict, *, config_key: str) -> None:
     missing = [key for key, p in known.items() if p.default is p.empty and key not in params]
     if missing:
         raise BenchError(f"{config_key}: {name} needs parameter(s) {', '.join(missing)}")
+    extra_check = getattr(module, "check_config", None)
+    if callable(extra_check):     # a method's own checks of values no annotation describes
+        try:
+            extra_check(params, config_key=config_key)
+        except ValueError as exc:
+            raise BenchError(str(exc)) from None
 
 
 def _default_label(module: ModuleType, inputs: list[str], params: dict) -> str:

@@ -51,7 +51,7 @@ def run_methods(entries: list[dict], render_path: str, *, scene: str = "", spp: 
     method. Methods are imported once per process (a learned method's torch import is paid once
     per batch, not once per method).
     """
-    from mcbench.pipeline.registry import load_method
+    from mcbench.pipeline.registry import load_method, method_parameters
 
     modules = {entry["module"]: load_method(entry["module"], config_key=f"method '{entry['name']}'")
                for entry in entries}
@@ -80,13 +80,17 @@ def run_methods(entries: list[dict], render_path: str, *, scene: str = "", spp: 
         # untimed run on a corner crop: compiles / loads the method's JIT kernels (numba's cache
         # load alone can cost more than a small case's compute) and first-call set-up, once per
         # module and parameters in the process (the 31 pool ensembles share one)
+        if "name" in method_parameters(module) and "name" not in params:
+            params["name"] = method          # a method that names its files gets its config name
         key = (module_name, json.dumps(params, sort_keys=True, default=str))
-        if key not in warmed:
+        if key not in warmed and getattr(module, "WARM_UP", True):
             _apply(module, *_corner_crop(buffers, inputs), params)
             warmed.add(key)
         start = time.perf_counter()
         result = _apply(module, buffers, inputs, params)
         seconds = time.perf_counter() - start
+        if getattr(module, "TIMES_ITSELF", False):      # e.g. an external program: its own wall time
+            seconds = float(module.program_seconds())
         layers = result.layers()
         bad = {name: layer for name, layer in layers.items() if not np.all(np.isfinite(layer))}
         if bad:

@@ -11,7 +11,7 @@ from __future__ import annotations
 from types import ModuleType
 from typing import Callable
 
-__all__ = ["available_methods", "load_method", "config_method_table", "single_image_function",
+__all__ = ["available_methods", "load_method", "method_parameters", "config_method_table", "single_image_function",
            "available_scenes", "load_scene"]
 
 
@@ -28,6 +28,13 @@ def load_method(name: str, kind: str | None = None, config_key: str = "config") 
     import methods
 
     return methods.load_method(name, kind, config_key)
+
+
+def method_parameters(module: ModuleType) -> dict:
+    """A method module's config parameters (:func:`methods.method_parameters`)."""
+    import methods
+
+    return methods.method_parameters(module)
 
 
 def config_method_table(config: dict, *, is_learned: Callable[[ModuleType], bool]) -> dict:

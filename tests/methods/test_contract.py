@@ -10,6 +10,8 @@ makes the test fail until the entry is removed).
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -122,12 +124,18 @@ def hard_case(case: str, build):
     raise ValueError(f"unknown hard case {case!r}")
 
 
+#: params a method cannot run without (no default): the external program runs the example's box filter
+REQUIRED_PARAMS = {"external": {"command": ["{python}", str(Path(__file__).resolve().parents[2] / "examples" / "box_denoiser"
+                                                            / "box_filter.py"),
+                                            "--in", "{input_dir}", "--out", "{output_dir}", "--name", "{name}"]}}
+
+
 def run(module, buffers, inputs) -> Denoised:
     """A denoiser on ``buffers``; a combiner on ``buffers`` and ``inputs`` (its first ``INPUTS``
     when it declares how many it takes, e.g. the deep combiner's one)."""
     if module.KIND == "combiner":
         return module.combine(buffers, inputs[:getattr(module, "INPUTS", len(inputs))])
-    return module.denoise(buffers)
+    return module.denoise(buffers, **REQUIRED_PARAMS.get(module.__name__.split(".")[-1], {}))
 
 
 def assert_valid_output(result, shape):
