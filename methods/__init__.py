@@ -17,8 +17,10 @@ A method module declares
   describes (raise ``ValueError`` naming ``config_key``), run when the DAG is parsed;
   ``WARM_UP = False``: no untimed warm-up run on a crop before the timed run; ``TIMES_ITSELF =
   True`` with ``program_seconds()``: the recorded time is what it reports (an external program's
-  wall time). A keyword parameter ``name`` receives the method's config name unless the config
-  sets it (``methods/external.py`` names its files with it).
+  wall time). Keyword parameters ``name``, ``scene`` and ``spp`` receive the method's config name
+  and the case unless the config sets them (``methods/external.py``, ``methods/precomputed.py``);
+  ``required_files(params, *, name, scene, spp)``: files each case needs, checked when the DAG is
+  parsed (``mcbench.pipeline.plan``).
 
 Config parameters are the keyword-only parameters of ``denoise``/``combine``, each annotated
 (``int``, ``float``, ``bool``, ``str`` or ``typing.Literal[...]`` for a choice): when the DAG is

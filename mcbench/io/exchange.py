@@ -29,8 +29,8 @@ import OpenEXR
 
 from mcbench.io.exr import ExrError, check_finite
 
-__all__ = ["RENDER_FILES", "EXTRA_RENDER_FILES", "write_image", "read_image", "denoiser_files",
-           "write_case", "check_denoiser_name"]
+__all__ = ["RENDER_FILES", "EXTRA_RENDER_FILES", "RESULT_PATTERN", "write_image", "read_image", "denoiser_files",
+           "write_case", "check_denoiser_name", "check_result_pattern", "result_files"]
 
 #: Files of the render that the authors' program reads (file name -> our render layer).
 RENDER_FILES = {"colorA.exr": "color_a", "colorB.exr": "color_b", "albedo.exr": "albedo",
@@ -39,6 +39,10 @@ RENDER_FILES = {"colorA.exr": "color_a", "colorB.exr": "color_b", "albedo.exr": 
 EXTRA_RENDER_FILES = {"color.exr": "color", "variance.exr": "variance", "depth.exr": "depth"}
 #: A denoiser's files in its folder ``<d>/``: file name pattern -> our output image.
 DENOISER_FILES = {"{name}.exr": "full", "{name}A.exr": "a", "{name}B.exr": "b"}
+#: where results made elsewhere lie, per case (the authors' naming under a scene/spp tree);
+#: ``{image}`` is "" for the full image, "A" and "B" for the halves
+RESULT_PATTERN = "{dir}/{scene}/spp{spp}/{name}/{name}{image}.exr"
+_RESULT_FIELDS = ("dir", "scene", "spp", "name", "image")
 
 
 def check_denoiser_name(name: str) -> str:
@@ -138,3 +142,29 @@ def write_case(folder: str | os.PathLike, render_layers: Mapping[str, np.ndarray
     for path, image in images.items():
         write_image(path, image)
     return list(images)
+
+
+def check_result_pattern(pattern: str, *, config_key: str = "params.pattern") -> str:
+    """``pattern`` if its placeholders are among dir, scene, spp, name, image and it holds
+    ``{image}`` (the three results need three files); else ``ValueError`` naming ``config_key``."""
+    import string
+
+    if not isinstance(pattern, str):
+        raise ValueError(f"{config_key}: must be a string like {RESULT_PATTERN!r}, got {pattern!r}")
+    try:
+        fields = [f for _, f, _, _ in string.Formatter().parse(pattern) if f is not None]
+    except ValueError as exc:
+        raise ValueError(f"{config_key}: {pattern!r} is not a valid template ({exc})") from None
+    unknown = [f for f in fields if f not in _RESULT_FIELDS]
+    if unknown or "image" not in fields:
+        raise ValueError(f"{config_key}: {pattern!r} must use only {{{'}, {'.join(_RESULT_FIELDS)}}} and hold "
+                         f"{{image}} (\"\", \"A\", \"B\"); unknown: {unknown}")
+    return pattern
+
+
+def result_files(pattern: str, *, dir: str, scene: str, spp: int, name: str) -> dict[str, Path]:
+    """The files of one case's results by ``pattern`` (:data:`RESULT_PATTERN`): ``{"full", "a",
+    "b"}`` -> path."""
+    check_result_pattern(pattern)
+    return {image: Path(pattern.format(dir=dir, scene=scene, spp=spp, name=name, image=suffix))
+            for image, suffix in (("full", ""), ("a", "A"), ("b", "B"))}

@@ -80,8 +80,9 @@ def run_methods(entries: list[dict], render_path: str, *, scene: str = "", spp: 
         # untimed run on a corner crop: compiles / loads the method's JIT kernels (numba's cache
         # load alone can cost more than a small case's compute) and first-call set-up, once per
         # module and parameters in the process (the 31 pool ensembles share one)
-        if "name" in method_parameters(module) and "name" not in params:
-            params["name"] = method          # a method that names its files gets its config name
+        for key, value in (("name", method), ("scene", scene), ("spp", spp)):
+            if key in method_parameters(module) and key not in params:
+                params[key] = value          # a method that names its files gets its name and case
         key = (module_name, json.dumps(params, sort_keys=True, default=str))
         if key not in warmed and getattr(module, "WARM_UP", True):
             _apply(module, *_corner_crop(buffers, inputs), params)

@@ -104,6 +104,7 @@ def _plan(config: dict, is_learned) -> dict:
                  f"Partial pool: {len(ranked)} of the 39 candidates (study.ensembles), {len(ranked) + 1} entries "
                  f"with the noisy input, so the scores are on another scale than the paper's 40-entry Table 3.")
     _check_comparisons(methods)
+    _check_case_files(methods, scenes, sorted(config["spp"]))
     # progressive denoising's entries (combiners of module progressive) -> the method each mixes
     # with the noisy render (progressive.smk)
     progressive = {name: spec["inputs"][0] for name, spec in methods.items() if spec["module"] == "progressive"}
@@ -157,6 +158,24 @@ def _plan(config: dict, is_learned) -> dict:
         "oracle_scene": oracle_scene, "oracle_downscale": oracle_downscale,
         "progressive_scene": progressive_scene, "progressive_downscale": progressive_downscale,
     }
+
+
+def _check_case_files(methods: dict, scenes: list[str], spps: list[int]) -> None:
+    """Files a method needs per case (its ``required_files``, e.g. precomputed results) exist for
+    every (scene, spp) of the config; else a BenchError naming the method and the first missing
+    files, before any job."""
+    from pathlib import Path
+
+    for name, spec in methods.items():
+        required = getattr(load_method(spec["module"]), "required_files", None)
+        if not callable(required):
+            continue
+        missing = [path for scene in scenes for spp in spps
+                   for path in required(spec["params"], name=name, scene=scene, spp=spp) if not Path(path).is_file()]
+        if missing:
+            shown = ", ".join(missing[:5]) + (f" and {len(missing) - 5} more" if len(missing) > 5 else "")
+            raise BenchError(f"method '{name}' ({spec['module']}): {len(missing)} file(s) of its cases are missing: "
+                             f"{shown}")
 
 
 def _reference_spp_table(config: dict, scenes: list[str], chunks: int) -> dict[str, int]:
