@@ -27,7 +27,7 @@ from typing import Mapping
 import numpy as np
 import OpenEXR
 
-from mcbench.io.exr import ExrError, check_finite
+from mcbench.io.exr import ExrError, check_finite, write_exr_atomically
 
 __all__ = ["RENDER_FILES", "EXTRA_RENDER_FILES", "RESULT_PATTERN", "write_image", "read_image", "denoiser_files",
            "write_case", "check_denoiser_name", "check_result_pattern", "result_files"]
@@ -67,20 +67,8 @@ def write_image(path: str | os.PathLike, image: np.ndarray) -> None:
     check_finite(path, {"image": array})
     channels = {"RGB": array} if array.ndim == 3 else {"Y": array}
     header = {"compression": OpenEXR.NO_COMPRESSION, "type": OpenEXR.scanlineimage}
-
-    def save(tmp):
-        try:
-            with OpenEXR.File(header, channels) as exr:
-                exr.write(tmp)
-        except OSError:
-            raise
-        except Exception as exc:   # the bindings raise a bare Exception, e.g. on a full disk
-            raise ExrError(f"{path}: cannot write EXR ({exc})") from exc
-
-    from mcbench.io.tables import write_atomically
-
     path.parent.mkdir(parents=True, exist_ok=True)
-    write_atomically(path, save, suffix=".tmp.exr")
+    write_exr_atomically(path, header, channels)
 
 
 def read_image(path: str | os.PathLike) -> np.ndarray:

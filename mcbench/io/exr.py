@@ -23,7 +23,7 @@ from mcbench import BenchError
 from mcbench.io.checksums import CHECKSUM_ATTRIBUTE, ChecksumError, exr_checksum, layer_crc
 
 __all__ = ["ExrError", "NonFiniteError", "read_layers", "write_layers", "read_metadata", "check_finite",
-           "check_resolution",
+           "check_resolution", "write_exr_atomically",
            "LayerRows", "layer_rows"]
 
 
@@ -73,6 +73,13 @@ def write_layers(path: str | os.PathLike, layers: dict[str, np.ndarray],
         width=shape[1], height=shape[0], metadata=attributes,
         layer_crcs={name: layer_crc(array) for name, array in channels.items()})
     header.update(attributes)
+    write_exr_atomically(path, header, channels)
+
+
+def write_exr_atomically(path: str | os.PathLike, header: dict, channels: dict) -> None:
+    """Write an EXR of ``header`` and ``channels`` (the OpenEXR bindings' dicts) to ``path`` through
+    a temporary file in its folder and a rename; a failure of the bindings (e.g. a full disk,
+    where they raise a bare Exception) becomes :class:`ExrError` naming the file."""
     def save(tmp):
         try:
             with OpenEXR.File(header, channels) as exr:

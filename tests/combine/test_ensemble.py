@@ -565,20 +565,28 @@ def brute_force_weight_filter(weights, y_full, y_a, y_b, albedo, normal, *, radi
     return out
 
 
+def filter_case(rng, truth, *, n, noise):
+    """Random simplex weights (n, H, W, 3), base outputs full/A/B around ``truth`` (H, W, 3) with
+    ``noise`` std, albedo in [0.4, 0.6] and normals near +z: the weight filter's inputs."""
+    h, w, _ = truth.shape
+    weights = rng.dirichlet(np.ones(n), size=(h, w, 3)).transpose(3, 0, 1, 2)
+    y_full = truth + rng.normal(0, noise, (n, h, w, 3))
+    y_a = y_full + rng.normal(0, noise, (n, h, w, 3))
+    y_b = y_full + rng.normal(0, noise, (n, h, w, 3))
+    albedo = rng.uniform(0.4, 0.6, (h, w, 3))
+    normal = rng.normal(size=(h, w, 3)) * 0.05 + [0.0, 0.0, 1.0]
+    return weights, y_full, y_a, y_b, albedo, normal
+
+
 def test_reflected_borders_and_the_variance_floor_match_brute_force():
     """filter_border="reflect101" and variance_sum_floor (the public code's windows and Eq. 33
     floor) equal the brute-force loop with reflected windows and max(v_p + v_q, floor); clipped
     windows or no floor give another result (the test has power). Tiny variances put the floor in
     its range."""
+    radius = 3
     rng = np.random.default_rng(32)
-    n, h, w, radius = 3, 9, 10, 3
-    weights = rng.dirichlet(np.ones(n), size=(h, w, 3)).transpose(3, 0, 1, 2)
-    truth = 0.5 + 0.001 * rng.uniform(size=(h, w, 3))     # smooth: colour distances ~ noise
-    y_full = truth + rng.normal(0, 0.0005, (n, h, w, 3))
-    y_a = y_full + rng.normal(0, 0.0005, (n, h, w, 3))
-    y_b = y_full + rng.normal(0, 0.0005, (n, h, w, 3))
-    albedo = rng.uniform(0.4, 0.6, (h, w, 3))
-    normal = rng.normal(size=(h, w, 3)) * 0.05 + [0.0, 0.0, 1.0]
+    truth = 0.5 + 0.001 * rng.uniform(size=(9, 10, 3))     # smooth: colour distances ~ noise
+    weights, y_full, y_a, y_b, albedo, normal = filter_case(rng, truth, n=3, noise=0.0005)
     params = dict(sigma_s=3.0, sigma_z=2.0, sigma_albedo=0.25, sigma_normal=0.15)
     expected = brute_force_weight_filter(weights, y_full, y_a, y_b, albedo, normal, radius=radius,
                                          border="reflect101", den_floor=1e-6, **params)
@@ -598,14 +606,7 @@ def test_filter_weights_matches_eq32_34_brute_force(radius):
     sigma_albedo 0.25, sigma_normal 0.15) equals the brute-force loop; the data put every
     factor of kappa in its sensitive range, so a wrong guide, Var factor or sigma fails."""
     rng = np.random.default_rng(31)
-    n, h, w = 3, 9, 11
-    weights = rng.dirichlet(np.ones(n), size=(h, w, 3)).transpose(3, 0, 1, 2)
-    truth = rng.uniform(0.2, 1.0, (h, w, 3))
-    y_full = truth + rng.normal(0, 0.05, (n, h, w, 3))
-    y_a = y_full + rng.normal(0, 0.05, (n, h, w, 3))
-    y_b = y_full + rng.normal(0, 0.05, (n, h, w, 3))
-    albedo = rng.uniform(0.4, 0.6, (h, w, 3))
-    normal = rng.normal(size=(h, w, 3)) * 0.05 + [0.0, 0.0, 1.0]
+    weights, y_full, y_a, y_b, albedo, normal = filter_case(rng, rng.uniform(0.2, 1.0, (9, 11, 3)), n=3, noise=0.05)
     paper = dict(sigma_s=3.0, sigma_z=2.0, sigma_albedo=0.25, sigma_normal=0.15)
     expected = brute_force_weight_filter(weights, y_full, y_a, y_b, albedo, normal,
                                          radius=radius, **paper)
