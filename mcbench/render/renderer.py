@@ -47,6 +47,7 @@ from mcbench.io.buffers import ALL_LAYERS, BINS
 from mcbench.progress import eta_seconds, progress_line
 from mcbench.render.seeds import SCALAR_BLOCK_SIZE, mitsuba_seed, render_seed
 from mcbench.render.variants import pick_variant, set_threads
+from mcbench.render.xml_scenes import XmlScene, load_xml_scene
 
 __all__ = ["RenderError", "MAX_WAVEFRONT", "passes_for", "load_scene_dict", "forget_scene",
            "render_scene_sums", "render_dict_buffers", "render_buffers", "render_reference_chunk",
@@ -138,7 +139,14 @@ def _loaded(key: str, build: Callable[[], dict], label: str, width: int, height:
 
     cache_key = (key, width, height, variant)
     if cache_key not in _scene_cache:
-        desc, integrator = _wrapped(build(), label, width, height, variant)
+        desc = build()
+        if isinstance(desc, XmlScene):        # a Mitsuba XML file (mcbench.render.xml_scenes)
+            if (desc.width, desc.height) != (width, height):
+                raise RenderError(f"scene '{label}': build({width}, {height}) made a {desc.width}x{desc.height} film")
+            _scene_cache[cache_key] = load_xml_scene(
+                desc, aovs=AOVS, block_size=SCALAR_BLOCK_SIZE if variant.startswith("scalar") else None)
+            return _scene_cache[cache_key]
+        desc, integrator = _wrapped(desc, label, width, height, variant)
         try:
             _scene_cache[cache_key] = (mi.load_dict(desc), integrator)
         except Exception as exc:

@@ -134,8 +134,9 @@ def test_bad_commands_stop_at_parse_time_naming_the_key(command, message):
 
 @pytest.mark.slow
 def test_the_example_ranks_an_external_denoiser_end_to_end(tmp_path):
-    """examples/box_denoiser/config.yaml at the smoke scale: the program runs on every case, is
-    ranked in the extra-methods tables beside the pool and combined with OIDN."""
+    """examples/box_denoiser/config.yaml at the smoke scale: the program runs on every case (the
+    Mitsuba XML scene scenes/xml_room.xml among them: rendered, referenced and ranked like the
+    Python scenes), is ranked in the extra-methods tables beside the pool and combined with OIDN."""
     import yaml
 
     from tests.conftest import run_snakemake
@@ -150,6 +151,7 @@ def test_the_example_ranks_an_external_denoiser_end_to_end(tmp_path):
             assert (results / "outputs" / scene / f"spp{spp}" / "box.exr").is_file()
             record = json.loads((results / "outputs" / scene / f"spp{spp}" / "box.json").read_text())
             assert record["seconds"] > 0
+    assert "xml_room" in config["scenes"] and (results / "references" / "xml_room.exr").is_file()
     extras = (results / "tables" / "extras_relmse.md").read_text()
     assert "Box filter 5x5 (external example)" in extras and "Ensemble OIDN+Box (external)" in extras
     assert sys.executable  # the {python} of the example is this interpreter
