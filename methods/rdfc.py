@@ -24,14 +24,16 @@ descriptions; the paper text was not available, so "Sec." references are to its 
    In the first pass the colour weights depend on y; :func:`candidate_filters` returns the
    exact derivative ``dF_p/dy_p = (w_pp + sum_q dw_pq/dy_p (y_q - F_p)) / sum_q w_pq``, where
    ``dw_pq/dy_p`` collects the two patch terms in which y_p enters d_c^2(p, q) (position n = 0
-   and n = p - q).
+   and n = p - q); by default (``CLAMP_DERIVATIVE``, the authors' rule) where any channel of
+   it leaves [0, 1], all three are replaced by w_pp / sum w.
 5. **Selection** (Sec. 5.2): the per-pixel SURE maps (summed over channels) are NL-means
    filtered, the per-pixel argmin gives binary selection maps, those are filtered with the same
    filter and used as blending weights of the candidates.
-6. **Second pass** (Sec. 5.3): the candidates are recomputed with colour weights taken from
-   the first-pass output of the *other* half buffer (its propagated variance as guide
-   variance). Weights then do not depend on the filtered buffer, so dF_p/dy_p = w_pp / sum w
-   and SURE is exact; selection as in 5.
+6. **Second pass** (default ``second_pass="authors"``, fbksd multifilm.cpp:409-423): the two
+   pass-1 buffers are filtered once more with shared colour weights from their mean (variance
+   (A~ - B~)^2 / 4, pyramid-smoothed), f = 3, k_c = 0.45, window r // 2, tau = 1e-4, no selection
+   (:func:`authors_second_pass`). ``"ours"`` (the earlier default): the noisy half is filtered
+   again, three candidates guided by the *other* half's pass-1 output, SURE and selection as in 5.
 
 Half buffers A and B are each denoised this way (they are the internal buffers RDFC needs
 for the feature variance and the second pass); ``Denoised.a``/``.b`` are the two results and
@@ -39,9 +41,9 @@ for the feature variance and the second pass); ``Denoised.a``/``.b`` are the two
 
 Constants (published ones first, then ours with the reason):
 
-* r = 10, k_c = 0.45, k_f = 0.6, FIRST f = 1, SECOND f = 3, THIRD k_c = inf, tau = 1e-3,
-  alpha = 1 (variance cancellation), prefilter r = 5, f = 3, k = 0.5: published values as
-  reported in RDFC / NFOR descriptions (the prefilter triple is the one NFOR reuses from RDFC).
+* k_c = 0.45, k_f = 0.6, FIRST f = 1, SECOND f = 3, THIRD k_c = inf, tau = 1e-3, alpha = 1:
+  the authors' code. r = 10: their paper scenes (README "wnd_rad [10]"); fbksd's driver uses 20
+  (``radius=20``, about 3x the time). Prefilter r = 5, f = 3 as theirs, k = 0.5 (theirs 1).
 * eps = 1e-10 in the colour-distance denominator: guards the zero-variance case (same value
   as mcbench.filters.nlmeans).
 * Feature gradient ``|Grad_j(p)|^2``: per axis the smaller of the two one-sided differences
@@ -62,11 +64,11 @@ Constants (published ones first, then ours with the reason):
 * Propagated output variance ``sum w^2 V / (sum w)^2`` ignores weight/colour correlation;
   the blend's variance is approximated by ``sum_k s_k Var_k``; used only as a guide variance.
 
-Departures from the paper: the SURE map filter parameters and the second-pass guide (other
-buffer's first-pass output, to make the second-pass SURE exact) are our choices; we use the
-renderer's per-pixel variance directly (no dual-buffer rescaling of the colour variance);
-the visibility/direct-light feature of the paper is not rendered, so only albedo, normal and
-depth are used; patch distances at image borders average only the in-image patch pairs.
+Departures from the authors' code (fbksd-package denoisers/RDFC; table with file:line in
+docs/fidelity_rdfc.md): each half denoised with its own weights (theirs: weights from the mean,
+applied to both); the renderer's per-pixel half variance (``variance="rescaled"`` gives their
+dual-buffer rescaling); no visibility feature, depth instead of world position; centre weight 1
+(theirs: the largest neighbour weight); no symmetric weights; our selection-filter parameters.
 """
 
 from __future__ import annotations
@@ -78,6 +80,7 @@ from scipy.ndimage import uniform_filter
 from mcbench.io.buffers import Denoised, RenderBuffers
 from mcbench.jit import cached_njit
 from mcbench.filters.nlmeans import nl_means_filter
+from mcbench.filters.smoothing import box_mean, pyramid_smooth
 from mcbench.progress import StageLog
 
 KIND = "denoiser"
@@ -97,6 +100,11 @@ SELECTION_FILTER = dict(radius=3, patch_radius=1, k=1.0)
 FEATURES = ("albedo", "normal", "depth")
 TILE = None
 BAND_ROWS = 8
+VARIANCE = "raw"            # colour variance of a half buffer: see half_variance
+CLAMP_DERIVATIVE = True     # authors' dF/dy in [0, 1] rule (featurefilter.cu:1354-1369)
+VARIANCE_BOX = 10           # radius of the authors' box for the dual-buffer rescaling (featurefilter.cu:1406-1409)
+SECOND_PASS = "authors"     # see denoise
+TAU_SECOND = 1e-4           # authors' pass-2 feature threshold (multifilm.cpp:416-420)
 
 
 # ----------------------------------------------------------------------------- kernels
@@ -211,6 +219,7 @@ def _candidates_kernel(y_img, v_img, g, gv, feat, fvar, inv_norm, fstart, radius
     out = np.zeros((ncand, h, w, nc))
     deriv = np.zeros((ncand, h, w, nc))
     outvar = np.zeros((ncand, h, w, nc))
+    centre = np.zeros((ncand, h, w))
     nbands = (h + band - 1) // band
     for bi in prange(nbands):
         y0 = bi * band
@@ -341,12 +350,13 @@ def _candidates_kernel(y_img, v_img, g, gv, feat, fvar, inv_norm, fstart, radius
                 y = y0 + r
                 for x in range(w):
                     cs = max(wsum[k, r, x], 1e-300)
+                    centre[k, y, x] = wself[k, r, x] / cs
                     for c in range(nc):
                         f = wy[k, c, r, x] / cs
                         out[k, y, x, c] = f
                         outvar[k, y, x, c] = w2v[k, c, r, x] / (cs * cs)
                         deriv[k, y, x, c] = (wself[k, r, x] + sdwy[k, c, r, x] - f * sdw[k, c, r, x]) / cs
-    return out, deriv, outvar
+    return out, deriv, outvar, centre
 
 
 # ----------------------------------------------------------------------------- building blocks
@@ -380,7 +390,8 @@ def feature_normaliser(feature: np.ndarray, feature_variance: np.ndarray, k_f: f
 def candidate_filters(color, variance, features, feature_variances, guide=None, guide_variance=None,
                       radius: int = WINDOW_RADIUS, patch_radii=CANDIDATE_PATCH_RADII,
                       k_colors=CANDIDATE_K_COLOR, k_f: float = K_FEATURE, tau: float = TAU,
-                      alpha: float = ALPHA, epsilon: float = EPSILON, tile: int | None = TILE):
+                      alpha: float = ALPHA, epsilon: float = EPSILON, tile: int | None = TILE,
+                      clamp_derivative: bool = CLAMP_DERIVATIVE, second_pass: str = SECOND_PASS):
     """The candidate filters (FIRST, SECOND, THIRD by default) of one image.
 
     color, variance: (H, W, 3) noisy colour and variance of its mean. features: list of
@@ -392,6 +403,8 @@ def candidate_filters(color, variance, features, feature_variances, guide=None, 
     Returns ``(filtered, derivative, output_variance)``, each (K, H, W, 3) float64:
     F_k(y), dF_k,p,c / dy_p,c and sum w^2 V / (sum w)^2. ``tile`` (pixels, None = whole
     image) only changes speed: the image is processed in tiles with a halo.
+    ``clamp_derivative``: where any channel's derivative leaves [0, 1], all three are replaced by
+    w_pp / sum w (the authors' rule, featurefilter.cu:1354-1369, with their fallback at :1339).
     """
     finite_k = {float(k) for k in k_colors if np.isfinite(k)}
     if len(finite_k) > 1:
@@ -425,13 +438,14 @@ def candidate_filters(color, variance, features, feature_variances, guide=None, 
             np.asarray(k_colors, dtype=np.float64), bool(self_guided), float(alpha), float(epsilon), BAND_ROWS)
     tile = int(tile) if tile else max(h, w)
     halo = int(radius) + int(patch_radii.max(initial=0))
-    planes = lambda a: np.ascontiguousarray(np.moveaxis(a, 2, 0))
+    def planes(a):
+        return np.ascontiguousarray(np.moveaxis(a, 2, 0))
     images = (y, v, g, gv, feat, fvar, 1.0 / fnorm)
     if tile >= h and tile >= w:
-        return _candidates_kernel(*(planes(a) for a in images), *args)
+        return _clamped(_candidates_kernel(*(planes(a) for a in images), *args), clamp_derivative)
     # Tiles with a halo of r + max f pixels give bit-identical interiors (every pixel, patch and
     # back-term a kept pixel touches lies inside its halo) and keep the working set in cache.
-    outs = [np.zeros((len(patch_radii), h, w, 3)) for _ in range(3)]
+    outs = [np.zeros((len(patch_radii), h, w, 3)) for _ in range(3)] + [np.zeros((len(patch_radii), h, w))]
     for y0 in range(0, h, tile):
         for x0 in range(0, w, tile):
             y1, x1 = min(y0 + tile, h), min(x0 + tile, w)
@@ -441,7 +455,17 @@ def candidate_filters(color, variance, features, feature_variances, guide=None, 
             res = _candidates_kernel(*(planes(a[crop]) for a in images), *args)
             for full, part in zip(outs, res):
                 full[:, y0:y1, x0:x1] = part[:, y0 - ya:y1 - ya, x0 - xa:x1 - xa]
-    return tuple(outs)
+    return _clamped(outs, clamp_derivative)
+
+
+def _clamped(results, clamp):
+    """(filtered, derivative, output variance) of the kernel's results, the derivative clamped
+    as the authors' (any channel outside [0, 1] -> all channels w_pp / sum w) if ``clamp``."""
+    filtered, deriv, outvar, centre = results
+    if clamp:
+        invalid = np.any((deriv < 0.0) | (deriv > 1.0), axis=-1, keepdims=True)
+        deriv = np.where(invalid, centre[..., None], deriv)
+    return filtered, deriv, outvar
 
 
 def sure(filtered, derivative, color, variance) -> np.ndarray:
@@ -503,31 +527,70 @@ def prefilter_features(buffers: RenderBuffers):
     return out
 
 
-def denoise(buffers: RenderBuffers, *, radius: int = WINDOW_RADIUS):
-    """RDFC on the half buffers; returns Denoised(full=(a+b)/2, a, b) as float32 (H, W, 3)."""
+def half_variance(buffers: RenderBuffers, which: str, mode: str = VARIANCE) -> np.ndarray:
+    """Colour variance (of the mean) of half buffer ``which`` used by RDFC, (H, W, 3) float64.
+
+    ``"raw"``: the renderer's ``variance_a``/``variance_b`` (spp/2 samples; 1 degree of freedom at
+    4 spp). ``"rescaled"``: the authors' dual-buffer rescaling (featurefilter.cu:1392-1412, there
+    of the full image's variance) applied to the half: V_h * box(V_dual) / (1e-10 + box(V_h)), box
+    of radius ``VARIANCE_BOX`` (:func:`mcbench.filters.smoothing.box_mean`), V_dual = (A - B)^2 / 2
+    (an unbiased one-pixel estimate of a half's variance of the mean).
+    """
+    suffix = "_" + which
+    v = np.maximum(np.nan_to_num(np.asarray(buffers.layers["variance" + suffix], dtype=np.float64)), 0.0)
+    if mode == "raw":
+        return v
+    if mode != "rescaled":
+        raise ValueError(f"variance must be 'raw' or 'rescaled', got {mode!r}")
+    a, b = (np.nan_to_num(np.asarray(buffers.layers[n], dtype=np.float64)) for n in ("color_a", "color_b"))
+    return v * box_mean((a - b) ** 2 / 2.0, VARIANCE_BOX) / (1e-10 + box_mean(v, VARIANCE_BOX))
+
+
+def authors_second_pass(first: dict, feats: dict, radius: int = WINDOW_RADIUS) -> dict:
+    """The authors' second pass (multifilm.cpp:409-423) of the pass-1 buffers ``first`` {"a", "b"}:
+    each filtered once more with shared colour weights from their mean, whose variance is
+    (A~ - B~)^2 / 4 pyramid-smoothed (featurefilter.cu:900-916, 1415-1429), patch radius 3, k_c =
+    0.45, k_f = 0.6, window radius // 2, tau = ``TAU_SECOND``; no candidates, no selection."""
+    guide = (first["a"] + first["b"]) / 2.0
+    guide_var = pyramid_smooth((first["a"] - first["b"]) ** 2 / 4.0)
+    return {w: candidate_filters(first[w], guide_var, *feats[w], guide=guide, guide_variance=guide_var,
+                                 radius=max(radius // 2, 1), patch_radii=(3,), k_colors=(K_COLOR,),
+                                 tau=TAU_SECOND)[0][0] for w in ("a", "b")}
+
+
+def denoise(buffers: RenderBuffers, *, radius: int = WINDOW_RADIUS, variance: str = VARIANCE,
+            clamp_derivative: bool = CLAMP_DERIVATIVE, second_pass: str = SECOND_PASS):
+    """RDFC on the half buffers; returns Denoised(full=(a+b)/2, a, b) as float32 (H, W, 3).
+
+    ``radius``: window radius of both passes (10 as the authors' paper scenes, 20 as fbksd's
+    driver: docs/fidelity_rdfc.md); ``variance``: :func:`half_variance`'s mode;
+    ``clamp_derivative``: :func:`candidate_filters`'s authors' rule; ``second_pass``: ``"ours"``
+    (module docstring, 6.) or ``"authors"`` (the pass-1 buffers filtered again, code below)."""
     colors = {w: np.nan_to_num(np.asarray(buffers.layers["color" + s], dtype=np.float64))
               for w, s in (("a", "_a"), ("b", "_b"))}
-    variances = {w: np.maximum(np.nan_to_num(np.asarray(buffers.layers["variance" + s],
-                                                        dtype=np.float64)), 0.0)
-                 for w, s in (("a", "_a"), ("b", "_b"))}
+    variances = {w: half_variance(buffers, w, variance) for w in ("a", "b")}
     stage_done = StageLog.for_image("rdfc", *colors["a"].shape[:2])    # prints on large images only
     feats = prefilter_features(buffers)
     stage_done("feature prefiltering")
     first, first_var = {}, {}
     for which in ("a", "b"):
         y, v = colors[which], variances[which]
-        filt, deriv, ovar = candidate_filters(y, v, *feats[which], radius=radius)
+        filt, deriv, ovar = candidate_filters(y, v, *feats[which], radius=radius,
+                                              clamp_derivative=clamp_derivative)
         errors = sure(filt, deriv, y, v).sum(axis=3)
         first[which], first_var[which], _ = select_and_blend(filt, ovar, errors, y, v)
         stage_done(f"first pass of half buffer {which.upper()}")
-    final = {}
-    for which, other in (("a", "b"), ("b", "a")):
+    if second_pass not in ("ours", "authors"):
+        raise ValueError(f"second_pass must be 'ours' or 'authors', got {second_pass!r}")
+    final = authors_second_pass(first, feats, radius) if second_pass == "authors" else {}
+    for which, other in (("a", "b"), ("b", "a")) if second_pass == "ours" else ():
         y, v = colors[which], variances[which]
         filt, deriv, ovar = candidate_filters(y, v, *feats[which], guide=first[other],
-                                              guide_variance=first_var[other], radius=radius)
+                                              guide_variance=first_var[other], radius=radius,
+                                              clamp_derivative=clamp_derivative)
         errors = sure(filt, deriv, y, v).sum(axis=3)
         final[which], _, _ = select_and_blend(filt, ovar, errors, first[other], first_var[other])
-        stage_done(f"second pass of half buffer {which.upper()}")
+    stage_done("second pass")
     a = np.nan_to_num(final["a"]).astype(np.float32)
     b = np.nan_to_num(final["b"]).astype(np.float32)
     full = ((a.astype(np.float64) + b) / 2.0).astype(np.float32)
