@@ -62,6 +62,12 @@ Constants we had to choose (one-line reasons):
 * Distances are averaged over colour channels (Rousselle et al. 2012 Eq. 5, as
   :mod:`mcbench.filters.nlmeans`), and patches replicate image edges like :mod:`mcbench.filters.nlmeans`.
 
+Tungsten switches. :func:`denoise` has keyword switches that turn each departure from Tungsten's
+``src/denoiser/`` (tunabrain/tungsten 88ea020) into Tungsten's behaviour; their defaults keep this
+module's numbers, and :data:`TUNGSTEN` sets them all. With :data:`TUNGSTEN` our output matches
+Tungsten's ``denoiser`` on stored renders (``tests/data/golden/tungsten_nfor/``,
+``tests/methods/test_nfor_golden.py``); ``docs/fidelity_nfor.md`` tabulates each switch's effect.
+
 Implementation and speed. NL-means filters are :func:`mcbench.filters.nlmeans.nl_means_filter`
 (compiled). The regression computes, per chunk of rows, the NL-means weights of every window
 offset (:func:`mcbench.filters.nlmeans.nl_means_distance_rows`), stores them pixel-major, then per pixel
@@ -75,7 +81,8 @@ regressions take most of it, the NL-means filters the rest). ``benchmarks/bench_
 measures the speed (``NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/bench_nfor.py --sizes 128 512``).
 
 Departures from the paper: NL-means weights over colour channels are averaged (Tungsten takes
-the per-channel minimum weight); we have 7 features (no direct-visibility feature: the renders
+the per-channel minimum weight in its regressions and per-channel weights in its MSE and selection
+filters); we have 7 features (no direct-visibility feature: the renders
 do not produce one); the normal equations are solved by pivot-dropping Cholesky rather than a
 column-pivoted QR; the second-pass guide variance is (r^A - r^B)^2 / 4, the variance of the mean
 of the halves (``second_pass_variance_scale`` multiplies it; Tungsten effectively uses 2).
@@ -88,7 +95,8 @@ from numba import prange
 
 from mcbench.io.buffers import Denoised, RenderBuffers
 from mcbench.jit import cached_njit
-from mcbench.filters.nlmeans import nl_means_distance_rows, nl_means_filter
+from mcbench.filters.nlmeans import (BORDER_MODES, CHANNEL_MODES, nl_means_distance_rows, nl_means_filter,
+                                     nl_means_offset_weights)
 from mcbench.progress import StageLog
 
 KIND = "denoiser"
@@ -108,6 +116,12 @@ BANDWIDTHS = (0.5, 1.0)                                          # Sec. 5.2
 MSE_FILTER = dict(radius=9, patch_radius=1, k=1.0)               # Sec. 5.3 (also selection maps)
 SECOND_PASS_FEATURES = dict(radius=2, patch_radius=3, k=0.5)     # Sec. 5.4
 SECOND_PASS_K = 1.0                                              # Sec. 5.4
+#: Every switch of :func:`denoise` at Tungsten's behaviour (``docs/fidelity_nfor.md``,
+#: ``tests/methods/test_nfor_golden.py``).
+TUNGSTEN = dict(second_pass_variance_scale=2.0, regression_channels="min", filter_channels="independent",
+                nlm_epsilon=1e-7, feature_variance="buffer", color_variance="buffer", patch_borders="truncate",
+                filter_clamp=True, feature_resolution=0.0, rank_threshold=float(np.finfo(np.float32).eps),
+                pivot_tolerance=float(np.finfo(np.float32).eps) ** 2)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -115,16 +129,33 @@ SECOND_PASS_K = 1.0                                              # Sec. 5.4
 # ---------------------------------------------------------------------------------------------
 
 @cached_njit(error_model="numpy")
-def _weights_into(guide, variance, y0, rows, radius, patch, k, alpha, eps, clamp_d, dmap, hsum, dist, out):
+def _weights_into(guide, variance, y0, rows, radius, patch, k, alpha, eps, clamp_d, dmap, hsum, dist, out,
+                  truncate, mode):
     """NL-means weights w(p, p + o) of the pixels p in rows [y0, y0 + rows), written to
     ``out[:rows, :, :]`` with shape (rows, W, n_offsets), pixel-major: offset index
     (dy + R) (2R + 1) + (dx + R). guide, variance: (C, H, W) float64 planes. Distances follow
     Rousselle et al. 2012 Eq. 5-6 (:func:`mcbench.filters.nlmeans.nl_means_distance_rows`, per-pixel
     distances clipped at ``clamp_d``); weight exp(-d) (1 for d <= 0), 0 where p + o leaves the
     image. dmap, hsum: scratch (rows + 2 patch, W); dist: scratch (rows, W).
+
+    ``truncate`` (truncated patch means) or ``mode`` 1 (minimum per-channel weight) take
+    Tungsten's path, :func:`mcbench.filters.nlmeans.nl_means_offset_weights` (distances clipped per
+    channel); otherwise the default kernel runs (today's numbers).
     """
     c, h, w = guide.shape
     side = 2 * radius + 1
+    if truncate or mode != 0:
+        dist_c = np.empty((c, rows, w))
+        wmap = np.empty((rows, w))
+        for dy in range(-radius, radius + 1):
+            for dx in range(-radius, radius + 1):
+                o = (dy + radius) * side + (dx + radius)
+                nl_means_offset_weights(guide, variance, y0, rows, dy, dx, patch, k, alpha, eps, clamp_d,
+                                        truncate, mode, dmap, hsum, dist_c, wmap)
+                for r in range(rows):
+                    for x in range(w):
+                        out[r, x, o] = wmap[r, x]
+        return
     for dy in range(-radius, radius + 1):
         for dx in range(-radius, radius + 1):
             o = (dy + radius) * side + (dx + radius)
@@ -141,7 +172,7 @@ def _weights_into(guide, variance, y0, rows, radius, patch, k, alpha, eps, clamp
 
 
 @cached_njit(error_model="numpy")
-def regression_weights(guide, variance, y0, y1, radius, patch, k, alpha, eps, clamp_d):
+def regression_weights(guide, variance, y0, y1, radius, patch, k, alpha, eps, clamp_d, truncate=False, mode=0):
     """(y1 - y0, W, (2R + 1)^2) NL-means weights of the regression for rows [y0, y1); guide,
     variance (C, H, W) float64 planes (see :func:`_weights_into`)."""
     c, h, w = guide.shape
@@ -149,7 +180,8 @@ def regression_weights(guide, variance, y0, y1, radius, patch, k, alpha, eps, cl
     side = 2 * radius + 1
     out = np.empty((rows, w, side * side))
     _weights_into(guide, variance, y0, rows, radius, patch, k, alpha, eps, clamp_d,
-                  np.empty((rows + 2 * patch, w)), np.empty((rows + 2 * patch, w)), np.empty((rows, w)), out)
+                  np.empty((rows + 2 * patch, w)), np.empty((rows + 2 * patch, w)), np.empty((rows, w)), out,
+                  truncate, mode)
     return out
 
 
@@ -172,19 +204,23 @@ def _minus_kept_products(value, lmat, keep, i, j):
 
 
 @cached_njit(error_model="numpy")
-def _solve_normal_equations(a, b, d, nch, tol, beta):
+def _solve_normal_equations(a, b, d, nch, tol, beta, rank_tol2=0.0):
     """Solve a beta = b (a: (d, d) SPD-ish, b: (d, nch)) by Cholesky on the diagonally scaled
-    matrix, dropping columns whose pivot is below ``tol`` (their coefficients are 0)."""
+    matrix, dropping columns whose pivot is below ``tol`` (their coefficients are 0), and columns
+    whose residual squared norm (pivot x a_jj) is at most ``rank_tol2`` x max_i a_ii (Eigen's
+    rank rule with rank_tol2 = eps^2; 0: off)."""
     scale = np.zeros(d)
+    amax = 0.0
     for i in range(d):
         scale[i] = np.sqrt(a[i, i]) if a[i, i] > 0.0 else 0.0
+        amax = max(amax, a[i, i])
     lmat = np.zeros((d, d))
     keep = np.zeros(d, dtype=np.bool_)
     for j in range(d):
         if scale[j] <= 0.0:
             continue
         s = _minus_kept_products(a[j, j] / (scale[j] * scale[j]), lmat, keep, j, j)
-        if s <= tol:
+        if s <= tol or s * a[j, j] <= rank_tol2 * amax:
             continue
         keep[j] = True
         ljj = np.sqrt(s)
@@ -223,7 +259,7 @@ def _solve_normal_equations(a, b, d, nch, tol, beta):
 
 @cached_njit(parallel=True, error_model="numpy")
 def _collaborative_regression(color, guide, guide_variance, features, radius, patch, k, alpha, eps,
-                              clamp_d, tol, feature_resolution, chunk):
+                              clamp_d, tol, feature_resolution, chunk, truncate, mode, rank_tol2):
     """Collaborative first-order regression (Bitterli et al. 2016 Sec. 5.2).
 
     color: (H, W, 3) values to filter; guide, guide_variance: (C, H, W) planes for the NL-means
@@ -234,7 +270,8 @@ def _collaborative_regression(color, guide, guide_variance, features, radius, pa
     colour), the normal equations A_ij = sum_q w z_i z_j, b_ic = sum_q w z_i y_c as dot
     products over q (float64), the pivot-dropping Cholesky solve, and the fit evaluated at
     every q and accumulated. Feature differences within ``feature_resolution`` (relative) of
-    zero are rounding noise of the prefilter and count as 0.
+    zero are rounding noise of the prefilter and count as 0. ``truncate``, ``mode``: see
+    :func:`_weights_into`; ``rank_tol2``: :func:`_solve_normal_equations`.
     """
     h, w, nch = color.shape
     nf = features.shape[2]
@@ -252,7 +289,7 @@ def _collaborative_regression(color, guide, guide_variance, features, radius, pa
         weights = np.empty((rows, w, nwin))
         _weights_into(guide, guide_variance, y0, rows, radius, patch, k, alpha, eps, clamp_d,
                       np.empty((rows + 2 * patch, w)), np.empty((rows + 2 * patch, w)),
-                      np.empty((rows, w)), weights)
+                      np.empty((rows, w)), weights, truncate, mode)
         a = np.zeros((d, d))
         b = np.zeros((d, nch))
         beta = np.zeros((d, nch))
@@ -301,7 +338,7 @@ def _collaborative_regression(color, guide, guide_variance, features, radius, pa
                         a[j, i] = a[i, j]
                     for ch in range(nch):
                         b[i, ch] = _dot(wz, z[d + ch], n)
-                ok = _solve_normal_equations(a, b, d, nch, tol, beta)
+                ok = _solve_normal_equations(a, b, d, nch, tol, beta, rank_tol2)
                 finite = ok
                 for i in range(d):
                     for ch in range(nch):
@@ -349,21 +386,32 @@ def _collaborative_regression(color, guide, guide_variance, features, radius, pa
 # ---------------------------------------------------------------------------------------------
 
 def collaborative_regression(color, guide, guide_variance, features, radius=REGRESSION_RADIUS,
-                             patch_radius=REGRESSION_PATCH, k=1.0):
+                             patch_radius=REGRESSION_PATCH, k=1.0, *, epsilon=NLM_EPSILON,
+                             feature_resolution=FEATURE_RESOLUTION, channels="mean", borders="replicate",
+                             rank_threshold=0.0, pivot_tolerance=PIVOT_TOLERANCE):
     """Filter ``color`` (H, W, 3) by collaborative first-order regression on ``features`` (H, W, F)
-    with NL-means weights from ``guide`` / ``guide_variance`` (H, W, C). Returns float64 (H, W, 3)."""
-    as64 = lambda x: np.ascontiguousarray(x, dtype=np.float64)
+    with NL-means weights from ``guide`` / ``guide_variance`` (H, W, C). Returns float64 (H, W, 3).
+    ``channels`` "mean" | "min", ``borders`` "replicate" | "truncate", ``rank_threshold``,
+    ``pivot_tolerance``: see :func:`denoise`."""
+    if channels not in ("mean", "min") or borders not in BORDER_MODES:
+        raise ValueError(f"regression channels {channels!r} (mean, min), borders {borders!r} {BORDER_MODES}")
+    def as64(x):
+        return np.ascontiguousarray(x, dtype=np.float64)
+
     guide = np.asarray(guide, dtype=np.float64)
     guide_variance = np.maximum(np.asarray(guide_variance, dtype=np.float64), 0.0)
     if guide.ndim == 2:
         guide, guide_variance = guide[..., None], guide_variance[..., None]
-    planes = lambda x: np.ascontiguousarray(np.moveaxis(x, 2, 0))
+    def planes(x):
+        return np.ascontiguousarray(np.moveaxis(x, 2, 0))
+
     features = as64(features)
     if features.ndim == 2:
         features = features[..., None]
     return _collaborative_regression(as64(color), planes(guide), planes(guide_variance), features, int(radius),
-                                     int(patch_radius), float(k), NLM_ALPHA, NLM_EPSILON,
-                                     DISTANCE_CLAMP, PIVOT_TOLERANCE, FEATURE_RESOLUTION, CHUNK_ROWS)
+                                     int(patch_radius), float(k), NLM_ALPHA, float(epsilon),
+                                     DISTANCE_CLAMP, float(pivot_tolerance), float(feature_resolution), CHUNK_ROWS,
+                                     borders == "truncate", CHANNEL_MODES[channels], float(rank_threshold) ** 2)
 
 
 def _features(buffers: RenderBuffers, suffix: str) -> np.ndarray:
@@ -379,51 +427,122 @@ def _features(buffers: RenderBuffers, suffix: str) -> np.ndarray:
     return np.concatenate([get("normal"), get("albedo"), depth[..., None]], axis=2)
 
 
-def prefilter_features(features_a, features_b):
+def _feature_variance(buffers: RenderBuffers) -> np.ndarray:
+    """(H, W, 7) float64 variance of the full-buffer feature means (``normal_variance``,
+    ``albedo_variance``, ``depth_variance``), clipped at 0; KeyError names a missing layer."""
+    layers = buffers.layers
+    missing = [n for n in ("normal_variance", "albedo_variance", "depth_variance") if n not in layers]
+    if missing:
+        raise KeyError(f"feature_variance='buffer' needs the layers {missing}")
+    depth = np.asarray(layers["depth_variance"], dtype=np.float64)
+    if depth.ndim == 3:
+        depth = depth[..., 0]
+    stacked = np.concatenate([np.asarray(layers["normal_variance"], dtype=np.float64),
+                              np.asarray(layers["albedo_variance"], dtype=np.float64), depth[..., None]], axis=2)
+    return np.maximum(stacked, 0.0)
+
+
+def prefilter_features(features_a, features_b, variance=None, *, epsilon=NLM_EPSILON, borders="replicate",
+                       clamp=None):
     """Sec. 5.1: cross-prefilter every scalar feature; returns (filtered A, filtered B), (H, W, F).
 
-    Half-buffer variance (f_A - f_B)^2 / 2; A is filtered with weights from B and vice versa.
+    ``variance`` (H, W, F): the variance of one half buffer, the same for A and B; None: the
+    per-pixel (f_A - f_B)^2 / 2. A is filtered with weights from B and vice versa. ``epsilon``,
+    ``borders``, ``clamp``: :func:`mcbench.filters.nlmeans.nl_means_filter`.
     """
-    variance = 0.5 * (features_a - features_b) ** 2
+    if variance is None:
+        variance = 0.5 * (features_a - features_b) ** 2
+    options = dict(alpha=NLM_ALPHA, epsilon=epsilon, borders=borders, clamp=clamp, **FEATURE_PREFILTER)
     out_a = np.empty_like(features_a)
     out_b = np.empty_like(features_b)
     for j in range(features_a.shape[2]):
         var_j = variance[..., j]
-        out_a[..., j] = nl_means_filter(features_a[..., j], features_b[..., j], var_j, alpha=NLM_ALPHA,
-                                        epsilon=NLM_EPSILON, **FEATURE_PREFILTER)
-        out_b[..., j] = nl_means_filter(features_b[..., j], features_a[..., j], var_j, alpha=NLM_ALPHA,
-                                        epsilon=NLM_EPSILON, **FEATURE_PREFILTER)
+        out_a[..., j] = nl_means_filter(features_a[..., j], features_b[..., j], var_j, **options)
+        out_b[..., j] = nl_means_filter(features_b[..., j], features_a[..., j], var_j, **options)
     return out_a, out_b
 
 
-def denoise(buffers: RenderBuffers, *, second_pass_variance_scale: float = 1.0) -> Denoised:
-    """NFOR on one render. Returns ``Denoised(full, a, b, extras={"selection": s})``, float32."""
-    f64 = lambda name: np.asarray(buffers.layers[name], dtype=np.float64)
+def denoise(buffers: RenderBuffers, *, second_pass_variance_scale: float = 1.0, regression_channels: str = "mean",
+            filter_channels: str = "mean", nlm_epsilon: float = NLM_EPSILON, feature_variance: str = "halves",
+            color_variance: str = "halves", patch_borders: str = "replicate", filter_clamp: bool = False,
+            feature_resolution: float = FEATURE_RESOLUTION, rank_threshold: float = 0.0,
+            pivot_tolerance: float = PIVOT_TOLERANCE) -> Denoised:
+    """NFOR on one render. Returns ``Denoised(full, a, b, extras={"selection": s})``, float32.
+
+    Keyword switches; the defaults are this module's behaviour, and :data:`TUNGSTEN` sets each to
+    Tungsten's (tunabrain/tungsten 88ea020, ``src/denoiser/``: D = ``denoiser.cpp``,
+    N = ``NlMeans.hpp``, Rg = ``Regression.cpp``; ``docs/fidelity_nfor.md`` measures each):
+
+    * ``second_pass_variance_scale``: the second-pass guide variance is this times
+      (r^A - r^B)^2 / 4; Tungsten 2 (its regression multiplies every variance by 2, Rg:72, also
+      in the second pass, D:129-132).
+    * ``regression_channels``: "mean" (weight from the channel-mean distance) or "min" (the
+      minimum of the per-channel weights, Tungsten, N:37-40,87 with Rg:40,71-72).
+    * ``filter_channels``: MSE and selection filters, "mean" or "independent" (each channel of
+      the map averaged with weights from that colour channel alone, Tungsten, D:81,94, N:33-36,142-152).
+    * ``nlm_epsilon``: epsilon of every NL-means distance; Tungsten 1e-7 (N:51).
+    * ``feature_variance``: prefilter variance of a half buffer, "halves" ((f_A - f_B)^2 / 2) or
+      "buffer" (2 x the render's ``<feature>_variance`` of the full mean, Tungsten, D:48-51 with N:72-73).
+    * ``color_variance``: variance of the other half in the pass-1 regressions and the MSE
+      estimate, "halves" (``variance_b`` for A, ``variance_a`` for B) or "buffer" (2 x
+      ``variance`` for both, Tungsten, D:63-76, Rg:72).
+    * ``patch_borders``: "replicate" (edge replication) or "truncate" (patch means over the
+      in-image pairs only, Tungsten, N:62-67,83), in every NL-means filter and regression.
+    * ``filter_clamp``: clip per-pixel, per-channel distances at 1e4 in the NL-means filters too
+      (Tungsten, N:53,76; the regressions always clip).
+    * ``feature_resolution``: relative threshold under which a feature difference counts as 0;
+      Tungsten has none (0.0; Rg:96-97).
+    * ``rank_threshold``: a design column (of sqrt(W) X, unscaled) whose residual norm after the
+      previous kept columns is at most this times the largest column norm counts as 0. Tungsten
+      solves in float32 with Eigen's ``ColPivHouseholderQR`` (Rg:105-106), whose rank rule drops
+      columns below float32 epsilon (1.19e-7) times the largest column norm
+      (``Eigen/src/QR/ColPivHouseholderQR.h:511-527``, Eigen 3.4, external): this is what removes
+      the prefilter's rounding noise in a feature that is constant in a window. 0: off.
+    * ``pivot_tolerance``: scaled Cholesky pivot (1 - R^2 of a column against the previous kept
+      ones) below which a column is dropped. Tungsten has no such rule (Eigen keeps every column
+      above its rank threshold); its float32 QR cannot resolve a residual below float32 epsilon
+      of the column's own norm, so :data:`TUNGSTEN` uses eps_32^2 = 1.4e-14 instead of 1e-9.
+    """
+    if feature_variance not in ("halves", "buffer") or color_variance not in ("halves", "buffer"):
+        raise ValueError(f"feature_variance {feature_variance!r}, color_variance {color_variance!r}: "
+                         "expected 'halves' or 'buffer'")
+    def f64(name):
+        return np.asarray(buffers.layers[name], dtype=np.float64)
+
     color, variance = f64("color"), np.maximum(f64("variance"), 0.0)
     color_a, color_b = f64("color_a"), f64("color_b")
-    var_a, var_b = np.maximum(f64("variance_a"), 0.0), np.maximum(f64("variance_b"), 0.0)
+    if color_variance == "buffer":
+        var_a = var_b = 2.0 * variance
+    else:
+        var_a, var_b = np.maximum(f64("variance_a"), 0.0), np.maximum(f64("variance_b"), 0.0)
     stage_done = StageLog.for_image("nfor", *color.shape[:2])    # prints on large images only
+    clamp = DISTANCE_CLAMP if filter_clamp else None
+    filters = dict(alpha=NLM_ALPHA, epsilon=nlm_epsilon, borders=patch_borders, clamp=clamp)
+    regression = dict(radius=REGRESSION_RADIUS, patch_radius=REGRESSION_PATCH, epsilon=nlm_epsilon,
+                      feature_resolution=feature_resolution, channels=regression_channels, borders=patch_borders,
+                      rank_threshold=rank_threshold, pivot_tolerance=pivot_tolerance)
 
     # 1. feature cross-prefiltering (Sec. 5.1)
-    feat_a, feat_b = prefilter_features(_features(buffers, "_a"), _features(buffers, "_b"))
+    half_var = 2.0 * _feature_variance(buffers) if feature_variance == "buffer" else None
+    feat_a, feat_b = prefilter_features(_features(buffers, "_a"), _features(buffers, "_b"), half_var,
+                                        epsilon=nlm_epsilon, borders=patch_borders, clamp=clamp)
     stage_done("feature prefiltering (Sec. 5.1)")
 
     # 2. cross-filtered regression for each bandwidth (Sec. 5.2) and 3. MSE estimates (Sec. 5.3)
     cand_a, cand_b, mses = [], [], []
     for k in BANDWIDTHS:
-        fa = collaborative_regression(color_a, color_b, var_b, feat_b, k=k)
-        fb = collaborative_regression(color_b, color_a, var_a, feat_a, k=k)
+        fa = collaborative_regression(color_a, color_b, var_b, feat_b, k=k, **regression)
+        fb = collaborative_regression(color_b, color_a, var_a, feat_a, k=k, **regression)
         mse_a = (fa - color_b) ** 2 - var_b
         mse_b = (fb - color_a) ** 2 - var_a
         mses.append(0.5 * (mse_a + mse_b) - 0.25 * (fa - fb) ** 2)
         cand_a.append(fa)
         cand_b.append(fb)
         stage_done(f"regression of A and B at k = {k} (Sec. 5.2)")
-    filtered_mse = nl_means_filter(np.concatenate(mses, axis=2), color, variance, alpha=NLM_ALPHA,
-                                   epsilon=NLM_EPSILON, **MSE_FILTER)
+    filtered_mse = nl_means_filter(np.concatenate(mses, axis=2), color, variance, channels=filter_channels,
+                                   **filters, **MSE_FILTER)
     raw_selection = (filtered_mse[..., 3:] <= filtered_mse[..., :3]).astype(np.float64)
-    selection = nl_means_filter(raw_selection, color, variance, alpha=NLM_ALPHA, epsilon=NLM_EPSILON,
-                                **MSE_FILTER)
+    selection = nl_means_filter(raw_selection, color, variance, channels=filter_channels, **filters, **MSE_FILTER)
     selection = np.clip(selection, 0.0, 1.0)
     result_a = (1.0 - selection) * cand_a[0] + selection * cand_a[1]
     result_b = (1.0 - selection) * cand_b[0] + selection * cand_b[1]
@@ -435,14 +554,16 @@ def denoise(buffers: RenderBuffers, *, second_pass_variance_scale: float = 1.0) 
     final_features = np.empty_like(combined_features)
     for j in range(combined_features.shape[2]):
         final_features[..., j] = nl_means_filter(combined_features[..., j], combined_features[..., j],
-                                                 combined_feature_var[..., j], alpha=NLM_ALPHA,
-                                                 epsilon=NLM_EPSILON, **SECOND_PASS_FEATURES)
+                                                 combined_feature_var[..., j], **filters, **SECOND_PASS_FEATURES)
     combined = 0.5 * (result_a + result_b)
     combined_var = second_pass_variance_scale * 0.25 * (result_a - result_b) ** 2
     stage_done("second-pass features (Sec. 5.4)")
-    full = collaborative_regression(combined, combined, combined_var, final_features, k=SECOND_PASS_K)
+    full = collaborative_regression(combined, combined, combined_var, final_features,
+                                    **dict(regression, k=SECOND_PASS_K))
     stage_done("second-pass regression (Sec. 5.4)")
 
-    f32 = lambda x: np.ascontiguousarray(x, dtype=np.float32)
+    def f32(x):
+        return np.ascontiguousarray(x, dtype=np.float32)
+
     return Denoised(full=f32(full), a=f32(result_a), b=f32(result_b),
                     extras={"selection": f32(selection)})

@@ -28,6 +28,23 @@ Two implementations with the same result (tested to 1e-10 relative):
 shared with the regression kernel of ``methods/nfor.py``. All arithmetic is float64 (the
 distances subtract variance terms of similar size, and the weights feed float64 sums).
 
+Options that reproduce Tungsten's NL-means (``src/denoiser/NlMeans.hpp`` of tunabrain/tungsten at
+88ea020, the NFOR authors' re-implementation; ``docs/fidelity_nfor.md``), all off by default:
+
+* ``channels="min"``: one weight per pixel pair, the minimum over channels of the per-channel
+  weights exp(-max(D_c, 0)) (Tungsten's regression weights, ``NlMeans.hpp:37-40,87``);
+  ``channels="independent"``: value channel j is averaged with weights from guide channel
+  j mod C alone and normalised on its own (``nlMeans<Vec3f>``, ``NlMeans.hpp:33-36,142-152``);
+* ``borders="truncate"``: the patch mean runs over the pairs (p + n, p + n + o) that lie inside
+  the image and divides by their count (Tungsten's box filter over the clipped region,
+  ``NlMeans.hpp:62-67,83``, ``BoxFilter.hpp:53-89``) instead of replicating the image edges;
+* ``clamp``: per-pixel, per-channel distances clipped before the patch mean (Tungsten: 1e4,
+  ``NlMeans.hpp:53,76``).
+
+These run in :func:`nl_means_channel_distance_rows` (direct, per channel, simpler and slower
+than the default kernel); with ``channels="mean"``, ``borders="replicate"`` and no clamp the
+default kernel runs and the numbers are today's.
+
 ``benchmarks/bench_nlmeans.py`` measures the compiled filter against the NumPy path
 (``NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/bench_nlmeans.py --sizes 128 512``).
 """
@@ -41,9 +58,15 @@ from scipy.ndimage import uniform_filter
 from mcbench.jit import cached_njit
 
 __all__ = ["nl_means_filter", "nl_means_filter_reference", "nl_means_weight_maps",
-           "nl_means_distance_rows", "BAND_ROWS"]
+           "nl_means_distance_rows", "nl_means_channel_distance_rows", "nl_means_offset_weights",
+           "BAND_ROWS", "CHANNEL_MODES", "BORDER_MODES"]
 
 BAND_ROWS = 16   # rows per band of the compiled filter; affects speed only
+#: Channel handling of the weights: "mean" (channel-mean distance, RKZ12 Eq. 5), "min" (minimum
+#: per-channel weight), "independent" (one weight per value channel); codes of the kernels.
+CHANNEL_MODES = {"mean": 0, "min": 1, "independent": 2}
+#: Patch borders: "replicate" (edge replication, ÷(2F+1)²) or "truncate" (in-image pairs only).
+BORDER_MODES = ("replicate", "truncate")
 
 
 
@@ -238,19 +261,178 @@ def _nl_means_kernel(values, guide, variance, radius, patch, k, alpha, epsilon, 
     return out
 
 
+@cached_njit(error_model="numpy")
+def nl_means_channel_distance_rows(guide, variance, y0, rows, dy, dx, patch, k, alpha, epsilon, clamp,
+                                   truncate, dmap, hsum, out):
+    """Per-channel patch distances D_c(p, p + o) for o = (dy, dx) and the pixels p of rows
+    [y0, y0 + rows), written to ``out[c, :rows, :]`` (``out``: (C, >= rows, W)).
+
+    guide, variance: (C, H, W) float64 planes (variance >= 0, already multiplied by any variance
+    scale). Per-pixel distances (module docstring, one channel each) are clipped at ``clamp``
+    per channel before the patch mean. ``truncate`` False: patch and shifted pixels replicate
+    the image edges and the mean divides by (2F + 1)^2 (as :func:`nl_means_distance_rows`);
+    True: only pairs with p + n and p + n + o inside the image count and the mean divides by
+    their number (Tungsten, ``NlMeans.hpp:62-67,83``); pixels whose p + o leaves the image get 0
+    (callers mask them). dmap, hsum: scratch of at least (rows + 2 patch, W).
+    """
+    c, h, w = guide.shape
+    k2 = k * k
+    ra = y0 - patch
+    nr = rows + 2 * patch
+    norm = 1.0 / ((2 * patch + 1) * (2 * patch + 1))
+    for ch in range(c):
+        for r in range(nr):
+            drow = dmap[r]
+            y = ra + r
+            if truncate:
+                if y < 0 or y >= h or y + dy < 0 or y + dy >= h:
+                    drow[:w] = 0.0
+                    continue
+                yp, yq = y, y + dy
+            else:
+                yp = _clamp(y, h)
+                yq = _clamp(yp + dy, h)
+            for x in range(w):
+                xq = x + dx
+                if truncate:
+                    if xq < 0 or xq >= w:
+                        drow[x] = 0.0
+                        continue
+                else:
+                    xq = _clamp(xq, w)
+                vp = variance[ch, yp, x]
+                vq = variance[ch, yq, xq]
+                diff = guide[ch, yp, x] - guide[ch, yq, xq]
+                d = (diff * diff - alpha * (vp + min(vp, vq))) / (epsilon + k2 * (vp + vq))
+                drow[x] = d if d < clamp else clamp
+        for r in range(nr):
+            for x in range(w):
+                s = 0.0
+                for n in range(-patch, patch + 1):
+                    xn = x + n
+                    if truncate:
+                        if xn >= 0 and xn < w:
+                            s += dmap[r, xn]          # out-of-image pairs hold 0
+                    else:
+                        s += dmap[r, _clamp(xn, w)]
+                hsum[r, x] = s
+        for r in range(rows):
+            y = y0 + r
+            cy = 0
+            for n in range(-patch, patch + 1):
+                if 0 <= y + n < h and 0 <= y + n + dy < h:
+                    cy += 1
+            for x in range(w):
+                s = 0.0
+                for n in range(-patch, patch + 1):
+                    s += hsum[r + patch + n, x]       # rows outside the image hold 0 (truncate)
+                if truncate:
+                    cx = 0
+                    for n in range(-patch, patch + 1):
+                        if 0 <= x + n < w and 0 <= x + n + dx < w:
+                            cx += 1
+                    out[ch, r, x] = s / (cx * cy) if cx * cy > 0 else 0.0
+                else:
+                    out[ch, r, x] = s * norm
+
+
+@cached_njit(error_model="numpy")
+def nl_means_offset_weights(guide, variance, y0, rows, dy, dx, patch, k, alpha, epsilon, clamp, truncate,
+                            mode, dmap, hsum, dist, out):
+    """Weights w(p, p + o) of one offset for the rows [y0, y0 + rows) into ``out[:rows, :]``, one
+    per pixel pair: ``mode`` 0 exp(-max(mean_c D_c, 0)), 1 min_c exp(-max(D_c, 0)) (Tungsten's
+    regression weights); 0 where p + o leaves the image. D_c from
+    :func:`nl_means_channel_distance_rows` (same arguments); dist: scratch (C, rows, W)."""
+    c, h, w = guide.shape
+    nl_means_channel_distance_rows(guide, variance, y0, rows, dy, dx, patch, k, alpha, epsilon, clamp,
+                                   truncate, dmap, hsum, dist)
+    for r in range(rows):
+        inside_y = 0 <= y0 + r + dy < h
+        for x in range(w):
+            if not (inside_y and 0 <= x + dx < w):
+                out[r, x] = 0.0
+                continue
+            if mode == 1:
+                d = dist[0, r, x]
+                for ch in range(1, c):
+                    d = max(d, dist[ch, r, x])
+            else:
+                d = 0.0
+                for ch in range(c):
+                    d += dist[ch, r, x]
+                d /= c
+            out[r, x] = np.exp(-d) if d > 0.0 else 1.0
+
+
+@cached_njit(parallel=True, error_model="numpy")
+def _nl_means_channels_kernel(values, guide, variance, radius, patch, k, alpha, epsilon, clamp, truncate,
+                              mode, band):
+    """The optional-behaviour filter (module docstring): values (K, H, W); guide, variance
+    (C, H, W) float64 planes; ``mode`` a :data:`CHANNEL_MODES` code. Returns (K, H, W)."""
+    nv, h, w = values.shape
+    c = guide.shape[0]
+    out = np.empty((nv, h, w))
+    nbands = (h + band - 1) // band
+    for bi in prange(nbands):
+        y0 = bi * band
+        rows = min(h, y0 + band) - y0
+        dmap = np.empty((rows + 2 * patch, w))
+        hsum = np.empty((rows + 2 * patch, w))
+        dist = np.empty((c, rows, w))
+        wmap = np.empty((rows, w))
+        total = np.zeros((nv, rows, w))
+        wsum = np.zeros((nv, rows, w))
+        for dy in range(-radius, radius + 1):
+            for dx in range(-radius, radius + 1):
+                x0 = max(0, -dx)
+                x1 = min(w, w - dx)
+                if mode == 2:
+                    nl_means_channel_distance_rows(guide, variance, y0, rows, dy, dx, patch, k, alpha, epsilon,
+                                                   clamp, truncate, dmap, hsum, dist)
+                else:
+                    nl_means_offset_weights(guide, variance, y0, rows, dy, dx, patch, k, alpha, epsilon, clamp,
+                                            truncate, mode, dmap, hsum, dist, wmap)
+                for r in range(rows):
+                    yq = y0 + r + dy
+                    if yq < 0 or yq >= h:
+                        continue
+                    for ch in range(nv):
+                        trow, vrow, srow = total[ch, r], values[ch, yq], wsum[ch, r]
+                        for x in range(x0, x1):
+                            if mode == 2:
+                                wt = np.exp(-max(dist[ch % c, r, x], 0.0))
+                            else:
+                                wt = wmap[r, x]
+                            trow[x] += wt * vrow[x + dx]
+                            srow[x] += wt
+        for ch in range(nv):
+            for r in range(rows):
+                for x in range(w):
+                    out[ch, y0 + r, x] = total[ch, r, x] / wsum[ch, r, x]
+    return out
+
+
 def _planes(array: np.ndarray) -> np.ndarray:
     """(H, W, C) -> contiguous (C, H, W) float64."""
     return np.ascontiguousarray(np.moveaxis(np.asarray(array, dtype=np.float64), 2, 0))
 
 
 def nl_means_filter(values: np.ndarray, guide: np.ndarray, guide_variance: np.ndarray, radius: int = 5,
-                    patch_radius: int = 3, k: float = 0.5, alpha: float = 1.0, epsilon: float = 1e-10) -> np.ndarray:
+                    patch_radius: int = 3, k: float = 0.5, alpha: float = 1.0, epsilon: float = 1e-10, *,
+                    channels: str = "mean", borders: str = "replicate", clamp: float | None = None) -> np.ndarray:
     """NL-means filter ``values`` (H, W, K) or (H, W) with weights computed on ``guide``
     (H, W, C) or (H, W) and its per-pixel, per-channel ``guide_variance`` (same shape).
 
     Returns float64 of the same shape as ``values``. The centre weight is 1, so the
-    normalisation never divides by zero. Compiled; equals :func:`nl_means_filter_reference`.
+    normalisation never divides by zero. Compiled; with the default options it equals
+    :func:`nl_means_filter_reference`. ``channels`` ("mean", "min", "independent"), ``borders``
+    ("replicate", "truncate") and ``clamp`` (per-pixel, per-channel distance clip; None: none)
+    select Tungsten's behaviours (module docstring); any non-default option runs
+    :func:`_nl_means_channels_kernel`.
     """
+    if channels not in CHANNEL_MODES or borders not in BORDER_MODES:
+        raise ValueError(f"channels {channels!r} (expected one of {sorted(CHANNEL_MODES)}), borders {borders!r} "
+                         f"(expected one of {list(BORDER_MODES)})")
     values = np.asarray(values, dtype=np.float64)
     squeeze = values.ndim == 2
     if squeeze:
@@ -258,7 +440,13 @@ def nl_means_filter(values: np.ndarray, guide: np.ndarray, guide_variance: np.nd
     guide, variance = _guide_and_variance(guide, guide_variance)
     if values.shape[:2] != guide.shape[:2]:
         raise ValueError(f"values {values.shape[:2]} and guide {guide.shape[:2]} differ in size")
-    out = _nl_means_kernel(_planes(values), _planes(guide), _planes(variance), int(radius),
-                           int(patch_radius), float(k), float(alpha), float(epsilon), BAND_ROWS)
+    if channels == "mean" and borders == "replicate" and clamp is None:
+        out = _nl_means_kernel(_planes(values), _planes(guide), _planes(variance), int(radius),
+                               int(patch_radius), float(k), float(alpha), float(epsilon), BAND_ROWS)
+    else:
+        out = _nl_means_channels_kernel(_planes(values), _planes(guide), _planes(variance), int(radius),
+                                        int(patch_radius), float(k), float(alpha), float(epsilon),
+                                        np.inf if clamp is None else float(clamp), borders == "truncate",
+                                        CHANNEL_MODES[channels], BAND_ROWS)
     out = np.moveaxis(out, 0, 2)
     return np.ascontiguousarray(out[..., 0] if squeeze else out)
