@@ -133,6 +133,7 @@ def test_bad_commands_stop_at_parse_time_naming_the_key(command, message):
 
 
 @pytest.mark.slow
+@pytest.mark.extended
 def test_the_example_ranks_an_external_denoiser_end_to_end(tmp_path):
     """examples/box_denoiser/config.yaml at the smoke scale: the program runs on every case (the
     Mitsuba XML scene scenes/xml_room.xml among them: rendered, referenced and ranked like the
