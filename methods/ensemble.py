@@ -292,3 +292,10 @@ def combine(buffers: RenderBuffers, inputs: list[Denoised], *,
         raise ValueError(f"ensemble ({weights} weights) combined image(s) {bad} overflow "
                          f"float32")
     return Denoised(full=images["full"], a=images["a"], b=images["b"], extras=extras)
+
+
+def check_config(params: dict, *, config_key: str) -> None:
+    """Parse-time check of what no annotation says: Eq. 33's denominator floor is finite and >= 0."""
+    floor = params.get("variance_sum_floor", ENSEMBLE_DEFAULTS["variance_sum_floor"])
+    if not (isinstance(floor, (int, float)) and not isinstance(floor, bool) and np.isfinite(floor) and floor >= 0):
+        raise ValueError(f"{config_key}.variance_sum_floor: must be a finite number >= 0, got {floor!r}")

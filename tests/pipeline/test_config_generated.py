@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import contextlib
 import copy
+import inspect
 import itertools
 import re
 import signal
@@ -74,7 +75,12 @@ def _catalogue() -> dict[str, dict]:
 
 
 CATALOGUE = _catalogue()
-DENOISERS = sorted(n for n, c in CATALOGUE.items() if c["kind"] == "denoiser")
+#: methods that cannot run without a param no default gives (an external program's command,
+#: precomputed results' folder, whose files are checked when the DAG is parsed): their own tests
+#: (tests/methods/test_external.py, test_precomputed.py) cover their configs, not generated ones
+NEEDS_OUTSIDE_PARAMS = sorted(n for n, c in CATALOGUE.items()
+                              if any(default is inspect.Parameter.empty for _, default in c["params"].values()))
+DENOISERS = sorted(n for n, c in CATALOGUE.items() if c["kind"] == "denoiser" and n not in NEEDS_OUTSIDE_PARAMS)
 COMBINERS = sorted(n for n, c in CATALOGUE.items() if c["kind"] == "combiner")
 POOL_NAMES = {name for denoisers, combiners in [pool_methods()] for name in denoisers + [c["name"] for c in combiners]}
 # even spp with a render seed code (mcbench.render.seeds.spp_code)
