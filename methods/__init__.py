@@ -130,6 +130,9 @@ def _allowed(value, hint) -> bool:
         return any(value == choice and type(value) is type(choice) for choice in typing.get_args(hint))
     if origin in (typing.Union, types.UnionType):
         return any(_allowed(value, arg) for arg in typing.get_args(hint))
+    if origin is list:          # list[T]: a YAML list of T's
+        (item,) = typing.get_args(hint) or (object,)
+        return isinstance(value, list) and all(_allowed(v, item) for v in value)
     if hint is type(None):
         return value is None
     if hint is bool:
@@ -146,6 +149,8 @@ def _allowed(value, hint) -> bool:
 def _describe(hint) -> str:
     if typing.get_origin(hint) is typing.Literal:
         return "one of " + ", ".join(repr(v) for v in typing.get_args(hint))
+    if typing.get_origin(hint) is list:
+        return f"a list of {_describe(typing.get_args(hint)[0])} (an argument list, not one string)"
     return getattr(hint, "__name__", str(hint))
 
 

@@ -48,7 +48,7 @@ def program_seconds() -> float:
     return float(sum(_seconds))
 
 
-def denoise(buffers: RenderBuffers, *, command: list, name: str = "external", timeout: float = 3600.0,
+def denoise(buffers: RenderBuffers, *, command: list[str], name: str = "external", timeout: float = 3600.0,
             per_image: bool = False, workdir: str = "") -> Denoised:
     """Run the program on the case (the module docstring); ``name`` is the output file stem (the
     pipeline passes the method's config name), ``workdir`` the value of ``{workdir}`` (default: the
