@@ -38,8 +38,9 @@ def denoise(buffers: RenderBuffers, *, dir: str, pattern: str = RESULT_PATTERN, 
     """The case's three results from their files (the module docstring); ``name``, ``scene`` and
     ``spp`` are filled in by the pipeline (the method's config name and the case)."""
     shape = buffers.layers["color"].shape
+    files = result_files(pattern, dir=dir, scene=scene, spp=spp, name=name)
     images = {}
-    for image, path in result_files(pattern, dir=dir, scene=scene, spp=spp, name=name).items():
+    for image, path in files.items():
         values = read_image(path)
         if values.shape != shape:
             raise ValueError(f"{path}: precomputed result is {values.shape}, the render {buffers.source} is {shape}")
@@ -48,8 +49,7 @@ def denoise(buffers: RenderBuffers, *, dir: str, pattern: str = RESULT_PATTERN, 
             raise ValueError(f"{path}: precomputed result holds NaN/Inf in {bad} pixel(s)")
         images[image] = values
     _seconds[0] = float(seconds)
-    return Denoised(full=images["full"], a=images["a"], b=images["b"], source=str(result_files(
-        pattern, dir=dir, scene=scene, spp=spp, name=name)["full"]))
+    return Denoised(full=images["full"], a=images["a"], b=images["b"], source=str(files["full"]))
 
 
 def check_config(params: dict, *, config_key: str) -> None:

@@ -11,15 +11,14 @@ named by ``--variants`` (each a switch of methods/rdfc.py, see VARIANTS below).
 
 from __future__ import annotations
 
-import argparse
 import time
-from pathlib import Path
 
 import numpy as np
 
 from mcbench.analysis.metrics import relmse, relmse_map
 from mcbench.io.buffers import RenderBuffers
 from methods import rdfc
+from render_case import case_arguments  # tools/rdfc/, the script's own folder
 
 
 def load(scene, spp, ref_spp, out):
@@ -64,11 +63,7 @@ VARIANTS = {
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("scene")
-    ap.add_argument("--spp", type=int, default=4)
-    ap.add_argument("--ref-spp", type=int, default=4096)
-    ap.add_argument("--out", type=Path, default=Path("/tmp/rdfc"))
+    ap = case_arguments(__doc__.splitlines()[0])
     ap.add_argument("--variants", default="default", help=f"comma-separated, of {sorted(VARIANTS)}")
     ap.add_argument("--trace", action="store_true", help="pass-1 details of half buffer A")
     args = ap.parse_args(argv)

@@ -16,13 +16,18 @@ from pathlib import Path
 import numpy as np
 
 
-def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def case_arguments(description: str) -> argparse.ArgumentParser:
+    """The case's arguments shared by the RDFC tools: scene, --spp, --ref-spp, --out."""
+    ap = argparse.ArgumentParser(description=description)
     ap.add_argument("scene")
     ap.add_argument("--spp", type=int, default=4)
     ap.add_argument("--ref-spp", type=int, default=4096)
     ap.add_argument("--out", type=Path, default=Path("/tmp/rdfc"))
-    args = ap.parse_args(argv)
+    return ap
+
+
+def main(argv=None):
+    args = case_arguments(__doc__.splitlines()[0]).parse_args(argv)
     from mcbench.pipeline.registry import load_scene
     from mcbench.render.renderer import render_buffers, render_reference_chunk
 
