@@ -172,6 +172,7 @@ def validation_scene():
     return seed, CropSet.from_layers(crops)
 
 
+@pytest.mark.extended      # renders a validation scene afresh (about 4 minutes)
 @pytest.mark.parametrize("name", LEARNED)
 def test_committed_weights_reproduce_their_validation_loss(name, validation_scene):
     seed, crops = validation_scene

@@ -166,6 +166,7 @@ def combiner_validation_scene(tmp_path_factory):
     return seed, paths, correlated
 
 
+@pytest.mark.extended      # renders a validation scene and its bases' results afresh (about 4 minutes)
 @pytest.mark.parametrize("name", COMBINERS)
 def test_committed_combiner_weights_reproduce_their_validation_loss(name, combiner_validation_scene):
     from mcbench.io.tables import read_json

@@ -10,6 +10,7 @@ import pytest
 from mcbench.pipeline.config import read_config_file
 from mcbench.render.renderer import render_buffers
 from mcbench.render.variants import pick_variant
+from mcbench.pipeline.config import resolve_config
 from scenes import available_scenes, load_scene
 
 REPO = Path(__file__).resolve().parents[2]
@@ -38,7 +39,13 @@ def test_scenes_import_only_core_building_blocks():
     assert not list((REPO / "scenes").glob("_[!_]*.py"))     # no private helper modules left
 
 
-@pytest.mark.parametrize("scene", SCENES)
+# the default study's scenes (and the XML one) in the README's test command, the rest of the
+# 30-scene suite in the extended tier (seconds to a minute each)
+STUDY_SCENES = set(resolve_config({})["scenes"]) | {"xml_room"}
+
+
+@pytest.mark.parametrize("scene", [scene if scene in STUDY_SCENES else pytest.param(scene, marks=pytest.mark.extended)
+                                   for scene in SCENES])
 def test_scene_renders_finite_at_every_spp(scene):
     """All of the paper's spp levels (and 2, one sample per half buffer) at 16x12 pixels."""
     module = load_scene(scene)

@@ -23,7 +23,9 @@ import yaml
 import tests.workflow.slurm_local as slurm_local
 from tests.conftest import REPO, SMOKE_CONFIG
 
-pytestmark = pytest.mark.slow
+# extended: minutes of SLURM daemons and a second smoke run, beyond the README's test command (.ci/run
+# runs the extended tier with MCBENCH_REQUIRE_SLURM=1)
+pytestmark = [pytest.mark.slow, pytest.mark.extended]
 
 # The tables that depend on the numbers only (timings differ between runs by nature).
 COMPARED_TABLES = ["metrics.csv", "tables/ranking_*.csv", "tables/comparisons/table1_*.csv",
