@@ -52,7 +52,7 @@ rule all:
         expand(rules.comparison_onehot.output, metric=config["metrics"]),
         rules.comparison_ablations.output,
         expand(rules.comparison_ranking.output, metric=config["metrics"]),
-        expand(rules.oracle_study.output, scene=ORACLE_SCENE),
+        oracle_targets(),
         study_targets(),
         progressive_targets(),
     default_target: True

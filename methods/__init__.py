@@ -13,6 +13,12 @@ A method module declares
 * optionally ``RENDER_LAYERS``: the render layers the method reads (a tuple of names; absent:
   all). A job whose methods all declare it reads only their union (``mcbench.pipeline.methods``),
   which saves most of a large render's memory.
+* optionally ``IMAGE_QUANTITIES``: a single-image denoiser (one that filters each of the full
+  image and the halves on its own, :func:`denoise_each_buffer`) names the quantities it reads of
+  each image, e.g. ``("color", "albedo", "normal")``. It may then run on renders imported without
+  half buffers (``scenes/<name>.yaml``, :mod:`mcbench.io.render_folders`), giving the full image
+  only; a method that declares neither this nor ``RENDER_LAYERS`` needs every layer of a render
+  (:func:`mcbench.pipeline.methods.needed_layers`, checked when the DAG is parsed).
 * optionally ``check_config(params, *, config_key)``: checks of param values that no annotation
   describes (raise ``ValueError`` naming ``config_key``), run when the DAG is parsed;
   ``WARM_UP = False``: no untimed warm-up run on a crop before the timed run; ``TIMES_ITSELF =

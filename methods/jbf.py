@@ -23,6 +23,7 @@ from mcbench.io.buffers import ImageBuffers, RenderBuffers
 from methods import denoise_each_buffer
 
 KIND = "denoiser"
+IMAGE_QUANTITIES = ("color", "variance", "albedo", "normal", "depth")   # what denoise_image reads of each image
 LABEL = "JBF (joint bilateral)"
 
 

@@ -16,6 +16,7 @@ from mcbench.io.buffers import ImageBuffers, RenderBuffers
 from methods import denoise_each_buffer
 
 KIND = "denoiser"
+IMAGE_QUANTITIES = ("color", "albedo", "normal")   # what denoise_image reads of each image
 LABEL = "#6 OIDN"
 Quality = Literal["high", "balanced", "fast", "default"]   # OIDN's filter qualities
 

@@ -19,6 +19,13 @@ blocks (sensors, quads, boxes, meshes, textures, skies, curves) are core modules
 A Mitsuba 3 XML file ``scenes/<name>.xml`` (assets beside it) is a scene as well, with its own
 ``<integrator>``; :func:`mcbench.render.xml_scenes.scene_module` gives it the contract above
 (``scenes/xml_room.xml`` is one, written for the project).
+
+A YAML file ``scenes/<name>.yaml`` names a folder of renders made elsewhere (another renderer's
+noisy images per spp and its reference, in the ensemble paper's layout or the OIDN toolkit's
+naming): :func:`mcbench.io.render_folders.scene_module` gives it the contract above with a
+``RENDER_FOLDER`` instead of a ``build`` that renders; the pipeline imports its files in place of
+rendering and checks, when the DAG is parsed, that every configured method finds the layers it
+reads.
 """
 
 from __future__ import annotations
@@ -29,11 +36,13 @@ from pathlib import Path
 from types import ModuleType
 
 from mcbench import BenchError
+from mcbench.io.render_folders import scene_module as render_folder_scene
 from mcbench.render.xml_scenes import scene_module
 
 __all__ = ["UnknownSceneError", "available_scenes", "load_scene"]
 
 _REQUIRED_ATTRIBUTES = ("DESCRIPTION", "CATEGORY", "RESOLUTION", "build")
+_FILE_SUFFIXES = (".xml", ".yaml")
 
 
 class UnknownSceneError(BenchError):
@@ -41,9 +50,10 @@ class UnknownSceneError(BenchError):
 
 
 def available_scenes() -> list[str]:
-    """Names of all scenes in this package, sorted: its modules and its Mitsuba XML files."""
+    """Names of all scenes in this package, sorted: its modules, its Mitsuba XML files and its
+    YAML files of renders."""
     modules = {info.name for info in pkgutil.iter_modules(__path__) if not info.name.startswith("_")}
-    files = {path.stem for path in Path(__path__[0]).glob("[!_]*.xml")}
+    files = {path.stem for folder in __path__ for suffix in _FILE_SUFFIXES for path in Path(folder).glob(f"[!_]*{suffix}")}
     return sorted(modules | files)
 
 
@@ -53,12 +63,15 @@ def load_scene(name: str, config_key: str = "scenes") -> ModuleType:
     if name not in available:
         raise UnknownSceneError(f"config key '{config_key}': unknown scene '{name}'; "
                                 f"available scenes: {', '.join(available)}")
-    xml_file = Path(__path__[0]) / f"{name}.xml"
-    if xml_file.is_file():
-        if (Path(__path__[0]) / f"{name}.py").is_file():
-            raise UnknownSceneError(f"config key '{config_key}': scene '{name}' is both scenes/{name}.py and "
-                                    f"scenes/{name}.xml; keep one")
-        return scene_module(xml_file)
+    kinds = [p for folder in map(Path, __path__)
+             for p in (folder / f"{name}.py", *(folder / f"{name}{s}" for s in _FILE_SUFFIXES)) if p.is_file()]
+    if len(kinds) > 1:
+        raise UnknownSceneError(f"config key '{config_key}': scene '{name}' is {' and '.join(f'scenes/{p.name}' for p in kinds)}; "
+                                f"keep one")
+    if kinds and kinds[0].suffix == ".xml":
+        return scene_module(kinds[0])
+    if kinds and kinds[0].suffix == ".yaml":
+        return render_folder_scene(kinds[0])
     module = importlib.import_module(f"{__name__}.{name}")
     missing = [a for a in _REQUIRED_ATTRIBUTES if not hasattr(module, a)]
     if missing:

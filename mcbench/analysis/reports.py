@@ -40,7 +40,9 @@ def scene_rows(metrics: pd.DataFrame, floors: dict[str, float], scenes_info: dic
     """One row per scene: category, description, reference spp and noise floor, the noisy and
     best candidate's relMSE at the highest spp, their ratio to the floor, and render costs.
 
-    ``costs[scene]`` holds ``render_cpu_hours`` and ``reference_cpu_hours``.
+    ``costs[scene]`` holds ``render_cpu_hours`` and ``reference_cpu_hours``. A floor of None (a
+    reference imported without its variance) is unknown: ``reference_relmse`` and ``floor_ratio``
+    are NaN there, written "n/a", and no warning is raised for it.
     """
     relmse = metrics[metrics["metric"] == "relmse"]
     rows = []
@@ -51,14 +53,17 @@ def scene_rows(metrics: pd.DataFrame, floors: dict[str, float], scenes_info: dic
         candidates = top.drop(index=noisy, errors="ignore")
         best = candidates.idxmin()
         floor = floors[scene]
-        ratio = float(candidates.min()) / floor if floor > 0 else math.inf
+        if floor is None:
+            floor, ratio = math.nan, math.nan
+        else:
+            ratio = float(candidates.min()) / floor if floor > 0 else math.inf
         rows.append({
             "scene": scene, "category": info.get("category", ""), "description": info.get("description", ""),
             "resolution": info.get("resolution", ""), "integrator": info.get("integrator", ""),
             "reference_spp": info.get("reference_spp", ""), "reference_relmse": floor,
             "top_spp": top_spp, "noisy_relmse": float(top.get(noisy, np.nan)),
             "best_candidate": best, "best_relmse": float(candidates.min()), "floor_ratio": ratio,
-            "floor_ok": ratio >= FLOOR_RATIO_REQUIRED,
+            "floor_ok": bool(math.isnan(ratio) or ratio >= FLOOR_RATIO_REQUIRED),
             "render_cpu_hours": costs.get(scene, {}).get("render_cpu_hours", np.nan),
             "reference_cpu_hours": costs.get(scene, {}).get("reference_cpu_hours", np.nan),
         })
@@ -75,9 +80,11 @@ def scene_markdown(table: pd.DataFrame) -> str:
     """The scene table as Markdown, saying plainly which references are too noisy."""
     shown = table[["scene", "category", "reference_spp", "reference_relmse", "noisy_relmse", "best_candidate",
                    "best_relmse", "floor_ratio", "render_cpu_hours", "reference_cpu_hours", "description"]].copy()
-    shown["floor_ratio"] = [f"{r:.1f}" + ("" if r >= FLOOR_RATIO_REQUIRED else " ⚠ <10×") for r in table["floor_ratio"]]
+    shown["floor_ratio"] = ["n/a" if math.isnan(r) else f"{r:.1f}" + ("" if r >= FLOOR_RATIO_REQUIRED else " ⚠ <10×")
+                            for r in table["floor_ratio"]]
     for column in ("reference_relmse", "noisy_relmse", "best_relmse"):
-        shown[column] = [f"{v:.3g}" for v in table[column]]
+        shown[column] = ["n/a" if math.isnan(v) else f"{v:.3g}" for v in table[column]]
+    shown["reference_spp"] = ["n/a" if v is None or v != v else v for v in table["reference_spp"]]
     for column in ("render_cpu_hours", "reference_cpu_hours"):
         shown[column] = [f"{v:.4f}" for v in table[column]]
     top = int(table["top_spp"].max()) if len(table) else 0
@@ -102,9 +109,10 @@ def scene_latex(table: pd.DataFrame, *, caption: str, label: str = "tab:scenes")
     header = ["Scene", "Category", "Ref. spp", "Ref. relMSE", "Noisy relMSE", "Best", "Best relMSE", "Floor ratio"]
     rows = []
     for row in table.itertuples():
-        ratio = f"{row.floor_ratio:.1f}"
-        cells = [latex_escape(row.scene), latex_escape(row.category), str(row.reference_spp),
-                 f"{row.reference_relmse:.3g}", f"{row.noisy_relmse:.3g}", latex_escape(row.best_candidate),
+        ratio = "n/a" if math.isnan(row.floor_ratio) else f"{row.floor_ratio:.1f}"
+        unknown_spp = row.reference_spp is None or row.reference_spp != row.reference_spp
+        cells = [latex_escape(row.scene), latex_escape(row.category), "n/a" if unknown_spp else str(row.reference_spp),
+                 "n/a" if math.isnan(row.reference_relmse) else f"{row.reference_relmse:.3g}", f"{row.noisy_relmse:.3g}", latex_escape(row.best_candidate),
                  f"{row.best_relmse:.3g}", ratio if row.floor_ok else rf"\textbf{{{ratio}}}"]
         rows.append("    " + " & ".join(cells) + r" \\")
     lines = [r"% Requires \usepackage{booktabs}. Written by mcbench (mcbench.analysis.reports.scene_latex).",

@@ -19,6 +19,12 @@ Conventions (all arrays float32, linear HDR radiance, row-major (H, W[, 3])):
   half (the unbiased one-sample variance, the same for both). Renders without bins (spp not a
   multiple of 4, files written before bins existed) load as before; only methods that need
   sub-buffers refuse them (:meth:`RenderBuffers.sub_images`).
+* Renders imported from another renderer (:mod:`mcbench.io.render_folders`; header key
+  ``imported_from``) hold only the layers their folder gives, e.g. no half buffers, variance or
+  depth. Nothing stands in for a missing layer: an absent colour or variance is ``None`` in
+  :class:`ImageBuffers`, and a single-image denoiser on a render without halves returns the full
+  image only (``Denoised.a`` and ``.b`` are ``None``). The pipeline refuses, when the DAG is
+  parsed, every method that reads a layer such a render lacks.
 """
 
 from __future__ import annotations
@@ -56,10 +62,10 @@ class ImageBuffers:
     """One noisy image (full, A or B) with its variance and features."""
 
     color: np.ndarray      # (H, W, 3)
-    variance: np.ndarray   # (H, W, 3) variance of the mean
-    albedo: np.ndarray     # (H, W, 3)
-    normal: np.ndarray     # (H, W, 3)
-    depth: np.ndarray      # (H, W)
+    variance: np.ndarray | None   # (H, W, 3) variance of the mean; None: the render has none
+    albedo: np.ndarray | None     # (H, W, 3)
+    normal: np.ndarray | None     # (H, W, 3)
+    depth: np.ndarray | None      # (H, W)
     spp: float             # samples behind this image
 
     @property
@@ -88,16 +94,25 @@ class RenderBuffers:
     def image(self, which: str) -> ImageBuffers:
         """The full (``"full"``) or half (``"a"``/``"b"``) image with its own features.
 
-        Half-buffer features fall back to the full-buffer ones when the render lacks them.
+        Half-buffer features fall back to the full-buffer ones when the render lacks them; colour
+        and variance never do (a half's samples are its own). A quantity the render lacks is
+        ``None`` (imported renders); an image without its colour raises :class:`mcbench.BenchError`.
         """
         suffix = BUFFER_SUFFIXES[which]
+        if "color" + suffix not in self.layers:
+            raise BenchError(f"{self.source}: the render has no image '{which}' (layer color{suffix})")
 
-        def get(q):
-            return self.layers.get(q + suffix, self.layers[q])
+        def feature(q):
+            return self.layers.get(q + suffix, self.layers.get(q))
 
-        return ImageBuffers(color=get("color"), variance=get("variance"), albedo=get("albedo"),
-                            normal=get("normal"), depth=get("depth"),
+        return ImageBuffers(color=self.layers["color" + suffix], variance=self.layers.get("variance" + suffix),
+                            albedo=feature("albedo"), normal=feature("normal"), depth=feature("depth"),
                             spp=self.spp if which == "full" else self.spp / 2)
+
+    def has_halves(self) -> bool:
+        """Whether the render holds the half buffers A and B (every Mitsuba render does; an
+        imported one only when its folder gives them)."""
+        return "color_a" in self.layers and "color_b" in self.layers
 
     def has_sub_buffers(self) -> bool:
         """Whether the render holds the four quarter-sample bins (spp a multiple of 4)."""
@@ -122,7 +137,9 @@ class RenderBuffers:
 
         ``layers``: only these layers (plus ``color``, which gives the shape), e.g. a method's
         ``RENDER_LAYERS``; the rest are not kept (a render holds several times the layers most
-        methods read). None: every layer, after checking :data:`REQUIRED_LAYERS`."""
+        methods read). None: every layer, after checking :data:`REQUIRED_LAYERS` (an imported
+        render, header key ``imported_from``: only ``color``; the pipeline checked its layers
+        against its methods' when the DAG was parsed)."""
         path = Path(path)
         if layers is not None:
             wanted = list(dict.fromkeys(("color", *layers)))
@@ -132,12 +149,13 @@ class RenderBuffers:
             check_resolution(path, layers["color"].shape, meta)
             return cls(layers=layers, spp=int(meta.get("spp", 0)), source=str(path))
         layers = read_layers(path)
-        missing = [n for n in REQUIRED_LAYERS if n not in layers]
+        meta = read_metadata(path)
+        required = ("color",) if meta.get("imported_from") else REQUIRED_LAYERS
+        missing = [n for n in required if n not in layers]
         if missing:
             from mcbench.io.exr import ExrError
             raise ExrError(f"{path}: not a render file, missing layer(s) {missing}")
         check_finite(path, layers)
-        meta = read_metadata(path)
         check_resolution(path, layers["color"].shape, meta)
         spp = int(meta.get("spp", 0))
         return cls(layers=layers, spp=spp, source=str(path))
@@ -145,23 +163,29 @@ class RenderBuffers:
 
 @dataclass(frozen=True)
 class Denoised:
-    """A method's output: denoised full image and the denoised half buffers A and B."""
+    """A method's output: denoised full image and the denoised half buffers A and B (``None``
+    both, for a render without half buffers: an imported one, see the module docstring)."""
 
     full: np.ndarray  # (H, W, 3)
-    a: np.ndarray
-    b: np.ndarray
+    a: np.ndarray | None
+    b: np.ndarray | None
     extras: dict | None = None  # optional named layers (weight maps, selection maps, ...)
 
     source: str = "<memory>"
 
     def layers(self) -> dict[str, np.ndarray]:
         out = {"color": self.full, "color_a": self.a, "color_b": self.b}
+        out = {name: image for name, image in out.items() if image is not None}
         out.update(self.extras or {})
         return out
 
     def image(self, which: str) -> np.ndarray:
-        """The result on image ``which``: ``"full"``, ``"a"`` or ``"b"``."""
-        return {"full": self.full, "a": self.a, "b": self.b}[which]
+        """The result on image ``which``: ``"full"``, ``"a"`` or ``"b"`` (BenchError naming the
+        output when it has no half buffers)."""
+        image = {"full": self.full, "a": self.a, "b": self.b}[which]
+        if image is None:
+            raise BenchError(f"{self.source}: no result on half buffer '{which}' (its render has no half buffers)")
+        return image
 
     def sub_outputs(self, which: str) -> tuple[np.ndarray, np.ndarray]:
         """The method's result on the two sub-buffers of image ``which`` (:data:`SUB_OUTPUTS`),
@@ -177,16 +201,21 @@ class Denoised:
     @classmethod
     def load(cls, path: str | Path, *, extras: bool = False) -> "Denoised":
         """A method's output EXR: ``color``, ``color_a``, ``color_b`` and, with ``extras``, every
-        other layer (sub-buffer results, weight maps) as :attr:`extras`."""
+        other layer (sub-buffer results, weight maps) as :attr:`extras`. An output with neither
+        half (a render without halves) loads with ``a`` and ``b`` None; one half alone is refused."""
         path = Path(path)
-        layers = read_layers(path) if extras else read_layers(path, ["color", "color_a", "color_b"])
+        from mcbench.io.exr import ExrError
+
+        layers = read_layers(path)      # decodes every layer of the file either way
+        halves = [n for n in ("color_a", "color_b") if n in layers]
         missing = [n for n in ("color", "color_a", "color_b") if n not in layers]
-        if missing:
-            from mcbench.io.exr import ExrError
+        if "color" in missing or len(halves) == 1:
             raise ExrError(f"{path}: not a method output, missing layer(s) {missing}")
+        if not extras:
+            layers = {n: layers[n] for n in ("color", *halves)}
         check_finite(path, layers)
         extras = {k: v for k, v in layers.items() if k not in ("color", "color_a", "color_b")}
-        return cls(full=layers["color"], a=layers["color_a"], b=layers["color_b"], extras=extras or None,
+        return cls(full=layers["color"], a=layers.get("color_a"), b=layers.get("color_b"), extras=extras or None,
                    source=str(path))
 
 
@@ -195,8 +224,11 @@ def denoise_each_buffer(buffers: RenderBuffers,
     """Run a single-image denoiser on the full buffer and on each half buffer.
 
     Each half buffer is denoised with its own features and variance only, keeping
-    y^A independent of x^B as the dual-buffer estimate assumes (Zheng et al. Eq. 10).
+    y^A independent of x^B as the dual-buffer estimate assumes (Zheng et al. Eq. 10). A render
+    without half buffers (an imported one) gives the full image's result only.
     """
+    if not buffers.has_halves():
+        return Denoised(full=denoise_image(buffers.image("full")), a=None, b=None, source=buffers.source)
     return Denoised(full=denoise_image(buffers.image("full")),
                     a=denoise_image(buffers.image("a")),
                     b=denoise_image(buffers.image("b")))

@@ -154,6 +154,26 @@ def render_layers(modules) -> tuple[str, ...] | None:
     return tuple(names)
 
 
+def needed_layers(module, *, halves: bool = True) -> tuple[str, ...]:
+    """The render layers a method cannot run without, checked against an imported render's when
+    the DAG is parsed (:mod:`mcbench.pipeline.plan`): its ``RENDER_LAYERS``; or, for a
+    single-image denoiser declaring ``IMAGE_QUANTITIES`` (methods/__init__.py), those quantities
+    of the full image plus the halves' own colour (and variance, if it reads variance) when
+    ``halves`` (half-buffer features fall back to the full image's,
+    :meth:`mcbench.io.buffers.RenderBuffers.image`); else every layer of
+    :data:`mcbench.io.buffers.REQUIRED_LAYERS`."""
+    from mcbench.io.buffers import REQUIRED_LAYERS
+
+    declared = getattr(module, "RENDER_LAYERS", None)
+    if declared is not None:
+        return tuple(declared)
+    quantities = getattr(module, "IMAGE_QUANTITIES", None)
+    if quantities is None:
+        return REQUIRED_LAYERS
+    own = [q for q in ("color", "variance") if q in quantities]
+    return (*quantities, *(q + s for s in ("_a", "_b") for q in own if halves))
+
+
 def _apply(module, buffers: RenderBuffers, inputs: list[Denoised], params: dict) -> Denoised:
     if module.KIND == "denoiser":
         return module.denoise(buffers, **params)

@@ -25,7 +25,14 @@ Checks here beyond the method table's (:func:`methods.method_table`):
   unique (:func:`mcbench.analysis.comparisons.find_comparisons`, which the comparison jobs
   would otherwise raise hours later), ``training.first_seed + training.count`` fits the object
   seeds, ``training.spp`` are powers of two 2..32768 (the training render seeds) and the
-  training crops fit ``training.resolution``.
+  training crops fit ``training.resolution``;
+* a scene of renders made elsewhere (``scenes/<name>.yaml``, :mod:`mcbench.io.render_folders`)
+  has a case for every ``spp`` and a reference, at the config's ``resolution`` if one is set,
+  a reference variance if ``relmse_corrected`` is computed, and every layer each configured
+  method reads (:func:`mcbench.pipeline.methods.needed_layers`): a method that needs what the
+  folder lacks (half buffers, variance, depth) is refused for that scene, naming the files
+  that would supply it; the oracle study and the progressive curve render their scene again,
+  so they take the first scene that Mitsuba renders.
 """
 
 from __future__ import annotations
@@ -105,13 +112,15 @@ def _plan(config: dict, is_learned) -> dict:
                  f"with the noisy input, so the scores are on another scale than the paper's 40-entry Table 3.")
     _check_comparisons(methods)
     _check_case_files(methods, scenes, sorted(config["spp"]))
+    render_folders = _check_render_folders(config, methods, scenes, spps)
     # progressive denoising's entries (combiners of module progressive) -> the method each mixes
     # with the noisy render (progressive.smk)
     progressive = {name: spec["inputs"][0] for name, spec in methods.items() if spec["module"] == "progressive"}
     labels = {NOISY: NOISY_LABEL, **{name: spec["label"] for name, spec in methods.items()}}
     reference_chunks = config["reference"]["chunks"]
-    reference_spp = _reference_spp_table(config, scenes, reference_chunks)
+    reference_spp = _reference_spp_table(config, [s for s in scenes if s not in render_folders], reference_chunks)
     _check_reference_above_spp(config, reference_spp)
+    reference_spp.update({scene: None for scene in render_folders})   # made elsewhere: unknown
 
     # Which methods share a job (config batch_methods): every method of a case in one job, in the
     # method table's order (dependency order, checked here); else one job per method.
@@ -144,8 +153,10 @@ def _plan(config: dict, is_learned) -> dict:
             raise BenchError(f"training.networks.{name}: not a learned method of this config; "
                              f"learned: {', '.join(networks) or 'none'}")
 
-    oracle_scene, oracle_downscale = _oracle(config, scenes, reference_spp)
-    progressive_scene, progressive_downscale = _progressive_curve(config, scenes, reference_spp, progressive)
+    rendered = [scene for scene in scenes if scene not in render_folders]
+    oracle_scene, oracle_downscale = _oracle(config, scenes, rendered, reference_spp)
+    progressive_scene, progressive_downscale = _progressive_curve(config, scenes, rendered, reference_spp,
+                                                                  progressive)
     return {
         "methods": methods, "scenes": scenes, "spps": spps,
         "cases": [(scene, spp) for scene in scenes for spp in spps],
@@ -155,7 +166,7 @@ def _plan(config: dict, is_learned) -> dict:
         "batches": batches, "single_job_methods": single_job_methods,
         "training": training, "training_overrides": training_overrides, "training_seeds": training_seeds_,
         "networks": networks, "combiner_training": combiner_training, "combiner_seeds": combiner_seeds,
-        "oracle_scene": oracle_scene, "oracle_downscale": oracle_downscale,
+        "oracle_scene": oracle_scene, "oracle_downscale": oracle_downscale, "render_folders": render_folders,
         "progressive_scene": progressive_scene, "progressive_downscale": progressive_downscale,
     }
 
@@ -176,6 +187,61 @@ def _check_case_files(methods: dict, scenes: list[str], spps: list[int]) -> None
             shown = ", ".join(missing[:5]) + (f" and {len(missing) - 5} more" if len(missing) > 5 else "")
             raise BenchError(f"method '{name}' ({spec['module']}): {len(missing)} file(s) of its cases are missing: "
                              f"{shown}")
+
+
+def _check_render_folders(config: dict, methods: dict, scenes: list[str], spps: list[int]) -> dict:
+    """The scenes of renders made elsewhere -> their :class:`mcbench.io.render_folders.RenderFolder`,
+    after checking (headers only, no pixels) that each has every case and its reference, the
+    config's resolution, the reference variance the corrected relMSE needs, and every layer of
+    every configured method (:func:`mcbench.pipeline.methods.needed_layers`)."""
+    from mcbench.io.render_folders import AUTHORS_FILES, case_files, image_size, reference_files, reference_names
+    from mcbench.pipeline.methods import needed_layers
+
+    folders = {}
+    for index, scene in enumerate(scenes):
+        folder = getattr(load_scene(scene, config_key=f"scenes[{index}]"), "RENDER_FOLDER", None)
+        if folder is None:
+            continue
+        folders[scene] = folder
+        key = f"scenes[{index}] ('{scene}', renders in {folder.path}, {folder.layout} layout)"
+        references = reference_files(folder)
+        if "color" not in references:
+            raise BenchError(f"{key}: no reference image: expected {reference_names(folder)}")
+        if "relmse_corrected" in config["metrics"] and "variance" not in references:
+            raise BenchError(f"{key}: metric relmse_corrected needs the reference's variance of the mean "
+                             f"({folder.path / 'reference_variance.exr'}; the OIDN naming has none): supply it or "
+                             f"leave relmse_corrected out of metrics")
+        height, width = image_size(references["color"])
+        if config["resolution"] is not None and tuple(config["resolution"]) != (width, height):
+            raise BenchError(f"resolution: {list(config['resolution'])}, but the renders of scene '{scene}' are "
+                             f"{width}x{height} ({references['color']}) and are not resized: set resolution: null "
+                             f"(every scene at its own size)")
+        layers_in_all = None
+        for spp in spps:
+            files, missing = case_files(folder, spp)
+            if missing:
+                raise BenchError(f"{key}: the case at {spp} spp (spp lists it) lacks {', '.join(missing)}")
+            for layer, path in files.items():
+                if image_size(path) != (height, width):
+                    raise BenchError(f"{path}: {image_size(path)[1]}x{image_size(path)[0]} pixels, but the "
+                                     f"reference {references['color']} is {width}x{height}")
+            present = set(files) | {"color"}          # the full image: given, or the halves' mean
+            layers_in_all = present if layers_in_all is None else layers_in_all & present
+        halves = {"color_a", "color_b"} <= layers_in_all
+        file_of = {layer: name for name, layer in AUTHORS_FILES.items()}
+        for name, spec in methods.items():
+            module = load_method(spec["module"])
+            needed = needed_layers(module, halves=halves)
+            lacking = [layer for layer in needed if layer not in layers_in_all]
+            if not lacking and not halves and spec["kind"] == "combiner":
+                lacking = ["color_a", "color_b"]    # a combiner weighs its inputs by their halves
+            if lacking:
+                supply = ", ".join(file_of.get(layer, layer) for layer in lacking)
+                raise BenchError(f"method '{name}' ({spec['module']}) reads render layer(s) {lacking}, which scene "
+                                 f"'{scene}' lacks (renders in {folder.path}, {folder.layout} layout): supply "
+                                 f"{supply} in the authors' layout (mcbench.io.render_folders) or leave '{name}' "
+                                 f"or the scene out of this config")
+    return folders
 
 
 def _reference_spp_table(config: dict, scenes: list[str], chunks: int) -> dict[str, int]:
@@ -250,10 +316,23 @@ def _check_training(training: dict) -> None:
                              f"{width}x{height} (at most {cells})")
 
 
-def _oracle(config: dict, scenes: list[str], reference_spp: dict[str, int]) -> tuple[str, int]:
-    """The oracle study's scene and downscale (oracle.smk), checked."""
+def _rendered_scene(key: str, chosen: str | None, scenes: list[str], rendered: list[str]) -> str | None:
+    """The scene a study that renders its scene again uses: ``chosen``, else the first scene
+    Mitsuba renders (None: the config has none); refuses a scene of renders made elsewhere."""
+    if chosen is not None and chosen in scenes and chosen not in rendered:
+        raise BenchError(f"{key}: '{chosen}' is a scene of renders made elsewhere (scenes/{chosen}.yaml); this "
+                         f"study renders its scene again: name a scene that Mitsuba renders")
+    return chosen or (rendered[0] if rendered else None)
+
+
+def _oracle(config: dict, scenes: list[str], rendered: list[str],
+            reference_spp: dict[str, int]) -> tuple[str | None, int]:
+    """The oracle study's scene and downscale (oracle.smk), checked; no scene (None, 1) when the
+    config has no scene that Mitsuba renders (the study is then left out)."""
     oracle = config["oracle"]
-    scene = oracle["scene"] or scenes[0]
+    scene = _rendered_scene("oracle.scene", oracle["scene"], scenes, rendered)
+    if scene is None:
+        return None, 1
     if scene not in scenes:
         raise BenchError(f"oracle.scene: '{scene}' is not one of the config's scenes "
                          f"({', '.join(scenes)}); its reference is rendered only for those")
@@ -270,12 +349,18 @@ def _oracle(config: dict, scenes: list[str], reference_spp: dict[str, int]) -> t
     return scene, downscale
 
 
-def _progressive_curve(config: dict, scenes: list[str], reference_spp: dict[str, int],
-                       progressive: dict) -> tuple[str, int]:
+def _progressive_curve(config: dict, scenes: list[str], rendered: list[str], reference_spp: dict[str, int],
+                       progressive: dict) -> tuple[str | None, int]:
     """The progressive curve's scene and downscale (progressive.smk), checked; its scene and
     levels only matter when the config has a progressive entry (the curve runs only then)."""
     curve = config["progressive_curve"]
-    scene = curve["scene"] or scenes[0]
+    scene = _rendered_scene("progressive_curve.scene", curve["scene"], scenes, rendered)
+    if scene is None:
+        if progressive:
+            raise BenchError(f"progressive_curve.scene: progressive denoising's curve renders its scene again, and "
+                             f"every scene of this config is a folder of renders ({', '.join(scenes)}): add a "
+                             f"scene that Mitsuba renders or leave out the progressive entries")
+        return None, 1
     if progressive and scene not in scenes:
         raise BenchError(f"progressive_curve.scene: '{scene}' is not one of the config's scenes "
                          f"({', '.join(scenes)}); its reference is rendered only for those")

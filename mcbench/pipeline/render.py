@@ -1,20 +1,54 @@
-"""The work behind ``workflow/rules/render.smk``: noisy renders, reference chunks and their merge.
+"""The work behind ``workflow/rules/render.smk``: noisy renders, reference chunks and their merge;
+for a scene of renders made elsewhere (``scenes/<name>.yaml``, :mod:`mcbench.io.render_folders`)
+the same rules import its cases and its reference from the folder instead.
 """
 
 from __future__ import annotations
 
-
-
 from mcbench.io.exr import check_finite, check_resolution, read_layers, read_metadata, write_layers
+from mcbench.io.render_folders import RenderFolder, case_files, read_case, read_reference, reference_files
+
+__all__ = ["render_noisy", "render_reference_chunk", "merge_reference", "folder_case_files",
+           "folder_reference_files", "resolution_pair"]
+
+
+def folder_case_files(folder: RenderFolder, spp: int) -> list[str]:
+    """The files of an imported case (the render job's inputs), sorted."""
+    return sorted(str(path) for path in case_files(folder, spp)[0].values())
+
+
+def folder_reference_files(folder: RenderFolder) -> list[str]:
+    """The files of an imported reference (colour, and variance where given), sorted."""
+    return sorted(str(path) for path in reference_files(folder).values())
+
+
+def _import_case(scene: str, folder: RenderFolder, spp: int, output_path: str, resolution) -> None:
+    """Write the imported case at ``spp`` as a render file: the layers the folder gives (nothing
+    stands in for the others), header ``imported_from`` naming the folder."""
+    layers = read_case(folder, spp)
+    height, width = layers["color"].shape[:2]
+    size = resolution_pair(resolution)
+    if size is not None and size != (width, height):
+        raise ValueError(f"{folder.path}: the renders of scene '{scene}' are {width}x{height}, the config's "
+                         f"resolution {list(size)}; they are not resized (set resolution: null)")
+    write_layers(output_path, layers, metadata={"scene": scene, "spp": str(spp), "resolution": f"{width}x{height}",
+                                                "imported_from": str(folder.path), "layout": folder.layout,
+                                                "layers": ",".join(sorted(layers))})
 
 
 def render_noisy(scene: str, spp: int, output_path: str, *, resolution=None, variant: str = "auto",
                  seed: int = 0, threads: int | None = None) -> None:
-    """Render the full image and the two half buffers of one (scene, spp) to a multi-layer EXR."""
-    from mcbench.render.renderer import render_buffers
+    """Render the full image and the two half buffers of one (scene, spp) to a multi-layer EXR (or
+    import the case of a scene of renders made elsewhere)."""
     from mcbench.pipeline.registry import load_scene
 
-    layers, metadata = render_buffers(load_scene(scene), spp, resolution=resolution_pair(resolution),
+    module = load_scene(scene)
+    if getattr(module, "RENDER_FOLDER", None) is not None:
+        _import_case(scene, module.RENDER_FOLDER, spp, output_path, resolution)
+        return
+    from mcbench.render.renderer import render_buffers
+
+    layers, metadata = render_buffers(module, spp, resolution=resolution_pair(resolution),
                                       variant=variant, seed=seed, threads=threads)
     check_finite(f"{output_path} (render of scene '{scene}' at {spp} spp)", layers)
     write_layers(output_path, layers, metadata=metadata)
@@ -32,9 +66,23 @@ def render_reference_chunk(scene: str, spp: int, chunk: int, output_path: str, *
     write_layers(output_path, layers, metadata=metadata)
 
 
-def merge_reference(chunk_paths: list[str], output_path: str) -> None:
-    """Merge reference chunks (spp-weighted, float64) into the reference with its own variance."""
+def merge_reference(chunk_paths: list[str], output_path: str, *, scene: str | None = None) -> None:
+    """Merge reference chunks (spp-weighted, float64) into the reference with its own variance; for
+    a ``scene`` of renders made elsewhere, import its reference (``chunk_paths`` are then the
+    folder's files, read again by :func:`mcbench.io.render_folders.read_reference`)."""
     from mcbench.render.renderer import merge_reference_chunks
+
+    if scene is not None:
+        from mcbench.pipeline.registry import load_scene
+
+        folder = getattr(load_scene(scene), "RENDER_FOLDER", None)
+        if folder is not None:
+            layers = read_reference(folder)
+            height, width = layers["color"].shape[:2]
+            write_layers(output_path, layers, metadata={"scene": scene, "resolution": f"{width}x{height}",
+                                                        "imported_from": str(folder.path), "layout": folder.layout,
+                                                        "layers": ",".join(sorted(layers))})
+            return
 
     chunks = []
     for path in chunk_paths:

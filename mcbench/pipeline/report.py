@@ -113,12 +113,15 @@ def write_scene_table(metrics_csv: str, reference_paths: dict[str, str], referen
     metrics = read_table(metrics_csv, columns=["scene", "spp", "candidate", "metric", "value"])
     floors, info, costs = {}, {}, {}
     for scene, path in reference_paths.items():
-        layers = read_layers(path, ["color", "variance"])
+        meta = read_metadata(path)
+        # a reference imported without its variance (scenes/<name>.yaml) has no known floor
+        imported_without_variance = (bool(meta.get("imported_from"))
+                                     and "variance" not in meta.get("layers", "").split(","))
+        layers = read_layers(path, ["color"] if imported_without_variance else ["color", "variance"])
         check_finite(path, layers)
         check_resolution(path, layers["color"].shape)
-        floors[scene] = reference_relmse_floor(layers["color"], layers["variance"])
+        floors[scene] = None if imported_without_variance else reference_relmse_floor(layers["color"], layers["variance"])
         module = load_scene(scene)
-        meta = read_metadata(path)
         info[scene] = {"category": module.CATEGORY, "description": module.DESCRIPTION,
                        "resolution": meta.get("resolution", ""), "reference_spp": reference_spp[scene]}
         costs[scene] = {

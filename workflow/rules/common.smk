@@ -14,6 +14,7 @@ sys.path.insert(0, str(Path(workflow.basedir)))  # methods/, scenes/, mcbench/ f
 from mcbench import NOISY, NOISY_LABEL, BenchError  # noqa: E402
 from mcbench.pipeline.config import config_digest, resolve_config  # noqa: E402
 from mcbench.pipeline.plan import plan_study  # noqa: E402
+from mcbench.pipeline.render import folder_case_files, folder_reference_files  # noqa: E402
 from mcbench.analysis.metrics import ALL_METRICS  # noqa: E402
 from mcbench.analysis.pool import POOL  # noqa: E402
 from mcbench.analysis.study_figures import STUDY_FIGURES as STUDY_FIGURE_KEYS, curve_candidates, paper_recommended  # noqa: E402
@@ -228,6 +229,29 @@ def all_case_metrics(wildcards=None):
     return expand(rules.case_metrics.output[0], scene=SCENES, spp=SPPS)
 
 
+# Scenes of renders made elsewhere (scenes/<name>.yaml): their cases and references are imported
+# from the folder (rules render_noisy, merge_reference), not rendered.
+RENDER_FOLDERS = PLAN["render_folders"]
+
+
+def imported_case_files(wildcards):
+    """The folder's files of an imported case (inputs of render_noisy, so that a changed file
+    reruns it); nothing for a scene that Mitsuba renders."""
+    folder = RENDER_FOLDERS.get(wildcards.scene)
+    if folder is None:
+        return []
+    return folder_case_files(folder, int(wildcards.spp))
+
+
+def reference_inputs(wildcards):
+    """merge_reference's inputs: the reference chunks of a rendered scene, the reference files
+    of an imported one."""
+    folder = RENDER_FOLDERS.get(wildcards.scene)
+    if folder is None:
+        return expand(rules.render_reference_chunk.output[0], scene=wildcards.scene, chunk=range(REFERENCE_CHUNKS))
+    return folder_reference_files(folder)
+
+
 def reference_paths():
     return {scene: rules.merge_reference.output[0].format(scene=scene) for scene in SCENES}
 
@@ -236,7 +260,8 @@ def render_cost_records(wildcards=None):
     """The benchmark records of the noisy renders and the reference chunks (the scene table's
     CPU-hours), declared as inputs so that the table waits for them."""
     noisy = expand(rules.render_noisy.benchmark, scene=SCENES, spp=SPPS)
-    chunks = expand(rules.render_reference_chunk.benchmark, scene=SCENES, chunk=range(REFERENCE_CHUNKS))
+    chunks = expand(rules.render_reference_chunk.benchmark, scene=[s for s in SCENES if s not in RENDER_FOLDERS],
+                    chunk=range(REFERENCE_CHUNKS))
     return {"noisy": noisy, "reference": chunks}
 
 
@@ -328,6 +353,14 @@ def study_targets(wildcards=None):
     if not POOL_STUDY:
         return []
     return [*rules.study_tables.output, *expand(rules.study_figures.output, metric=METRIC_NAMES)]
+
+
+def oracle_targets(wildcards=None):
+    """The oracle study (oracle.smk) of its scene; nothing when every scene of the config is a
+    folder of renders made elsewhere (the study renders its scene again)."""
+    if PLAN["oracle_scene"] is None:
+        return []
+    return expand(rules.oracle_study.output, scene=PLAN["oracle_scene"])
 
 
 def progressive_targets(wildcards=None):

@@ -3,19 +3,12 @@
 # denoisers' true MSE matrices against the harness's reference, the weights solved from them
 # next to the dual-buffer estimate's.
 
-from mcbench.pipeline.oracle import oracle_size, usable_downscale  # noqa: E402
-
 ORACLE = config["oracle"]
-# the scene: oracle.scene, or the config's first scene when null (the default)
-ORACLE_SCENE = ORACLE["scene"] or SCENES[0]
-if ORACLE_SCENE not in SCENES:
-    raise BenchError(f"oracle.scene: '{ORACLE_SCENE}' is not one of the config's scenes "
-                     f"({', '.join(SCENES)}); its reference is rendered only for those")
-# oracle.downscale, reduced where the harness's resolution is too small for it (usable_downscale)
-ORACLE_DOWNSCALE = usable_downscale(config["resolution"], load_scene(ORACLE_SCENE).RESOLUTION, ORACLE["downscale"])
-oracle_size(config["resolution"], load_scene(ORACLE_SCENE).RESOLUTION, ORACLE_DOWNSCALE)
-for _index, _name in enumerate(ORACLE["denoisers"]):
-    load_method(_name, kind="denoiser", config_key=f"oracle.denoisers[{_index}]")
+# the scene: oracle.scene, or the config's first scene that Mitsuba renders when null (the
+# default); oracle.downscale, reduced where the harness's resolution is too small for it
+# (mcbench.pipeline.oracle.usable_downscale); both checked by the plan
+ORACLE_SCENE = PLAN["oracle_scene"]
+ORACLE_DOWNSCALE = PLAN["oracle_downscale"]
 
 
 rule oracle_study:

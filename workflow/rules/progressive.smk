@@ -4,18 +4,12 @@
 # per-spp errors and added time beside each entry's input, and one scene rendered up to
 # progressive_curve.spp (8192 by default) with its base, progressive and noisy curves.
 
-from mcbench.pipeline.oracle import usable_downscale  # noqa: E402
-
 PROGRESSIVE_DIR = f"{RESULTS}/tables/progressive"
 PROGRESSIVE_CURVE = config["progressive_curve"]
-# the curve's scene: progressive_curve.scene, or the config's first scene when null (cornell_box)
-PROGRESSIVE_SCENE = PROGRESSIVE_CURVE["scene"] or SCENES[0]
-if PROGRESSIVE and PROGRESSIVE_SCENE not in SCENES:
-    raise BenchError(f"progressive_curve.scene: '{PROGRESSIVE_SCENE}' is not one of the config's scenes "
-                     f"({', '.join(SCENES)}); its reference is rendered only for those")
-PROGRESSIVE_DOWNSCALE = usable_downscale(config["resolution"], load_scene(PROGRESSIVE_SCENE).RESOLUTION,
-                                         PROGRESSIVE_CURVE["downscale"])
-load_method(PROGRESSIVE_CURVE["base"], kind="denoiser", config_key="progressive_curve.base")
+# the curve's scene: progressive_curve.scene, or the config's first scene that Mitsuba renders
+# when null (cornell_box), and its downscale: checked by the plan
+PROGRESSIVE_SCENE = PLAN["progressive_scene"]
+PROGRESSIVE_DOWNSCALE = PLAN["progressive_downscale"]
 
 
 rule progressive_tables:

@@ -1,7 +1,10 @@
-# Rendering: noisy full/half buffers per (scene, spp) and chunked high-spp references.
+# Rendering: noisy full/half buffers per (scene, spp) and chunked high-spp references; a scene of
+# renders made elsewhere (scenes/<name>.yaml) has its cases and reference imported instead.
 
 
 rule render_noisy:
+    input:
+        imported_case_files,
     output:
         f"{RESULTS}/renders/{{scene}}/spp{{spp}}.exr",
     params:
@@ -44,10 +47,7 @@ rule render_reference_chunk:
 
 rule merge_reference:
     input:
-        expand(
-            f"{RESULTS}/references/{{{{scene}}}}/chunk{{chunk}}.exr",
-            chunk=range(REFERENCE_CHUNKS),
-        ),
+        reference_inputs,
     output:
         f"{RESULTS}/references/{{scene}}.exr",
     threads: 1
