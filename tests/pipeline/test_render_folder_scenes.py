@@ -188,3 +188,16 @@ def test_a_study_ranks_renders_from_another_renderer_end_to_end(tmp_path):
     scenes_md = (copy / "results" / "tables" / "scenes.md").read_text()
     assert "kitchen" in scenes_md and "n/a" in scenes_md      # no reference variance: floor unknown
     assert (copy / "results" / "tables" / "ranking_relmse.md").is_file()
+
+
+def test_a_combiner_is_refused_without_halves_even_if_it_reads_no_render_layer_of_them(folder_scenes, monkeypatch):
+    """A combiner weighs its inputs by their half-buffer results, which a render without halves
+    cannot give, whatever render layers it declares."""
+    import methods.naive_average
+
+    monkeypatch.setattr(methods.naive_average, "RENDER_LAYERS", ("color",), raising=False)
+    combiners = [{"name": "avg", "method": "naive_average", "inputs": ["oidn", "oidn_fast"]}]
+    denoisers = ["oidn", {"name": "oidn_fast", "method": "oidn", "params": {"quality": "fast"}}]
+    with pytest.raises(BenchError, match=r"method 'avg' \(naive_average\) reads render layer\(s\) \['color_a', 'color_b'\]"):
+        plan(denoisers=denoisers, combiners=combiners)
+    assert plan(scenes=["cornell_box", "attic"], denoisers=denoisers, combiners=combiners)["render_folders"]
