@@ -71,11 +71,13 @@ def write_image(path: str | os.PathLike, image: np.ndarray) -> None:
     write_exr_atomically(path, header, channels)
 
 
-def read_image(path: str | os.PathLike) -> np.ndarray:
+def read_image(path: str | os.PathLike, *, allow_half: bool = False, allow_xyz: bool = False) -> np.ndarray:
     """Read a single-part R, G, B (-> (H, W, 3)) or Y (-> (H, W)) float EXR as float32.
 
     Other channels (e.g. A) are ignored; a file without R, G, B or Y, with half/uint pixels, or
-    missing/corrupt raises :class:`mcbench.io.exr.ExrError` naming it."""
+    missing/corrupt raises :class:`mcbench.io.exr.ExrError` naming it. ``allow_half``: half pixels
+    are read too (converted exactly); ``allow_xyz``: channels X, Y, Z stand for R, G, B (normals
+    written by other programs)."""
     path = Path(path)
     if not path.is_file():
         raise ExrError(f"{path}: EXR file is missing")
@@ -84,15 +86,18 @@ def read_image(path: str | os.PathLike) -> np.ndarray:
             channels = {name: np.asarray(ch.pixels) for name, ch in exr.channels().items()}
     except Exception as exc:  # the bindings raise a bare Exception on corrupt files
         raise ExrError(f"{path}: cannot read EXR ({exc})") from exc
-    names = ["R", "G", "B"] if all(c in channels for c in "RGB") else ["Y"] if "Y" in channels else None
+    sets = (["R", "G", "B"], *([["X", "Y", "Z"]] if allow_xyz else []), ["Y"])
+    names = next((n for n in sets if all(c in channels for c in n)), None)
     if names is None:
-        raise ExrError(f"{path}: no R, G, B or Y channels; file has {sorted(channels)}")
+        raise ExrError(f"{path}: no {' or '.join(', '.join(n) for n in sets)} channels; file has {sorted(channels)}")
+    allowed = (np.float32, np.float16) if allow_half else (np.float32,)
     for name in names:
-        if channels[name].dtype != np.float32:
-            raise ExrError(f"{path}: channel {name} holds {channels[name].dtype} pixels, expected float32 "
-                           f"(write the file with 32-bit float channels)")
+        if channels[name].dtype not in allowed:
+            raise ExrError(f"{path}: channel {name} holds {channels[name].dtype} pixels, expected "
+                           + ("float (32-bit or half)" if allow_half else
+                              "float32 (write the file with 32-bit float channels)"))
     if len(names) == 1:
-        return np.ascontiguousarray(channels["Y"], dtype=np.float32)
+        return np.ascontiguousarray(channels[names[0]], dtype=np.float32)
     return np.ascontiguousarray(np.stack([channels[c] for c in names], axis=-1), dtype=np.float32)
 
 

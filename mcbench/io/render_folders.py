@@ -233,26 +233,9 @@ def read_image_any(path: str | os.PathLike) -> np.ndarray:
     """One image of another renderer: R, G, B (or X, Y, Z) -> (H, W, 3), Y -> (H, W); float32 or
     half pixels, returned as float32 (half converts exactly). Missing/corrupt files, other channel
     sets and integer pixels raise :class:`mcbench.io.exr.ExrError` naming the file."""
-    import OpenEXR
+    from mcbench.io.exchange import read_image
 
-    path = Path(path)
-    if not path.is_file():
-        raise ExrError(f"{path}: EXR file is missing")
-    try:
-        with OpenEXR.File(str(path), separate_channels=True) as exr:
-            channels = {name: np.asarray(ch.pixels) for name, ch in exr.channels().items()}
-    except Exception as exc:  # the bindings raise a bare Exception on corrupt files
-        raise ExrError(f"{path}: cannot read EXR ({exc})") from exc
-    names = next((n for n in (["R", "G", "B"], ["X", "Y", "Z"], ["Y"]) if all(c in channels for c in n)), None)
-    if names is None:
-        raise ExrError(f"{path}: no R, G, B (or X, Y, Z, or Y) channels; file has {sorted(channels)}")
-    for name in names:
-        if channels[name].dtype not in (np.float32, np.float16):
-            raise ExrError(f"{path}: channel {name} holds {channels[name].dtype} pixels; expected float "
-                           f"(32-bit or half)")
-    image = np.stack([channels[c].astype(np.float32) for c in names], axis=-1)
-    image = image[..., 0] if len(names) == 1 else image
-    image = np.ascontiguousarray(image, dtype=np.float32)
+    image = read_image(path, allow_half=True, allow_xyz=True)
     check_finite(path, {"image": image})
     return image
 

@@ -20,7 +20,6 @@ four times the default's pixels. Nothing is tuned on them; the result decides a 
 from __future__ import annotations
 
 import argparse
-import itertools
 import subprocess
 import sys
 from pathlib import Path
