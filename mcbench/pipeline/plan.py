@@ -222,8 +222,9 @@ def _check_render_folders(config: dict, methods: dict, scenes: list[str], spps: 
             if missing:
                 raise BenchError(f"{key}: the case at {spp} spp (spp lists it) lacks {', '.join(missing)}")
             for layer, path in files.items():
-                if image_size(path) != (height, width):
-                    raise BenchError(f"{path}: {image_size(path)[1]}x{image_size(path)[0]} pixels, but the "
+                size = image_size(path)
+                if size != (height, width):
+                    raise BenchError(f"{path}: {size[1]}x{size[0]} pixels, but the "
                                      f"reference {references['color']} is {width}x{height}")
             present = set(files) | {"color"}          # the full image: given, or the halves' mean
             layers_in_all = present if layers_in_all is None else layers_in_all & present
