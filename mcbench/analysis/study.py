@@ -71,6 +71,7 @@ __all__ = ["NOISY", "PAPER_ENTRIES", "SEED", "N_RESAMPLES", "CONFIDENCE", "ALMOS
            "CLASSICAL_BASES", "REPRODUCED", "NOT_REPRODUCED", "INCONCLUSIVE", "STUDY_FILES", "Resampling",
            "StudyData", "study_data", "avg_scores", "ranking_from", "resample_indices", "bootstrap_ci",
            "score_cis", "difference_ci", "is_real", "place_fractions", "paper_comparison", "paper_kendall",
+           "PAPER_TABLE3_BASES",
            "paper_comparison_markdown", "recommendations", "recommendation_sentences", "recommendations_markdown",
            "ci_verdict", "findings", "findings_markdown", "ALMOST_ALWAYS", "size2_pairs", "pair_wins", "PAIR_COLUMNS",
            "pair_members", "pair_members_markdown", "REC_COLUMNS", "BOTH_COLUMNS", "BOTH_METRICS", "COMBINED_RULE",
@@ -348,6 +349,10 @@ def place_fractions(per_scene, indices: np.ndarray, *, place: int = 1) -> np.nda
 # beside the paper (Table 3)
 # --------------------------------------------------------------------------------------------
 
+# The base denoisers among the paper's Table 3 rows (KPCN, MCGAN, NFOR, OIDN, OptiX, RDFC).
+PAPER_TABLE3_BASES = tuple(cid for cid in pool.PAPER_TABLE3 if pool.candidate(cid).is_base)
+
+
 def _paper_names(names) -> dict[int, str]:
     names = dict(names or {})
     return {cid: names.get(cid, pool.candidate_name(cid)) for cid in pool.PAPER_TABLE3}
@@ -417,12 +422,16 @@ def _kendall(ours, paper) -> dict:
     return {"n": int(len(ours)), "tau": tau, "p_value": p}
 
 
-def paper_kendall(ranking: pd.DataFrame, *, names: dict[int, str] | None = None) -> pd.DataFrame:
+def paper_kendall(ranking: pd.DataFrame, *, names: dict[int, str] | None = None,
+                  ids=None) -> pd.DataFrame:
     """Kendall tau-b (:func:`scipy.stats.kendalltau`, two-sided p-value) between our ordering of
     the Table 3 candidates in our ranking and the paper's: once by ``Avg.`` as each table has
-    it, once by the mean over the spp both have. Columns basis, n, tau, p_value (None when fewer
-    than two candidates or one side constant)."""
+    it, once by the mean over the spp both have. ``ids``: only these of the paper's IDs (e.g.
+    :data:`PAPER_TABLE3_BASES`, the six bases of its Table 3); default all 11. Columns basis, n,
+    tau, p_value (None when fewer than two candidates or one side constant)."""
     table = paper_comparison(ranking, names=names)
+    if ids is not None:
+        table = table[table["id"].isin(list(ids))]
     rows = []
     for basis in ("Avg.", "Avg. (common spp)"):
         chosen = table[(table["spp"] == basis)].dropna(subset=["ours", "paper"])
@@ -476,10 +485,12 @@ def paper_comparison_markdown(ranking: pd.DataFrame, *, names: dict[int, str] | 
     missing = sorted({r.note for r in table.itertuples() if r.note.endswith("not in our ranking")})
     lines += [""] + [f"- {m}" for m in missing]
     lines += ["", "Kendall tau-b of our ordering of these candidates against the paper's:", ""]
-    for r in kendall.itertuples():
-        text = "undefined (fewer than two candidates, or a constant side)" if r.tau is None else \
-            f"tau = {r.tau:.3f} (p = {r.p_value:.3g}, n = {r.n})"
-        lines.append(f"- by {r.basis}: {text}")
+    bases = paper_kendall(ranking, names=names, ids=PAPER_TABLE3_BASES)
+    for prefix, rows in (("", kendall), ("among its bases alone (IDs 1, 3, 4, 6, 7, 8), ", bases)):
+        for r in rows.itertuples():
+            text = "undefined (fewer than two candidates, or a constant side)" if r.tau is None else \
+                f"tau = {r.tau:.3f} (p = {r.p_value:.3g}, n = {r.n})"
+            lines.append(f"- {prefix}by {r.basis}: {text}")
     return "\n".join(lines) + "\n"
 
 

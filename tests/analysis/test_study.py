@@ -184,6 +184,14 @@ def test_kendall_tau_equals_a_pair_count(ours):
     assert 0.0 < found.loc["Avg.", "p_value"] <= 1.0
     common = [pool.PAPER_TABLE3[c][4] for c in pool.PAPER_TABLE3]
     assert found.loc["Avg. (common spp)", "tau"] == pytest.approx(_brute_tau(ours, common))
+    # the bases alone: the six rows of IDs <= 8, nothing else
+    bases = [i for i, c in enumerate(pool.PAPER_TABLE3) if c <= 8]
+    assert study.PAPER_TABLE3_BASES == (1, 3, 4, 6, 7, 8)
+    found = study.paper_kendall(ranking, ids=study.PAPER_TABLE3_BASES).set_index("basis")
+    assert found.loc["Avg.", "n"] == 6
+    assert found.loc["Avg.", "tau"] == pytest.approx(_brute_tau([ours[i] for i in bases], [paper[i] for i in bases]))
+    assert "among its bases alone (IDs 1, 3, 4, 6, 7, 8), by Avg.: tau = " \
+        f"{found.loc['Avg.', 'tau']:.3f}" in study.paper_comparison_markdown(ranking)
 
 
 # --------------------------------------------------------------------------------------------
