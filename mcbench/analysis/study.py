@@ -486,7 +486,8 @@ def paper_comparison_markdown(ranking: pd.DataFrame, *, names: dict[int, str] | 
     lines += [""] + [f"- {m}" for m in missing]
     lines += ["", "Kendall tau-b of our ordering of these candidates against the paper's:", ""]
     bases = paper_kendall(ranking, names=names, ids=PAPER_TABLE3_BASES)
-    for prefix, rows in (("", kendall), ("among its bases alone (IDs 1, 3, 4, 6, 7, 8), ", bases)):
+    bases_prefix = f"among its bases alone (IDs {', '.join(map(str, PAPER_TABLE3_BASES))}), "
+    for prefix, rows in (("", kendall), (bases_prefix, bases)):
         for r in rows.itertuples():
             text = "undefined (fewer than two candidates, or a constant side)" if r.tau is None else \
                 f"tau = {r.tau:.3f} (p = {r.p_value:.3g}, n = {r.n})"

@@ -78,7 +78,7 @@ def table(work: Path) -> str:
 
     from mcbench.analysis import pool
     from mcbench.analysis.ranking import ranking_table
-    from mcbench.analysis.study import paper_kendall
+    from mcbench.analysis.study import PAPER_TABLE3_BASES, paper_kendall
 
     rankings = {}
     for size in SIZES:
@@ -87,13 +87,11 @@ def table(work: Path) -> str:
         rankings[(size, "whole")] = ranking_table(metrics, "relmse")
         rankings[(size, f"crop {CROP}")] = ranking_table(cropped_metrics(folder, CROP), "relmse")
     names = {cid: pool.candidate_name(cid) for cid in pool.PAPER_TABLE3}
-    bases = {cid: name for cid, name in names.items() if cid <= 8}
     lines = ["| setting | τ vs paper, 11 rows (Avg.) | τ vs paper, 11 rows (common spp) | τ vs paper, 6 bases (common spp) | order (Avg., best first) |",
              "|---|---|---|---|---|"]
     for (size, crop), ranking in rankings.items():
         all_rows = paper_kendall(ranking, names=names).set_index("basis")
-        base_rows = paper_kendall(ranking.loc[[n for n in ranking.index if n in bases.values() or n == "noisy"]],
-                                  names=bases).set_index("basis")
+        base_rows = paper_kendall(ranking, names=names, ids=PAPER_TABLE3_BASES).set_index("basis")
         order = ", ".join(ranking.index)
         lines.append(f"| {size}², {crop} | {all_rows.loc['Avg.', 'tau']:.2f} | {all_rows.loc['Avg. (common spp)', 'tau']:.2f} | "
                      f"{base_rows.loc['Avg. (common spp)', 'tau']:.2f} | {order} |")
