@@ -29,10 +29,10 @@ import time
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
 import pytest
 import yaml
 
+from mcbench.analysis import run_comparison
 from tests.conftest import REPO
 
 pytestmark = pytest.mark.fuzz     # whole tiny runs, several each: the fuzz tier (python -m pytest -q -m fuzz)
@@ -59,8 +59,6 @@ STAGES = [("render", ("render_reference_chunk", "render_noisy")),
           ("report", ("viewer_case", "viewer", "gallery", "study_figures", "error_curves")),
           ("table", ("ranking_table", "extras_table", "study_tables", "scene_table"))]
 STAGE_WAIT = 25.0
-#: Columns that hold measured times (or are derived from them); every other value must match.
-TIMING_COLUMN = re.compile(r"second|time|cpu|speed|hours|machine|wall", re.IGNORECASE)
 
 
 def _command(workdir: Path, *args: str) -> list[str]:
@@ -81,35 +79,9 @@ def _run(workdir: Path, *args: str, check: bool = True, timeout: int = 1200) -> 
     return result
 
 
-def _without_timing(path: Path) -> str:
-    """A table's content with its timing columns left out (CSV columns, Markdown table columns by
-    their header; other text lines that mention a time)."""
-    if path.suffix in (".csv", ".tsv"):
-        frame = pd.read_csv(path, sep="\t" if path.suffix == ".tsv" else ",")
-        return frame.drop(columns=[c for c in frame.columns if TIMING_COLUMN.search(str(c))]).to_csv(index=False)
-    lines, kept, drop = path.read_text().splitlines(), [], set()
-    for number, line in enumerate(lines):
-        if not line.startswith("|"):
-            drop = set()
-            kept.append("" if TIMING_COLUMN.search(line) else line)
-            continue
-        cells = line.strip().strip("|").split("|")
-        following = lines[number + 1] if number + 1 < len(lines) else ""
-        if following.startswith("|") and set(following.replace("|", "").strip()) <= set("-: "):
-            drop = {i for i, cell in enumerate(cells) if TIMING_COLUMN.search(cell)}   # a header row
-        kept.append("|".join(cell for i, cell in enumerate(cells) if i not in drop))
-    return "\n".join(kept)
-
-
 def table_contents(workdir: Path) -> dict[str, str]:
-    """``metrics.csv`` (bytes) and every CSV/Markdown/LaTeX table under ``results/tables`` (timing
-    columns excepted)."""
-    results = workdir / "results"
-    contents = {"metrics.csv": (results / "metrics.csv").read_text()}
-    for path in sorted((results / "tables").rglob("*")):
-        if path.is_file() and path.suffix in (".csv", ".md", ".tex") and not path.name.startswith("."):
-            contents[str(path.relative_to(results))] = _without_timing(path)
-    return contents
+    """``metrics.csv`` and every table of the run in ``workdir``, timing left out."""
+    return run_comparison.table_contents(workdir / "results")
 
 
 @pytest.fixture(scope="module")
