@@ -139,7 +139,7 @@ def test_imported_case_is_denoised_and_scored_like_a_render(folder_scenes, tmp_p
     assert isinstance(pd.read_csv(tmp_path / "metrics.csv"), pd.DataFrame)
 
 
-@pytest.mark.slow
+@pytest.mark.extended     # a whole scratch study (75 s): beside the worked example's end-to-end run
 def test_a_study_ranks_renders_from_another_renderer_end_to_end(tmp_path):
     """A scratch copy of the workflow with two scene files of renders made elsewhere (OIDN naming
     without halves, the authors' layout with every layer) beside a Mitsuba scene, 32 x 32: the

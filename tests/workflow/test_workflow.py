@@ -182,6 +182,7 @@ def test_invalid_config_is_refused(tmp_path):
     assert result.returncode != 0 and "7" in result.stdout + result.stderr
 
 
+@pytest.mark.extended     # 100 s; the fuzz tier's random kills (test_interruptions.py) cover every stage too
 def test_killed_run_resumes_without_redoing_finished_jobs(tmp_path):
     workdir = tmp_path / "resume"
     write_config(workdir, scenes=["cornell_box", "envmap_objects"])
