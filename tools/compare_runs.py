@@ -3,6 +3,7 @@ of their renders, references or method outputs.
 
     python tools/compare_runs.py RESULTS_A RESULTS_B                      # metrics.csv and every table
     python tools/compare_runs.py RESULTS_A RESULTS_B --images renders outputs
+    python tools/compare_runs.py A B --ignore 'mcbench[./][A-Za-z_./]*'    # captions' module paths left out
 
 Prints a Markdown report (one row per table or file that differs, with the largest absolute and
 relative difference of its numbers) and exits 1 when anything differs, 0 when the runs agree.
@@ -12,6 +13,7 @@ What is compared and how: :mod:`mcbench.analysis.run_comparison`.
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 from pathlib import Path
 
@@ -31,12 +33,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("results_b", type=Path, help="results folder of the second run")
     parser.add_argument("--images", nargs="*", default=[], metavar="FOLDER",
                         help="folders under results/ whose EXR files are compared pixel by pixel (renders, references, outputs)")
+    parser.add_argument("--ignore", type=re.compile, default=None, metavar="REGEX",
+                        help="text left out of every table before comparing (e.g. module paths a refactoring renamed)")
     args = parser.parse_args(argv)
-    tables = table_contents(args.results_a)
-    differences = compare_runs(args.results_a, args.results_b)
+    tables = table_contents(args.results_a, ignore=args.ignore)
+    differences = compare_runs(args.results_a, args.results_b, ignore=args.ignore)
     print(f"# {args.results_a} against {args.results_b}\n")
     print(f"{len(tables)} tables (metrics.csv and every CSV/Markdown/LaTeX file under "
-          f"tables/, oracle/, progressive/), timing columns left out: {len(differences)} differ.")
+          f"tables/, oracle/, progressive/), timing left out"
+          f"{'' if args.ignore is None else f' and text matching {args.ignore.pattern!r}'}: {len(differences)} differ.")
     for folder in args.images:
         count = sum(1 for _ in (args.results_a / folder).rglob("*.exr"))
         found = compare_images(args.results_a, args.results_b, folder)

@@ -3,9 +3,12 @@
 A run's *tables* are ``results/metrics.csv`` and every CSV, Markdown and LaTeX file under
 ``results/tables``, ``results/oracle`` and ``results/progressive``. Two runs of the same config
 and seeds must agree on all of them byte for byte, except for what measures time: columns whose
-header matches :data:`TIMING_COLUMN` (seconds, CPU, speed, machine, wall, …) and text lines
-outside a table that mention one. :func:`table_contents` gives each table with its timing left
-out; :func:`compare_runs` lists the tables that differ and, for CSV tables of equal shape, the
+header matches :data:`TIMING_COLUMN` (seconds, CPU, speed, machine, wall, …), rows of a long
+table whose quantity is one (a cell that is a timing word, :data:`TIMING_VALUE`), a Markdown
+section whose heading names one, and text lines outside a table that mention one or a duration
+(:data:`DURATION`, "63 s"). :func:`table_contents` gives each table with its timing left out
+(and, if asked, the text an ``ignore`` pattern matches, e.g. module paths that a refactoring
+renamed in the captions); :func:`compare_runs` lists the tables that differ and, for CSV tables of equal shape, the
 largest absolute and relative difference of their numeric cells (``|a - b| / max(|a|, |b|)``,
 zero where both are zero), so that a difference in the last printed digit reads differently
 from a changed ranking.
@@ -31,28 +34,47 @@ from mcbench.io.exr import read_layers
 
 #: Columns that hold measured times (or are derived from them); every other value must match.
 TIMING_COLUMN = re.compile(r"second|time|cpu|speed|hours|machine|wall", re.IGNORECASE)
+#: A cell that names a timing quantity (the ``quantity`` column of a long table): its row is timing.
+TIMING_VALUE = re.compile(r"(?:\w+_)?(?:seconds?|time|cpu|speed|hours|wall)(?:_\w+)?", re.IGNORECASE)
+#: A duration in running text (a caption's "…; 63 s", "2.5 min"): the line is timing.
+DURATION = re.compile(r"\b\d+(?:\.\d+)?\s?(?:s|ms|min|h)\b")
 #: Folders under ``results/`` whose CSV, Markdown and LaTeX files are tables.
 TABLE_FOLDERS = ("tables", "oracle", "progressive")
 TABLE_SUFFIXES = (".csv", ".md", ".tex")
 
 
-def table_without_timing(path: Path) -> str:
+def table_without_timing(path: Path, *, ignore: re.Pattern | None = None) -> str:
     """The content of one table with its timing left out.
 
-    CSV/TSV: the columns whose header matches :data:`TIMING_COLUMN` are dropped and the rest
+    CSV/TSV: the columns whose header matches :data:`TIMING_COLUMN` are dropped, and the rows with
+    a cell that is a timing word (:data:`TIMING_VALUE`, e.g. ``quantity = seconds``); the rest is
     written back by pandas. Markdown/LaTeX: in a Markdown table, the columns whose header cell
-    matches are dropped (a header row is a ``|`` row followed by a ``|---|`` rule); any other
-    line that matches is blanked.
+    matches are dropped (a header row is a ``|`` row followed by a ``|---|`` rule); a section
+    under a heading (``#`` line) that matches is blanked to the next heading; any other line that
+    matches :data:`TIMING_COLUMN` or holds a :data:`DURATION` is blanked. ``ignore``: text it
+    matches is removed first (Markdown/LaTeX) or from every cell (CSV).
     """
     path = Path(path)
     if path.suffix in (".csv", ".tsv"):
         frame = pd.read_csv(path, sep="\t" if path.suffix == ".tsv" else ",")
-        return frame.drop(columns=[c for c in frame.columns if TIMING_COLUMN.search(str(c))]).to_csv(index=False)
-    lines, kept, drop = path.read_text().splitlines(), [], set()
+        frame = frame.drop(columns=[c for c in frame.columns if TIMING_COLUMN.search(str(c))])
+        timing_rows = [any(isinstance(v, str) and TIMING_VALUE.fullmatch(v) for v in row)
+                       for row in frame.itertuples(index=False)]
+        frame = frame[[not timing for timing in timing_rows]]
+        text = frame.to_csv(index=False)
+        return ignore.sub("", text) if ignore is not None else text
+    text = path.read_text()
+    lines = (ignore.sub("", text) if ignore is not None else text).splitlines()
+    kept, drop, timing_section = [], set(), False
     for number, line in enumerate(lines):
+        if line.startswith("#"):
+            timing_section = bool(TIMING_COLUMN.search(line))
+        if timing_section:
+            kept.append("")
+            continue
         if not line.startswith("|"):
             drop = set()
-            kept.append("" if TIMING_COLUMN.search(line) else line)
+            kept.append("" if TIMING_COLUMN.search(line) or DURATION.search(line) else line)
             continue
         cells = line.strip().strip("|").split("|")
         following = lines[number + 1] if number + 1 < len(lines) else ""
@@ -62,18 +84,19 @@ def table_without_timing(path: Path) -> str:
     return "\n".join(kept)
 
 
-def table_contents(results: Path) -> dict[str, str]:
-    """``metrics.csv`` (as written) and every table of :data:`TABLE_FOLDERS` (timing left out),
-    keyed by the path relative to ``results``. Hidden files (checksums) are not tables."""
+def table_contents(results: Path, *, ignore: re.Pattern | None = None) -> dict[str, str]:
+    """``metrics.csv`` (as written) and every table of :data:`TABLE_FOLDERS` (timing and what
+    ``ignore`` matches left out), keyed by the path relative to ``results``. Hidden files
+    (checksums) are not tables."""
     results = Path(results)
     metrics = results / "metrics.csv"
     if not metrics.is_file():
         raise ValueError(f"{metrics}: no metrics.csv; is {results} the results folder of a finished run?")
-    contents = {"metrics.csv": metrics.read_text()}
+    contents = {"metrics.csv": ignore.sub("", metrics.read_text()) if ignore is not None else metrics.read_text()}
     for folder in TABLE_FOLDERS:
         for path in sorted((results / folder).rglob("*")):
             if path.is_file() and path.suffix in TABLE_SUFFIXES and not path.name.startswith("."):
-                contents[str(path.relative_to(results))] = table_without_timing(path)
+                contents[str(path.relative_to(results))] = table_without_timing(path, ignore=ignore)
     return contents
 
 
@@ -118,10 +141,10 @@ def _numeric_difference(text_a: str, text_b: str) -> tuple[int | None, float | N
     return (differing, *_largest_differences(a[numeric].to_numpy(np.float64), b[numeric].to_numpy(np.float64)))
 
 
-def compare_runs(results_a: Path, results_b: Path) -> list[TableDifference]:
-    """The tables of two runs' results folders that are not the same (timing left out), sorted by
-    name; an empty list means the two runs made the same study."""
-    a, b = table_contents(results_a), table_contents(results_b)
+def compare_runs(results_a: Path, results_b: Path, *, ignore: re.Pattern | None = None) -> list[TableDifference]:
+    """The tables of two runs' results folders that are not the same (timing and what ``ignore``
+    matches left out), sorted by name; an empty list means the two runs made the same study."""
+    a, b = table_contents(results_a, ignore=ignore), table_contents(results_b, ignore=ignore)
     differences = []
     for name in sorted(set(a) | set(b)):
         if name not in b:

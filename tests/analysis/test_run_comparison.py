@@ -94,3 +94,48 @@ def test_images_are_compared_value_by_value(tmp_path):
 def test_a_folder_without_metrics_is_refused(tmp_path):
     with pytest.raises(ValueError, match="metrics.csv"):
         table_contents(tmp_path)
+
+
+LONG_CSV = "entry,4,16,quantity\noidn,{relmse},0.02,relmse\noidn,{seconds},0.17,seconds\n"
+SECTIONED = """**Consistency curve: cornell_box at 64x64, seed 0; {seconds} s**
+
+## relMSE
+
+| entry | 4 |
+| --- | --- |
+| oidn | {relmse} |
+
+## seconds per case (own compute)
+
+| entry | 4 |
+| --- | --- |
+| oidn | {seconds} |
+"""
+
+
+@pytest.mark.parametrize("template, suffix", [(LONG_CSV, ".csv"), (SECTIONED, ".md")])
+def test_timing_rows_sections_and_durations_are_left_out_and_nothing_else(tmp_path, template, suffix):
+    """A long table's ``seconds`` rows, a Markdown section headed by a timing word and a caption's
+    duration ("63 s") are timing; the relMSE beside them is not."""
+    texts = {}
+    for name, relmse, seconds in [("a", 0.0305, 0.177), ("b", 0.0305, 0.69), ("c", 0.0306, 0.177)]:
+        path = tmp_path / f"{name}{suffix}"
+        path.write_text(template.format(relmse=relmse, seconds=seconds))
+        texts[name] = table_without_timing(path)
+    assert texts["a"] == texts["b"]
+    assert texts["a"] != texts["c"]
+    assert "0.0305" in texts["a"] and "0.177" not in texts["a"]
+
+
+def test_an_ignore_pattern_leaves_out_renamed_module_paths_only(tmp_path):
+    """Comparing across a refactoring: the captions' module paths changed, a value did not; with
+    the pattern the runs agree, and a changed value is still found."""
+    a = _results(tmp_path / "a")
+    b = _results(tmp_path / "b")
+    c = _results(tmp_path / "c", nfor=0.0457)
+    for root, module in [(a, "mcbench.ranking"), (b, "mcbench.analysis.ranking"), (c, "mcbench.analysis.ranking")]:
+        (root / "tables" / "ranking.tex").write_text(f"% Written by mcbench ({module}.format_latex).\n\\toprule\n")
+    pattern = run_comparison.re.compile(r"mcbench[./][A-Za-z_./]*")
+    assert [d.table for d in compare_runs(a, b)] == ["tables/ranking.tex"]
+    assert compare_runs(a, b, ignore=pattern) == []
+    assert [d.table for d in compare_runs(a, c, ignore=pattern)] == ["tables/study/summary.md"]
