@@ -340,18 +340,20 @@ def _planned(result: subprocess.CompletedProcess) -> tuple[list[str], str]:
 def test_the_same_command_plans_the_same_study_from_any_folder(tmp_path):
     """From the repository root the smoke config once inherited config.yaml's per-scene reference
     spp (65536 instead of 1024), from another folder it did not: the same jobs and the same
-    resolved configuration (digest) from both, including a folder with a space in its name."""
+    resolved configuration (digest) from both, including a folder with a space in its name.
+    ``--forceall``: every job is planned whatever the checkout's results/ already holds (after
+    the README's main job, the root's results/ is complete and the other folder's is empty)."""
     other = tmp_path / "a folder with spaces"
     other.mkdir()
-    from_root = _planned(_dry_run(REPO, "--configfile", str(SMOKE)))
-    from_other = _planned(_dry_run(other, "--configfile", str(SMOKE)))
+    from_root = _planned(_dry_run(REPO, "--configfile", str(SMOKE), "--forceall"))
+    from_other = _planned(_dry_run(other, "--configfile", str(SMOKE), "--forceall"))
     assert from_root == from_other and len(from_root[0]) > 40
     from mcbench.pipeline.config import config_digest, resolve_config
 
     assert from_root[1] == config_digest(resolve_config(yaml.safe_load(SMOKE.read_text())))
     # without --configfile the default study (config.yaml) is read from the checkout, not the folder
-    default_root = _planned(_dry_run(REPO))
-    default_other = _planned(_dry_run(other))
+    default_root = _planned(_dry_run(REPO, "--forceall"))
+    default_other = _planned(_dry_run(other, "--forceall"))
     assert default_root == default_other
     assert default_root[1] == config_digest(resolve_config(yaml.safe_load((REPO / "config.yaml").read_text())))
 
