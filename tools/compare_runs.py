@@ -20,7 +20,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from mcbench.analysis.run_comparison import compare_images, compare_runs, table_contents  # noqa: E402
+from mcbench.analysis.run_comparison import compare_images, compare_runs, table_paths  # noqa: E402
 
 
 def _number(value: float | int | None) -> str:
@@ -36,7 +36,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--ignore", type=re.compile, default=None, metavar="REGEX",
                         help="text left out of every table before comparing (e.g. module paths a refactoring renamed)")
     args = parser.parse_args(argv)
-    tables = table_contents(args.results_a, ignore=args.ignore)
+    tables = table_paths(args.results_a)
     differences = compare_runs(args.results_a, args.results_b, ignore=args.ignore)
     print(f"# {args.results_a} against {args.results_b}\n")
     print(f"{len(tables)} tables (metrics.csv and every CSV/Markdown/LaTeX file under "

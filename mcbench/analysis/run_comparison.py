@@ -43,6 +43,11 @@ TABLE_FOLDERS = ("tables", "oracle", "progressive")
 TABLE_SUFFIXES = (".csv", ".md", ".tex")
 
 
+def _without_ignored(text: str, ignore: re.Pattern | None) -> str:
+    """``text`` with what ``ignore`` matches removed (unchanged without a pattern)."""
+    return text if ignore is None else ignore.sub("", text)
+
+
 def table_without_timing(path: Path, *, ignore: re.Pattern | None = None) -> str:
     """The content of one table with its timing left out.
 
@@ -61,10 +66,8 @@ def table_without_timing(path: Path, *, ignore: re.Pattern | None = None) -> str
         timing_rows = [any(isinstance(v, str) and TIMING_VALUE.fullmatch(v) for v in row)
                        for row in frame.itertuples(index=False)]
         frame = frame[[not timing for timing in timing_rows]]
-        text = frame.to_csv(index=False)
-        return ignore.sub("", text) if ignore is not None else text
-    text = path.read_text()
-    lines = (ignore.sub("", text) if ignore is not None else text).splitlines()
+        return _without_ignored(frame.to_csv(index=False), ignore)
+    lines = _without_ignored(path.read_text(), ignore).splitlines()
     kept, drop, timing_section = [], set(), False
     for number, line in enumerate(lines):
         if line.startswith("#"):
@@ -84,19 +87,24 @@ def table_without_timing(path: Path, *, ignore: re.Pattern | None = None) -> str
     return "\n".join(kept)
 
 
-def table_contents(results: Path, *, ignore: re.Pattern | None = None) -> dict[str, str]:
-    """``metrics.csv`` (as written) and every table of :data:`TABLE_FOLDERS` (timing and what
-    ``ignore`` matches left out), keyed by the path relative to ``results``. Hidden files
-    (checksums) are not tables."""
+def table_paths(results: Path) -> list[Path]:
+    """``results/metrics.csv`` and every CSV, Markdown and LaTeX file under :data:`TABLE_FOLDERS`
+    (hidden files, the checksums, are not tables), in a fixed order."""
     results = Path(results)
     metrics = results / "metrics.csv"
     if not metrics.is_file():
         raise ValueError(f"{metrics}: no metrics.csv; is {results} the results folder of a finished run?")
-    contents = {"metrics.csv": ignore.sub("", metrics.read_text()) if ignore is not None else metrics.read_text()}
-    for folder in TABLE_FOLDERS:
-        for path in sorted((results / folder).rglob("*")):
-            if path.is_file() and path.suffix in TABLE_SUFFIXES and not path.name.startswith("."):
-                contents[str(path.relative_to(results))] = table_without_timing(path, ignore=ignore)
+    return [metrics] + [path for folder in TABLE_FOLDERS for path in sorted((results / folder).rglob("*"))
+                        if path.is_file() and path.suffix in TABLE_SUFFIXES and not path.name.startswith(".")]
+
+
+def table_contents(results: Path, *, ignore: re.Pattern | None = None) -> dict[str, str]:
+    """``metrics.csv`` (as written) and every table of :data:`TABLE_FOLDERS` (timing and what
+    ``ignore`` matches left out), keyed by the path relative to ``results``."""
+    metrics, *tables = table_paths(results)
+    contents = {"metrics.csv": _without_ignored(metrics.read_text(), ignore)}
+    for path in tables:
+        contents[str(path.relative_to(results))] = table_without_timing(path, ignore=ignore)
     return contents
 
 
