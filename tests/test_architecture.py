@@ -11,12 +11,13 @@ or ``__import__`` calls, hence rule 6.
 2. each layer is imported only by the packages declared to use it (the graph as it is);
 3. only ``mcbench.pipeline.registry`` imports the plugins (``methods``, ``scenes``); they never
    import ``mcbench.pipeline``, even indirectly, nor each other;
-4. no import cycle between the modules (or subpackages) of one package;
+4. no import cycle between the modules (or subpackages) of one package, nor (checked here:
+   the contract compares a package's children only) through a package's ``__init__``;
 5. torch only in ``nn``, ``pipeline``, ``methods``; Mitsuba only in ``render``, ``training_data``,
    ``scenes``.
 
-Rules 6-9 are what import-linter cannot express, checked here by parsing files with ``ast``
-(no import is executed):
+Rules 6-9 and the second half of rule 4 are what import-linter cannot express, checked here by
+parsing files with ``ast`` (no import is executed):
 
 6. no ``importlib.import_module("m")`` or ``__import__("m")`` of a project module ``m`` (an import
    statement instead, which the contracts see);
@@ -40,8 +41,10 @@ import shutil
 import subprocess
 import sys
 import tomllib
+from collections import deque
 from pathlib import Path
 
+import grimp
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -66,8 +69,8 @@ def import_linter_config(root: Path = ROOT) -> dict:
         return tomllib.load(file)["tool"]["importlinter"]
 
 
-def contracts_of_type(kind: str, root: Path = ROOT) -> list[dict]:
-    return [c for c in import_linter_config(root)["contracts"] if c["type"] == kind]
+def contracts_of_type(kind: str) -> list[dict]:
+    return [c for c in import_linter_config()["contracts"] if c["type"] == kind]
 
 
 def lint_imports_command() -> str:
@@ -108,12 +111,12 @@ def unit_of(module: str) -> str:
     return parts[0]
 
 
-def declared_uses(root: Path = ROOT) -> dict[str, set[str]]:
+def declared_uses() -> dict[str, set[str]]:
     """Rules 2 and 3 as a graph: package -> the packages it is declared to use (import directly),
     read from the ``protected`` contracts of the project's own packages."""
-    roots = set(import_linter_config(root)["root_packages"])
+    roots = set(import_linter_config()["root_packages"])
     uses = {}
-    for contract in contracts_of_type("protected", root):
+    for contract in contracts_of_type("protected"):
         for protected in contract["protected_modules"]:
             if protected.split(".")[0] not in roots:
                 continue  # a third party (rule 5)
@@ -126,10 +129,9 @@ def declared_uses(root: Path = ROOT) -> dict[str, set[str]]:
 def measured_uses() -> dict[str, set[str]]:
     """The graph of this repository's imports, as grimp reads it for import-linter: package ->
     the declared packages it imports directly (module level or inside functions)."""
-    import grimp
-
     declared = declared_uses()
     graph = grimp.build_graph(*import_linter_config()["root_packages"], cache_dir=None)
+    assert graph.modules == set(project_files(ROOT)), "grimp read another tree than this repository's"
     uses = {name: set() for name in declared}
     for module in graph.modules:
         for imported in graph.find_modules_directly_imported_by(module):
@@ -139,10 +141,10 @@ def measured_uses() -> dict[str, set[str]]:
     return uses
 
 
-def documented_graph(root: Path = ROOT) -> dict[str, tuple[set[str], set[str]]]:
+def documented_graph() -> dict[str, tuple[set[str], set[str]]]:
     """The table under ``GRAPH_HEADING`` in ``docs/architecture.md``: package -> (the packages it
     uses, the packages that use it), each a cell of backquoted names."""
-    text = (root / DOC).read_text()
+    text = (ROOT / DOC).read_text()
     assert GRAPH_HEADING in text, f"{DOC}: no section {GRAPH_HEADING!r}"
     section = text.split(GRAPH_HEADING, 1)[1].split("\n## ", 1)[0]
     rows = {}
@@ -199,7 +201,7 @@ def test_the_documentation_lists_every_pipeline_module():
 
 
 # ---------------------------------------------------------------------------------------------
-# Rules 6-9: reading the tree with ast
+# Rule 4 through a package's __init__, and rules 6-9: reading the tree with ast
 
 
 def module_name(path: Path, root: Path) -> str:
@@ -279,7 +281,56 @@ def in_package(target: str, package: str) -> bool:
     return target == package or target.startswith(package + ".")
 
 
+def nearest_known(target: str, known: set[str]) -> str:
+    """``target`` or its nearest enclosing known module ("" for a module outside the project)."""
+    while target and target not in known:
+        target = target.rpartition(".")[0]
+    return target
+
+
+def import_graph(root: Path) -> dict[str, set[str]]:
+    """Edges among the modules of mcbench/, methods/ and scenes/: importer -> the nearest
+    project module of each import (module level or inside functions)."""
+    modules = project_files(root)
+    known = set(modules)
+    return {name: {nearest_known(target, known)
+                   for target, _, _ in imports_in(path.read_text(), name, path.name == "__init__.py", known)}
+            - {"", name} for name, path in modules.items()}
+
+
+def cycle_through(graph: dict[str, set[str]], start: str) -> list[str] | None:
+    """A shortest import chain from ``start`` back to ``start`` (breadth first), or None."""
+    parents, queue = {}, deque()
+    for module in sorted(graph[start]):
+        parents[module] = start
+        queue.append(module)
+    while queue:
+        module = queue.popleft()
+        if module == start:
+            chain, node = [start], parents[start]
+            while node != start:
+                chain.append(node)
+                node = parents[node]
+            return [start] + chain[::-1]
+        for imported in sorted(graph.get(module, ())):
+            if imported not in parents:
+                parents[imported] = module
+                queue.append(imported)
+    return None
+
+
 # The checkers: each takes the root of a tree and returns its findings (empty: the rule holds)
+
+
+def package_cycles(root: Path) -> list[str]:
+    """(4) Import cycles through a package's own module (its ``__init__``), which import-linter's
+    ``acyclic_siblings`` leaves out: it compares the children of a package, not the package with
+    its children (e.g. ``methods`` importing ``methods.jbf``, which imports ``methods``)."""
+    graph = import_graph(root)
+    packages = [name for name, path in project_files(root).items() if path.name == "__init__.py"]
+    return [f"cycle through package {package}: " + " -> ".join(chain) for package in sorted(packages)
+            if (chain := cycle_through(graph, package))]
+
 
 
 def import_calls(root: Path) -> list[str]:
@@ -363,11 +414,16 @@ def script_violations(root: Path) -> list[str]:
     return found
 
 
-CHECKS = {6: import_calls, 7: long_plugin_files, 8: private_uses, 9: script_violations}
+CHECKS = {4: package_cycles, 6: import_calls, 7: long_plugin_files, 8: private_uses, 9: script_violations}
 
 
 def findings(root: Path) -> dict[int, set[str]]:
     return {rule: set(function(root)) for rule, function in CHECKS.items()}
+
+
+def test_rule_4_no_cycle_through_a_package_module():
+    found = package_cycles(ROOT)
+    assert not found, "import cycles through a package's __init__:\n" + "\n".join(found)
 
 
 def test_rule_6_no_import_of_a_project_module_by_a_call():
@@ -412,6 +468,13 @@ def test_the_walk_sees_function_level_relative_and_importlib_imports():
     assert ("scenes.furball", ()) in found
 
 
+def test_cycle_through_finds_the_shortest_loop_back():
+    graph = {"p": {"p.a", "q"}, "p.a": {"p.b"}, "p.b": {"p"}, "q": {"p"}, "r": set()}
+    assert cycle_through(graph, "p") == ["p", "q", "p"]
+    assert cycle_through(graph, "p.a") == ["p.a", "p.b", "p", "p.a"]
+    assert cycle_through(graph, "r") is None and cycle_through({"s": {"t"}, "t": set()}, "s") is None
+
+
 PRIVATE_PROBE = """\
 import mcbench.render.renderer
 from mcbench.render import renderer as r
@@ -443,11 +506,12 @@ def write(path: Path, text: str) -> None:
 
 
 def test_checkers_on_a_minimal_synthetic_tree(tmp_path):
-    """Each of rules 6-9 fires on its own file of a small tree."""
+    """Each of rules 4 (through a package) and 6-9 fires on its own file of a small tree."""
     write(tmp_path / "mcbench/__init__.py", "")
+    write(tmp_path / "mcbench/pipeline/__init__.py", "from mcbench.pipeline import step\n")
+    write(tmp_path / "mcbench/pipeline/step.py", "def f():\n    import mcbench.pipeline\n")
     write(tmp_path / "mcbench/low/__init__.py", "def _hidden():\n    pass\n")
     write(tmp_path / "mcbench/low/a.py", "import numpy\nfrom mcbench import BenchError\n")
-    write(tmp_path / "mcbench/pipeline/__init__.py", "")
     write(tmp_path / "methods/__init__.py", "")
     write(tmp_path / "methods/m.py", "from mcbench.low import _hidden\n" + "#\n" * MAX_PLUGIN_LINES)
     write(tmp_path / "scenes/__init__.py", "")
@@ -456,6 +520,8 @@ def test_checkers_on_a_minimal_synthetic_tree(tmp_path):
     write(tmp_path / "workflow/scripts/run.py", "from mcbench import BenchError\nfrom mcbench.low.a import f\n"
                                                 "from mcbench.pipeline import render\n")
 
+    assert package_cycles(tmp_path) == [
+        "cycle through package mcbench.pipeline: mcbench.pipeline -> mcbench.pipeline.step -> mcbench.pipeline"]
     assert import_calls(tmp_path) == ["scenes/s.py:2: imports mcbench.pipeline.x by a call "
                                       "(an import statement, which the contracts see)"]
     assert long_plugin_files(tmp_path) == [f"methods/m.py: {MAX_PLUGIN_LINES + 1} lines (at most 600 in a plugin file)"]
@@ -558,6 +624,9 @@ BREAKAGES = {
         {"mcbench/filters/sure.py": PROBE.format("from mcbench.filters import smoothing"),
          "mcbench/filters/smoothing.py": PROBE.format("from mcbench.filters import sure")},
         "4-acyclic", ["No cycles are allowed in mcbench.filters"]),
+    "cycle through a package's __init__": (
+        {"methods/__init__.py": PROBE.format("import methods.jbf")},
+        4, ["cycle through package methods: methods -> methods.jbf -> methods"]),
     "torch below nn": (
         {"mcbench/analysis/metrics.py": PROBE.format("import torch")},
         "5-torch", ["mcbench.analysis.metrics -> torch"]),
