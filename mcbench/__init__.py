@@ -6,7 +6,8 @@ first (:data:`LAYERS`):
 
 * ``mcbench`` itself: :class:`BenchError`, :mod:`mcbench.jit` (numba with an on-disk cache),
   :mod:`mcbench.progress` (progress lines of long jobs);
-* :mod:`mcbench.io` -- EXR files, render buffers, tables and JSON records, network-weight files;
+* :mod:`mcbench.io` -- EXR files, render buffers, tables and JSON records, network-weight files,
+  the method plugin contract (:mod:`mcbench.io.method_spec`);
 * :mod:`mcbench.render` -- Mitsuba rendering, seeds, scene geometry, hair curves, variants;
 * :mod:`mcbench.filters` -- image filters any method may use: bilateral, NL-means, SURE;
 * :mod:`mcbench.combine` -- per-pixel weighting of several images: simplex solvers,
