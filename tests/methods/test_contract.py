@@ -359,3 +359,33 @@ def test_the_registry_refuses_the_wrong_kind(scratch_plugin):
     with pytest.raises(UnknownMethodError, match=r"'scratch_kinds' is a denoiser, not a combiner"):
         scratch_plugin("scratch_kinds", "METHOD = MethodSpec(kind='denoiser', label='Scratch', run=denoise)\n",
                        kind="combiner")
+
+
+def legacy_reads(text: str) -> list[str]:
+    """Reads of a contract hook off a module instead of its declaration in ``text``: ``x.RENDER_LAYERS``
+    (a field's name in upper case) or ``getattr(x, "check_config", ...)``/``hasattr`` of such a
+    name or of a function field's own name (``check_config``, ``build_network``, ...)."""
+    import re
+    import typing
+
+    names = [n.upper() for n in field_names()] + ["TIMES_ITSELF"]
+    functions = [name for name, hint in typing.get_type_hints(MethodSpec).items() if "Callable" in str(hint)]
+    attribute = re.compile(rf"\.({'|'.join(names)})\b")
+    by_name = re.compile(rf"\b(?:getattr|hasattr)\([^,()]+,\s*[\"']({'|'.join(names + functions)})[\"']")
+    return [m.group(0) for pattern in (attribute, by_name) for m in pattern.finditer(text)]
+
+
+def test_no_consumer_reads_a_hook_off_the_module():
+    """The core, the workflow, the benchmarks, the tools and the tests read a method's hooks from its
+    declaration (``method_spec(module).render_layers``), never off the module."""
+    assert legacy_reads('layers = getattr(module, "RENDER_LAYERS", None)\nif hasattr(m, "check_config"):\n'
+                        'x = module.TRAINING_KEYS\n') == \
+        ['.TRAINING_KEYS', 'getattr(module, "RENDER_LAYERS"', 'hasattr(m, "check_config"']
+    found = {}
+    for folder in ("mcbench", "methods", "workflow", "benchmarks", "tools", "tests", "examples"):
+        for path in sorted((ROOT / folder).rglob("*")):
+            if path.suffix in (".py", ".smk") and path != Path(__file__).resolve() and path.is_file():
+                reads = legacy_reads(path.read_text(errors="replace"))
+                if reads:
+                    found[str(path.relative_to(ROOT))] = reads
+    assert not found, found
