@@ -2,7 +2,7 @@
 
 For each network a child process does what the job does (``mcbench.pipeline.training.train_learned_method``:
 the data loading of ``training_data`` -- a denoiser's crops, a combiner's crops with its
-``CORRELATED_BASES``' results -- then ``train_network``) for ``--steps`` steps, with a validation
+declared ``correlated_bases``' results -- then ``train_network``) for ``--steps`` steps, with a validation
 pass and a checkpoint at the last step, into a temporary folder; the parent reads the child's peak
 RSS from ``os.wait4`` (``ru_maxrss``; MiB, like the ``max_rss`` of Snakemake's benchmark records).
 
@@ -47,16 +47,17 @@ def repeated(paths: list, count: int) -> list:
 def child(args: argparse.Namespace) -> None:
     """Train one network as the job does; print one JSON line (items, seconds, files read)."""
     sys.path.insert(0, str(Path(args.code).resolve()))
+    from mcbench.io.method_spec import method_spec
     from mcbench.nn.data import crop_paths
     from mcbench.nn.train import correlated_paths
     from mcbench.pipeline.training import learned_method, train_learned_method
 
-    module = learned_method(args.child)
+    spec = method_spec(learned_method(args.child))
     files = crop_paths(args.data)
     correlated = None
     count = args.crops
-    if getattr(module, "KIND", "denoiser") == "combiner":
-        files, correlated = correlated_paths(args.data, module.CORRELATED_BASES, files)
+    if spec.kind == "combiner":
+        files, correlated = correlated_paths(args.data, spec.correlated_bases, files)
         count = args.combiner_crops
     available = len(files)
     files = repeated(files, count)

@@ -86,14 +86,8 @@ from mcbench.combine.simplex_solvers import MAX_ITERATIONS, SOLVERS, STARTS, TOL
 from mcbench.combine.weight_filter import FILTER_PARAMETERS, filter_band, planar64, tile_rows
 from mcbench.filters.bilateral import COLOUR_DISTANCES
 from mcbench.io.buffers import Denoised, RenderBuffers
+from mcbench.io.method_spec import MethodSpec
 
-KIND = "combiner"
-LABEL = "Ensemble"
-# what combine() reads of the render: the noisy halves (Eq. 11-14) and the filter's features
-RENDER_LAYERS = ("color_a", "color_b", "albedo", "normal")
-# combine() only ever indexes the render's layers and the inputs' images by rows (x[y0:y1]), so a
-# job may hand it mcbench.io.exr.LayerRows (layers read from their files by rows) instead of arrays
-READS_ROWS = True
 # the choices combine() validates (owned by mcbench.combine; here for its annotations):
 # SOLVERS, STARTS, WEIGHTS, CHANNELS, GUIDE_VARIANCE_BLURS, COLOUR_DISTANCES, OUTLIER_PASSES,
 # FILTER_BORDERS, NORMAL_FEATURES
@@ -299,3 +293,12 @@ def check_config(params: dict, *, config_key: str) -> None:
     floor = params.get("variance_sum_floor", ENSEMBLE_DEFAULTS["variance_sum_floor"])
     if not (isinstance(floor, (int, float)) and not isinstance(floor, bool) and np.isfinite(floor) and floor >= 0):
         raise ValueError(f"{config_key}.variance_sum_floor: must be a finite number >= 0, got {floor!r}")
+
+
+METHOD = MethodSpec(
+    kind="combiner", label="Ensemble", run=combine, check_config=check_config,
+    # what combine() reads of the render: the noisy halves (Eq. 11-14) and the filter's features
+    render_layers=("color_a", "color_b", "albedo", "normal"),
+    # combine() only ever indexes the render's layers and the inputs' images by rows (x[y0:y1]), so a
+    # job may hand it mcbench.io.exr.LayerRows (layers read from their files by rows) instead of arrays
+    reads_rows=True)

@@ -790,8 +790,8 @@ def test_banded_combine_equals_the_whole_image_pass(passes, solver, monkeypatch,
 
 def test_combine_reads_layers_by_rows(tmp_path, monkeypatch, make_render_buffers):
     """The render's layers and the inputs as mcbench.io.exr.LayerRows (read from their files by
-    rows, E.READS_ROWS) give the same output, bit for bit, as the same files read whole; a NaN
-    in a file is refused with the whole image's count, as for arrays."""
+    rows, as the declaration's reads_rows allows) give the same output, bit for bit, as the same
+    files read whole; a NaN in a file is refused with the whole image's count, as for arrays."""
     from mcbench.io.buffers import RenderBuffers
     from mcbench.io.exr import layer_rows, write_layers
 
@@ -806,11 +806,11 @@ def test_combine_reads_layers_by_rows(tmp_path, monkeypatch, make_render_buffers
 
     def lazy():
         render = RenderBuffers(layers=layer_rows(tmp_path / "render.exr",
-                                                 ["color", *E.RENDER_LAYERS]), spp=8)
+                                                 ["color", *E.METHOD.render_layers]), spp=8)
         return render, [Denoised(full=L["color"], a=L["color_a"], b=L["color_b"])
                         for L in (layer_rows(p) for p in paths)]
 
-    eager = E.combine(RenderBuffers.load(tmp_path / "render.exr", layers=E.RENDER_LAYERS),
+    eager = E.combine(RenderBuffers.load(tmp_path / "render.exr", layers=E.METHOD.render_layers),
                       [Denoised.load(p) for p in paths])
     by_rows = E.combine(*lazy())
     for name, layer in eager.layers().items():

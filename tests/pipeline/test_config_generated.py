@@ -66,9 +66,9 @@ def _catalogue() -> dict[str, dict]:
     out = {}
     for name in methods.available_methods():
         module = methods.load_method(name)
-        function = getattr(module, methods.KINDS[module.KIND])
-        hints = typing.get_type_hints(function)
-        out[name] = {"kind": module.KIND, "label": module.LABEL, "inputs": getattr(module, "INPUTS", None),
+        spec = methods.method_spec(module)
+        hints = typing.get_type_hints(spec.run)
+        out[name] = {"kind": spec.kind, "label": spec.label, "inputs": spec.inputs,
                      "learned": is_learned_method(module),
                      "params": {key: (hints.get(key), p.default) for key, p in methods.method_parameters(module).items()}}
     return out
