@@ -2,7 +2,7 @@
 solvers -- iterative (Sec. 4.1), exact (hull projection) and a general-purpose QP
 (``solver="qp"``: qpsolvers with quadprog, one call per problem) -- for N = 2..8 base
 denoisers, and each one's objective gap to the exact optimum; then both fast solvers on
-image-sized problem sets (``--image-side``, issue 14 target 2) with the iterative solver's
+image-sized problem sets (``--image-side``) with the iterative solver's
 fraction of problems stopped at the 1024-iteration limit, for each of its starts
 (``start=`` random: the paper's; vertex; pair). A script, not a timed test:
 

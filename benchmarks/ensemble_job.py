@@ -6,12 +6,12 @@ Like :func:`mcbench.pipeline.methods.run_methods` for a batch of ensembles: the 
 ``render_layers`` (declared in ``methods.ensemble.METHOD``) and each input's three images,
 ``methods.ensemble.combine``, write the output EXR (``write_layers``). Two ways to read them:
 
-* default (the job path proposed for ``run_methods``, issue 14): a combiner that declares
+* default (as ``run_methods`` reads for a batch of such methods): a combiner that declares
   ``reads_rows`` gets the render's layers and the inputs' images as
   :class:`mcbench.io.exr.LayerRows` (:func:`mcbench.io.exr.layer_rows`: only headers are read here;
   combine reads rows as it goes, so no input is held whole);
-* ``--eager``: as ``run_methods`` reads today, every layer whole (``RenderBuffers.load`` of the
-  ``render_layers``, ``Denoised.load``; the ensemble reads no extras).
+* ``--eager``: as ``run_methods`` reads for any other batch, every layer whole
+  (``RenderBuffers.load`` of the ``render_layers``, ``Denoised.load``; the ensemble reads no extras).
 
 Prints one JSON line: seconds spent importing, reading, loading the numba cache (a combine of
 an 8 x 8 crop, ``jit_s``), combining and writing (wall, ``time.perf_counter``). The parent

@@ -13,7 +13,7 @@ memory is the same: every file read is stored), which the table says; a smaller 
 evenly spaced crops (quick checks).
 
 ``--code DIR`` imports ``mcbench`` and ``methods`` from another copy of the code (e.g. an older
-commit, ``git archive <rev> mcbench methods | tar -x -C DIR``) to measure before/after.
+commit, ``git archive <rev> mcbench methods | tar -x -C DIR``), to compare two versions' memory.
 
     .venv/bin/python benchmarks/training_memory.py [--networks kpcn deep_combiner] [--steps 20]
         [--data results/training] [--crops 640] [--combiner-crops 112] [--code DIR]

@@ -16,8 +16,8 @@ convolutions with leaky ReLU and a 3×3 output, trained as a WGAN-GP critic (Gul
 2017, λ_GP = 10; Adam 1e-4, β = (0.5, 0.9)).
 
 Loss: L1 (in log space, see :mod:`mcbench.nn.losses`) plus ``adversarial_weight`` = 0.005 times
-the adversarial term; Xu et al. combine L1 with the adversarial loss -- the paper is not in
-``../shared/papers``, the weight 0.005 is our recollection of it, stated here as our choice.
+the adversarial term; Xu et al. combine L1 with the adversarial loss -- their paper was not
+available to us, the weight 0.005 is our recollection of it, stated here as our choice.
 
 Scaling against the published architecture: one generator on demodulated colour instead of
 separate diffuse and specular generators; 6 residual blocks of width 32 (the paper's generator is

@@ -1,5 +1,5 @@
-"""Weight-sharing kernel prediction network (Fan et al. 2021,
-``../shared/papers/weight-sharing-kpn-fan2021.md``), an extra learned base denoiser, trained by
+"""Weight-sharing kernel prediction network (Fan et al. 2021, "Real-time Monte Carlo Denoising
+with Weight Sharing Kernel Prediction Network"), an extra learned base denoiser, trained by
 us on our procedural scenes. Weights: ``methods/weights/wskpn.pt``, record ``wskpn.json``.
 
 * **ImportanceNet** (Sec. 4.1): six RepVGG blocks (Ding et al. 2021). In training each block sums

@@ -18,14 +18,14 @@ rule, sigma = 1.7, borders reflected) before the filter; ``outlier_removal="publ
 after the filter, a pixel of a weight map where any channel lies 2.5 or more standard
 deviations from the mean of the other 48 pixels of its 7 x 7 window takes the map's 7 x 7
 Gaussian blur (:func:`mcbench.filters.bilateral.remove_outlier_pixels`), ``"neighbour_mean"``
-our earlier reading (one value -> the neighbours' mean,
+our own reading (one value -> the neighbours' mean,
 :func:`mcbench.filters.bilateral.remove_outliers`), then the weights are projected back onto
 the simplex (onto sum one when unconstrained; a pixel-channel left with all weights 0 keeps its
 filtered ones); ``filter_border="reflect101"``: windows reflected at the image borders;
 ``variance_sum_floor=1e-6``: Eq. 33's denominator max(v_p + v_q, 1e-6);
 ``normal_features="standardised"``: the normal feature standardised per channel and clipped to
 +-3. Eq. 33's ||.||^2 is a sum over the channels (the text and the code; ``colour_distance=
-"mean"`` is our earlier reading). The ensemble's defaults
+"mean"`` is our own reading). The ensemble's defaults
 (``mcbench.combine.ensemble_weights.ENSEMBLE_DEFAULTS``) follow the text where it decides and the
 code where it is silent; :data:`PAPER_FILTER` is Sec. 4.2 alone and :data:`PUBLIC_CODE_FILTER`
 the code's choices (with :func:`public_code_sigmas` for its feature terms).
@@ -181,7 +181,7 @@ def filter_band(values, y0, y1, guide, guide_variance, v0, albedo, normal, *, ra
     if normal_statistics is not None:
         features[1] = standardised_normal(features[1], normal_statistics)
     rows = (o0 - f0, o1 - f0)
-    if filter_border == "reflect101":   # pad by the window's radius: no window is clipped any more
+    if filter_border == "reflect101":   # pad by the window's radius: no window is clipped
         tile = dict(radius=radius, first_row=f0, height=height, rows=(o0, o1))
         weights = reflect101_tile(np.asarray(weights), row_axis=1, **tile)
         z, var = reflect101_tile(z, **tile), reflect101_tile(var, **tile)

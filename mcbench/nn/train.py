@@ -306,7 +306,7 @@ def train_network(module: ModuleType, data: list[str | Path] | CropSet, weights_
             "training_scenes": sorted(int(s) for s in set(train_set.seeds.tolist())),
             "validation_scenes": sorted(int(s) for s in set(validation_set.seeds.tolist())),
             "folder": folder,
-            "source": "procedural training scenes of mcbench.training (no test scene)",
+            "source": "procedural training scenes of mcbench.training_data (no test scene)",
         },
         "loss": settings["loss"],
         # one epoch = every (training crop, level, buffer) once, as a full crop

@@ -194,7 +194,7 @@ def test_no_test_scene_is_a_training_scene():
         data = read_json(record_path(name))["data"]
         used = data["training_scenes"] + data["validation_scenes"]
         assert len(used) == len(set(used)) and not any(is_validation_seed(s) for s in data["training_scenes"])
-        assert "mcbench.training" in data["source"]
+        assert data["source"] == "procedural training scenes of mcbench.training_data (no test scene)"
         seeds.update(used)
     pick_variant("auto")
     tests = {scene_fingerprint(load_scene(scene).build(16, 12)) for scene in available_scenes()}
