@@ -13,7 +13,7 @@ least) and peak RSS (``os.wait4`` of the child). Printed:
    :data:`CPP_REFERENCE`, the program's whole-process figures at 1024^2 on an idle 2-core machine
    of the project's kind: 9.0 / 13.0 / 20.4 s, 274 / 395 / 635 MiB) as ratios (target: wall
    <= 0.25x, RSS <= 1.2x). Three jobs per line, one after the other: ``rows`` (the job reading
-   the render and the inputs by rows, as ``run_methods`` reads for a batch of ``READS_ROWS``
+   the render and the inputs by rows, as ``run_methods`` reads for a batch of ``reads_rows``
    methods), ``eager`` (every layer read whole, as ``run_methods`` reads for any other batch)
    and ``base`` (the whole job as of ``--baseline``, default :data:`BASELINE_COMMIT`, the
    whole-image combine without bands or row reads: its files extracted from
