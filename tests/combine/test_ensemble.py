@@ -15,7 +15,7 @@ import qpsolvers
 
 from mcbench.combine import weight_filter
 from mcbench.combine.ensemble_weights import CHANNELS, solve_weights
-from mcbench.combine.simplex_solvers import SOLVERS, objective
+from mcbench.combine.simplex_solvers.problem import SOLVERS, objective
 from mcbench.combine.weight_filter import PAPER_FILTER, filter_weights
 from mcbench.io.buffers import Denoised
 from methods import ensemble as E
@@ -241,7 +241,7 @@ def test_iterative_reaches_the_optimum_on_99_percent(problems):
     """At least 99 % of pixel-channels end within 1e-6 s^2 of the exact optimum of Eq. 13.
 
     With the paper's alpha in [0, 1] (no away steps) this measured 67 % and 86 %; with away
-    steps (mcbench/combine/simplex_solvers.py docstring) 99.6 % and 99.96 %."""
+    steps (mcbench/combine/simplex_solvers/iterative.py docstring) 99.6 % and 99.96 %."""
     xa, xb, ya, yb = problems()
     gap = gap_above_optimum(solve_weights(xa, xb, ya, yb, solver="iterative"), xa, xb, ya, yb)
     share = float(np.mean(gap <= 1e-6))
