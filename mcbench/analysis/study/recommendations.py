@@ -51,6 +51,14 @@ def _scopes(data: StudyData) -> list[tuple[str, object, list[str], list[int], in
     return out
 
 
+def _with_int_ids(table: pd.DataFrame, columns) -> pd.DataFrame:
+    """``table`` with ``columns`` (counts and pool IDs) as nullable integers: empty cells stay
+    empty, the others are written without a decimal point."""
+    for column in columns:
+        table[column] = table[column].astype("Int64")
+    return table
+
+
 def _pick(per_scene: np.ndarray, eligible: list[str], place: int, indices: np.ndarray,
           resampling: Resampling) -> dict | None:
     """The entry of ``eligible`` (columns of ``per_scene``, (scenes, k)) holding ``place`` by mean
@@ -137,10 +145,8 @@ def recommendations(data: StudyData, *, resampling: Resampling = Resampling()) -
                 notes.append(f"the paper's #{paper_id} is not in our data")
         row["note"] = "; ".join(notes)
         rows.append(row)
-    table = pd.DataFrame(rows, columns=REC_COLUMNS)
-    for column in ("candidates", "ours_id", "named_candidates", "named_id", "paper_id"):
-        table[column] = table[column].astype("Int64")
-    return table
+    return _with_int_ids(pd.DataFrame(rows, columns=REC_COLUMNS),
+                         ("candidates", "ours_id", "named_candidates", "named_id", "paper_id"))
 
 
 def recommendations_both(by_metric: dict[str, StudyData], *, resampling: Resampling = Resampling()) -> pd.DataFrame:
@@ -194,8 +200,6 @@ def recommendations_both(by_metric: dict[str, StudyData], *, resampling: Resampl
                     notes.append(f"the paper's #{paper_id} is not in this set in our data")
             row["note"] = "; ".join(notes)
             rows.append(row)
-    table = pd.DataFrame(rows, columns=BOTH_COLUMNS)
-    for column in ("candidates", "relmse_id", "dssim_id", "combined_id", "paper_id"):
-        table[column] = table[column].astype("Int64")
-    return table
+    return _with_int_ids(pd.DataFrame(rows, columns=BOTH_COLUMNS),
+                         ("candidates", "relmse_id", "dssim_id", "combined_id", "paper_id"))
 
