@@ -47,7 +47,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench_ensemble import synthetic  # noqa: E402
 from mcbench.combine.ensemble_weights import CHANNELS, solve_weights  # noqa: E402
-from mcbench.combine.simplex_solvers import QP_BACKEND, STARTS, objective  # noqa: E402
+from mcbench.combine.simplex_solvers.iterative import STARTS  # noqa: E402
+from mcbench.combine.simplex_solvers.problem import objective  # noqa: E402
+from mcbench.combine.simplex_solvers.qp import QP_BACKEND  # noqa: E402
 from timing import timed  # noqa: E402
 
 

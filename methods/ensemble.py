@@ -82,7 +82,8 @@ from mcbench.combine.ensemble_weights import (CHANNELS, ENSEMBLE_DEFAULTS, FILTE
                                               GUIDE_VARIANCE_BLURS, NORMAL_FEATURES, OUTLIER_PASSES,
                                               WEIGHTS, check_choices, check_shapes,
                                               nonfinite_pixels, raise_nonfinite, solve_block)
-from mcbench.combine.simplex_solvers import MAX_ITERATIONS, SOLVERS, STARTS, TOLERANCE
+from mcbench.combine.simplex_solvers.iterative import MAX_ITERATIONS, STARTS, TOLERANCE
+from mcbench.combine.simplex_solvers.problem import SOLVERS
 from mcbench.combine.weight_filter import FILTER_PARAMETERS, filter_band, planar64, tile_rows
 from mcbench.filters.bilateral import COLOUR_DISTANCES
 from mcbench.io.buffers import Denoised, RenderBuffers

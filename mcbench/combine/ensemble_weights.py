@@ -32,10 +32,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from mcbench.combine.simplex_solvers import (MAX_EXACT_N, MAX_ITERATIONS, SOLVERS, STARTS, TOLERANCE,
-                                             exact_weights, iterative_weights, qp_simplex_weights,
-                                             seed_state, shared_exact_weights,
-                                             unconstrained_least_squares, unconstrained_weights)
+from mcbench.combine.simplex_solvers.exact import MAX_EXACT_N, exact_weights
+from mcbench.combine.simplex_solvers.iterative import MAX_ITERATIONS, STARTS, TOLERANCE, iterative_weights, seed_state
+from mcbench.combine.simplex_solvers.problem import SOLVERS
+from mcbench.combine.simplex_solvers.qp import qp_simplex_weights
+from mcbench.combine.simplex_solvers.shared_exact import shared_exact_weights
+from mcbench.combine.simplex_solvers.unconstrained import unconstrained_least_squares, unconstrained_weights
 from mcbench.filters.bilateral import COLOUR_DISTANCES
 
 __all__ = ["WEIGHTS", "CHANNELS", "GUIDE_VARIANCE_BLURS", "OUTLIER_PASSES", "FILTER_BORDERS",

@@ -15,7 +15,7 @@ import qpsolvers
 
 from mcbench.combine import weight_filter
 from mcbench.combine.ensemble_weights import CHANNELS, solve_weights
-from mcbench.combine.simplex_solvers import SOLVERS, objective
+from mcbench.combine.simplex_solvers.problem import SOLVERS, objective
 from mcbench.combine.weight_filter import PAPER_FILTER, filter_weights
 from mcbench.io.buffers import Denoised
 from methods import ensemble as E
@@ -240,7 +240,7 @@ def test_iterative_never_below_exact():
 def test_iterative_reaches_the_optimum_on_99_percent(problems):
     """At least 99 % of pixel-channels end within 1e-6 s^2 of the exact optimum of Eq. 13.
 
-    The away steps (mcbench/combine/simplex_solvers.py docstring) are what lets the solver reach
+    The away steps (mcbench/combine/simplex_solvers/iterative.py docstring) are what lets the solver reach
     this: with the paper's alpha in [0, 1] alone the share on these problems is far below 99 %."""
     xa, xb, ya, yb = problems()
     gap = gap_above_optimum(solve_weights(xa, xb, ya, yb, solver="iterative"), xa, xb, ya, yb)
@@ -699,23 +699,23 @@ def test_solve_in_blocks_equals_whole_image(monkeypatch, make_render_buffers):
 # the band-wise pass (bounded memory): tiles with their halos equal the whole image
 # ---------------------------------------------------------------------------------------
 def test_gaussian_blur_kernel_and_tiles_equal_the_numpy_blur():
-    """mcbench.filters.bilateral.gaussian_blur (numba) equals its NumPy formulation bit for bit, on
+    """mcbench.filters.blur_and_outliers.gaussian_blur (numba) equals its NumPy formulation bit for bit, on
     whole images (axes of length 1, 2, 3: NumPy's repeated reflection) and on tiles holding
     only the rows within 4 of the rows asked for (or the image's border)."""
-    from mcbench.filters import bilateral
+    from mcbench.filters import blur_and_outliers
     rng = np.random.default_rng(3)
     for shape in [(1, 1, 3), (1, 6, 3), (2, 3, 3), (3, 9, 1), (5, 4, 3), (17, 2), (40, 33, 3)]:
         image = rng.normal(size=shape) * 10
-        assert np.array_equal(bilateral.gaussian_blur(image),
-                              bilateral.gaussian_blur_reference(image)), shape
+        assert np.array_equal(blur_and_outliers.gaussian_blur(image),
+                              blur_and_outliers.gaussian_blur_reference(image)), shape
     image = rng.normal(size=(50, 21, 3))
-    whole = bilateral.gaussian_blur_reference(image)
+    whole = blur_and_outliers.gaussian_blur_reference(image)
     for r0, r1 in [(0, 1), (0, 10), (3, 30), (20, 21), (40, 50), (46, 50)]:
         v0, v1 = max(0, r0 - 4), min(50, r1 + 4)
-        tile = bilateral.gaussian_blur(image[v0:v1], rows=(r0, r1), first_row=v0, height=50)
+        tile = blur_and_outliers.gaussian_blur(image[v0:v1], rows=(r0, r1), first_row=v0, height=50)
         assert np.array_equal(tile, whole[r0:r1]), (r0, r1)
     with pytest.raises(ValueError, match="outside the tile"):
-        bilateral.gaussian_blur(image[10:20], rows=(10, 20), first_row=10, height=50)
+        blur_and_outliers.gaussian_blur(image[10:20], rows=(10, 20), first_row=10, height=50)
 
 
 def test_filter_rows_of_a_tile_equal_the_whole_filter():

@@ -78,7 +78,7 @@ def table(work: Path) -> str:
 
     from mcbench.analysis import pool
     from mcbench.analysis.ranking import ranking_table
-    from mcbench.analysis.study import PAPER_TABLE3_BASES, paper_kendall
+    from mcbench.analysis.study.paper import PAPER_TABLE3_BASES, paper_kendall
 
     rankings = {}
     for size in SIZES:

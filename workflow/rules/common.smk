@@ -17,7 +17,7 @@ from mcbench.pipeline.plan import plan_study  # noqa: E402
 from mcbench.pipeline.render import folder_case_files, folder_reference_files  # noqa: E402
 from mcbench.analysis.metrics import ALL_METRICS  # noqa: E402
 from mcbench.analysis.pool import POOL  # noqa: E402
-from mcbench.analysis.study_figures import STUDY_FIGURES as STUDY_FIGURE_KEYS, curve_candidates, paper_recommended  # noqa: E402
+from mcbench.analysis.study.figures import STUDY_FIGURES as STUDY_FIGURE_KEYS, curve_candidates, paper_recommended  # noqa: E402
 from mcbench.pipeline.resources import JobCost, estimate_job, job_request, load_job_costs  # noqa: E402
 from mcbench.io.method_spec import method_spec  # noqa: E402
 from mcbench.io.weights import COMMITTED_WEIGHTS, is_learned_method  # noqa: E402
