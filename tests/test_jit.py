@@ -57,8 +57,9 @@ def numba_cache_files(folder: Path) -> list[Path]:
 
 
 def test_loading_a_module_by_path_does_not_break_its_normal_import(project_copy):
-    """The sequence of the issue: load the solvers' module by file path and solve, then a normal
-    `import mcbench.combine.simplex_solvers.iterative` solves too (it died with No module named '<dynamic>')."""
+    """Load the solvers' module by file path and solve, then a normal
+    `import mcbench.combine.simplex_solvers.iterative` solves too, reading what the first cached
+    (a cache entry recorded under the module name '<dynamic>' must not break the normal import)."""
     copy, env = project_copy
     first = run_python(BY_PATH + SOLVE, copy, env)
     assert first.returncode == 0, first.stderr

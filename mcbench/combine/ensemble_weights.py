@@ -8,8 +8,8 @@ For every pixel-channel with base outputs y_i^A, y_i^B (N denoisers) and noisy h
     L(w) = w^T <M> w = 1/2 |A w - b|^2 - 1/2 (x^A - x^B)^2                      (Eq. 13, 25)
 
 (<M> of Eq. 11-12; A's columns a_i = (y_i^A, y_i^B), b = (x^B, x^A)) on the simplex
-(w >= 0, sum w = 1) with the solvers of :mod:`mcbench.combine.simplex_solvers` (whose docstring
-gives the equations and our departures):
+(w >= 0, sum w = 1) with the solvers of :mod:`mcbench.combine.simplex_solvers` (each solver's module gives its
+equations and our departures):
 
 * ``solver``: ``"iterative"`` (Sec. 4.1, Eq. 29-31, the paper's), ``"exact"`` (projection onto
   the convex hull, minimum-norm tie-break; our addition) or ``"qp"`` (a general QP solver, the
