@@ -181,11 +181,11 @@ def run_job(render: Path, inputs: list[Path], output: Path, *, script: Path | No
 
 def run_cpp(program: str, render: Path, inputs: list[Path], folder: Path, *, solver: str = "brute") -> dict:
     """The authors' program (``--cpp``) on the same case: its inputs written once in its layout
-    (:func:`mcbench.io.exchange.write_case`, not timed), then one process ``-m d0,d1,... -s
+    (:func:`mcbench.io.case_folders.write_case`, not timed), then one process ``-m d0,d1,... -s
     solver -q`` with its wall seconds, CPU seconds and peak RSS (MiB) from ``os.wait4``, as
     :func:`run_job` measures ours, and the 1-minute load after it."""
     from mcbench.io.buffers import Denoised
-    from mcbench.io.exchange import write_case as write_authors_case
+    from mcbench.io.case_folders import write_case as write_authors_case
     from mcbench.io.exr import read_layers
 
     names = [f"d{i}" for i in range(len(inputs))]

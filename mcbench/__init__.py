@@ -17,7 +17,7 @@ higher one. The declaration is the import-linter contracts of ``pyproject.toml``
 * :mod:`mcbench.nn` -- the networks' shared training and inference machinery (torch);
 * :mod:`mcbench.training_data` -- procedural training scenes rendered into crops;
 * :mod:`mcbench.analysis` -- tables in, tables and figures out: metrics, ranking, the pool, the
-  study, comparisons, figures, the viewer, reports;
+  study, comparisons, figures, the viewer, the scene summary;
 * :mod:`mcbench.pipeline` -- the work behind each Snakemake rule (one module per
   ``workflow/rules/X.smk``), the config and its plan, cluster resources, thread limits and logs.
   Only this layer resolves method and scene names (through the registries ``methods`` and

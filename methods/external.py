@@ -7,7 +7,7 @@ case through files. ``config.yaml``::
                             "--in", "{input_dir}", "--out", "{output_dir}", "--name", "{name}"]}}
 
 Per case the harness writes the render into a temporary folder in the layout of
-:mod:`mcbench.io.exchange` (``colorA.exr``, ``colorB.exr``, ``albedo.exr``, ``normal.exr`` -- what
+:mod:`mcbench.io.case_folders` (``colorA.exr``, ``colorB.exr``, ``albedo.exr``, ``normal.exr`` -- what
 the ensemble paper's program reads -- and ``color.exr``, ``variance.exr``, ``depth.exr``; float32
 RGB EXRs), runs the command (placeholders :data:`mcbench.io.external_program.PLACEHOLDERS`; no
 shell; working directory the temporary folder; ``timeout`` seconds) and reads what it wrote into
@@ -29,7 +29,7 @@ import tempfile
 from pathlib import Path
 
 from mcbench.io.buffers import BUFFER_SUFFIXES, Denoised, RenderBuffers
-from mcbench.io.exchange import write_case, write_image
+from mcbench.io.case_folders import write_case, write_image
 from mcbench.io.external_program import check_command, expand_command, read_results, run_program
 from mcbench.io.method_spec import MethodSpec
 

@@ -5,9 +5,9 @@ read from files and ranked like any base denoiser. ``config.yaml``::
       - {name: optix_gpu, method: precomputed, label: "OptiX (GPU box)", params: {dir: /data/optix}}
 
 Per case the three results are read by ``pattern`` (default
-:data:`mcbench.io.exchange.RESULT_PATTERN`: ``{dir}/{scene}/spp{spp}/{name}/{name}{image}.exr``,
+:data:`mcbench.io.case_folders.RESULT_PATTERN`: ``{dir}/{scene}/spp{spp}/{name}/{name}{image}.exr``,
 ``{image}`` = "", "A", "B": the full image and the half buffers A and B, the authors' naming),
-float32 RGB EXRs of the render's size without NaN/Inf (:func:`mcbench.io.exchange.read_image`).
+float32 RGB EXRs of the render's size without NaN/Inf (:func:`mcbench.io.case_folders.read_image`).
 Every file of every case is checked when the DAG is parsed (:func:`required_files`), so a missing
 case stops the run before any job, naming the file. The recorded time is ``seconds`` (measured
 where the results were made; 0 when unknown), not a time measured here.
@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from mcbench.io.buffers import Denoised, RenderBuffers
-from mcbench.io.exchange import RESULT_PATTERN, check_result_pattern, read_image, result_files
+from mcbench.io.case_folders import RESULT_PATTERN, check_result_pattern, read_image, result_files
 from mcbench.io.method_spec import MethodSpec
 
 _seconds: list[float] = [0.0]

@@ -13,7 +13,7 @@ sees B's samples, as the deep combiner): x, σ² (the render's variance of the m
    (the paper's value), K = ``iterations`` (default 1; the paper: 1 or 4), plus once on x itself
    (F(x) recomputed in this process, so the difference sees only the perturbation);
 2. SURE = (y − x)² + 2σ²f′ − σ² (Eq. 1) and the network's 18 inputs
-   (:mod:`mcbench.nn.progressive`), α = clip(f_act(x1, x2, x3), 0, 1) (Eq. 19);
+   (:mod:`mcbench.nn.progressive_mixing`), α = clip(f_act(x1, x2, x3), 0, 1) (Eq. 19);
 3. α′ = (1 − Φ(2(|t| − 4.2))) α (Eq. 18, :func:`mcbench.filters.sure.t_test`), z = x + α′(y − x).
 
 **The divergence needs F on an arbitrary image.** A combiner receives only its input's three
@@ -106,7 +106,7 @@ DivergenceBase = Literal["none", "oidn", "jbf", "kpcn", "mcgan", "optix_ae", "ws
 @cache
 def network_classes() -> SimpleNamespace:
     """The torch module of h_NN, imported on first use (importing this module imports no torch)."""
-    from mcbench.nn.progressive import MixingNetwork
+    from mcbench.nn.progressive_mixing import MixingNetwork
 
     return SimpleNamespace(MixingNetwork=MixingNetwork)
 
@@ -119,7 +119,7 @@ def build_network(**arch):
 def augment_batch(buffers: dict, rng) -> dict:
     """The swap augmentation (Sec. 4.3): a ``swap`` flag per item, 1 with probability 1/2, drawn
     from ``rng`` (the training loop's per-step generator)."""
-    from mcbench.nn.progressive import swap_flags
+    from mcbench.nn.progressive_mixing import swap_flags
 
     return {**buffers, "swap": swap_flags(len(buffers["color"]), rng)}
 

@@ -261,7 +261,7 @@ def relmse_corrected(image, reference, reference_variance) -> float:
     candidate; tested). The clamp at 0 only acts where the reference's noise exceeds its value,
     where no metric can see the truth. The raw relMSE against a noisy
     reference overstates every candidate's error by about mean(v / (μ² + 0.01)), the reference's
-    noise floor (``mcbench.analysis.reports.reference_relmse_floor``), which at high spp can exceed the
+    noise floor (``mcbench.analysis.scene_summary.reference_relmse_floor``), which at high spp can exceed the
     candidates' own errors and reorders them; the corrected one does not. Not clamped at 0: a
     candidate better than the reference's noise floor may score slightly below 0 (clamping would
     bias it upwards). tests/analysis/test_metrics.py checks the unbiasedness on synthetic data.

@@ -1,6 +1,6 @@
 """Run a denoiser that is a program outside mcbench on one case, through files.
 
-The case goes to the program as a folder in the layout of :mod:`mcbench.io.exchange` (the
+The case goes to the program as a folder in the layout of :mod:`mcbench.io.case_folders` (the
 ensemble paper's program's layout, extended with the full image, its variance and the depth);
 the program writes its results as EXRs into an output folder, and :func:`read_results` checks
 them (present, float32 R, G, B, finite, the render's size) before anyone uses them.
@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from mcbench import BenchError
-from mcbench.io.exchange import check_denoiser_name, read_image
+from mcbench.io.case_folders import check_denoiser_name, read_image
 from mcbench.io.exr import ExrError
 
 __all__ = ["PLACEHOLDERS", "STDERR_LINES", "ExternalProgramError", "check_command", "expand_command",

@@ -13,7 +13,7 @@ Two layouts are read, both single-part float EXRs with channels R, G, B (a one-c
 Y; normals may be X, Y, Z), float32 or half pixels (converted exactly to float32):
 
 ``authors`` -- the case folders of the ensemble paper's public program (LuisaGroup/Ensemble-
-  Denoising, ``src/main.cpp``), one per spp, as :mod:`mcbench.io.exchange` writes them
+  Denoising, ``src/main.cpp``), one per spp, as :mod:`mcbench.io.case_folders` writes them
   (``snakemake export_cases``)::
 
       <renders>/spp<N>/colorA.exr colorB.exr albedo.exr normal.exr      the program's inputs
@@ -233,7 +233,7 @@ def read_image_any(path: str | os.PathLike) -> np.ndarray:
     """One image of another renderer: R, G, B (or X, Y, Z) -> (H, W, 3), Y -> (H, W); float32 or
     half pixels, returned as float32 (half converts exactly). Missing/corrupt files, other channel
     sets and integer pixels raise :class:`mcbench.io.exr.ExrError` naming the file."""
-    from mcbench.io.exchange import read_image
+    from mcbench.io.case_folders import read_image
 
     image = read_image(path, allow_half=True, allow_xyz=True)
     check_finite(path, {"image": image})

@@ -1,5 +1,5 @@
 """The work behind ``workflow/rules/export.smk``: every test case in the layout of the ensemble
-paper's public program (:mod:`mcbench.io.exchange`), so that their C++ tool, tev or any other
+paper's public program (:mod:`mcbench.io.case_folders`), so that their C++ tool, tev or any other
 program can read this project's renders and results.
 
 One folder per case, ``results/export/<scene>/spp<N>/``: ``colorA.exr``, ``colorB.exr``,
@@ -19,7 +19,7 @@ import tempfile
 from pathlib import Path
 
 from mcbench.io.buffers import Denoised, RenderBuffers
-from mcbench.io.exchange import EXTRA_RENDER_FILES, RENDER_FILES, write_case, write_image
+from mcbench.io.case_folders import EXTRA_RENDER_FILES, RENDER_FILES, write_case, write_image
 from mcbench.io.exr import check_finite, check_resolution, read_layers
 
 __all__ = ["REFERENCE_FILE", "export_case"]

@@ -323,7 +323,7 @@ _CURVE_ZERO_BITS = 0x1F00                 # bits 12..8: 0 here, never 0 in a tra
 def progressive_curve_seed(level_index: int, half: int, *, bin: int = 0, pass_index: int = 0,
                            base_seed: int = 0) -> int:
     """32-bit Mitsuba seed of one pass of a render of progressive denoising's consistency curve
-    (:mod:`mcbench.pipeline.progressive`: one scene rendered at many spp levels, level ``i`` of the
+    (:mod:`mcbench.pipeline.progressive_study`: one scene rendered at many spp levels, level ``i`` of the
     sorted levels seeded with ``level_index`` i)::
 
         bit 31..29  7 (the training renders' base seed: the slot is a hole of their layout)

@@ -119,7 +119,7 @@ def test_gather_refuses_a_case_csv_cut_mid_row(tmp_path):
 
 def test_write_rankings_refuses_a_table_with_other_candidates(tmp_path):
     from mcbench import BenchError
-    from mcbench.pipeline.report import write_rankings
+    from mcbench.pipeline.rankings import write_rankings
 
     path = _write_case(tmp_path / "metrics.csv", _full_case())
     write_rankings(path, "relmse", str(tmp_path / "r.csv"), str(tmp_path / "r.md"),
@@ -200,7 +200,7 @@ def test_latex_escapes_and_refuses_a_bad_label():
 
 
 def test_write_rankings_writes_the_latex_table(tmp_path):
-    from mcbench.pipeline.report import write_rankings
+    from mcbench.pipeline.rankings import write_rankings
 
     path = _write_case(tmp_path / "metrics.csv", _full_case())
     table = write_rankings(path, "dssim", str(tmp_path / "r.csv"), str(tmp_path / "r.md"),

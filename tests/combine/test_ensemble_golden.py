@@ -33,7 +33,7 @@ from mcbench.combine.blending import combine_with
 from mcbench.combine.weight_filter import PUBLIC_CODE_FILTER, public_code_sigmas
 from mcbench.filters.blur_and_outliers import gaussian_blur
 from mcbench.io.buffers import Denoised, RenderBuffers
-from mcbench.io.exchange import RENDER_FILES, denoiser_files, read_image
+from mcbench.io.case_folders import RENDER_FILES, denoiser_files, read_image
 
 GOLDEN = Path(__file__).resolve().parents[1] / "data" / "golden" / "ensemble_cpp"
 CASES = sorted(p.name for p in GOLDEN.iterdir() if p.is_dir()) if GOLDEN.is_dir() else []

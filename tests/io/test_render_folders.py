@@ -8,7 +8,7 @@ import OpenEXR
 import pytest
 
 from mcbench import BenchError
-from mcbench.io.exchange import write_image
+from mcbench.io.case_folders import write_image
 from mcbench.io.exr import ExrError, NonFiniteError
 from mcbench.io.render_folders import (RenderFolder, case_files, read_case, read_image_any, read_reference,
                                        reference_files, scene_module)

@@ -246,7 +246,7 @@ def random_network(**arch):
 def test_network_inputs_follow_sec_4_3_and_the_swap_exchanges_the_pairs():
     import torch
 
-    from mcbench.nn.progressive import network_inputs
+    from mcbench.nn.progressive_mixing import network_inputs
 
     batch = random_batch(np.random.default_rng(1))
     x, y, v, d = (batch[k].double() for k in ("color", "correlated", "variance", "divergence"))
@@ -270,7 +270,7 @@ def test_swap_mixes_towards_the_other_image_so_the_target_alpha_is_one_minus_alp
     reproduces an unswapped z = x + α (y − x) is α_s = 1 − α (the augmentation's target)."""
     import torch
 
-    from mcbench.nn.progressive import MixingNetwork
+    from mcbench.nn.progressive_mixing import MixingNetwork
 
     net = random_network()
     batch = random_batch(np.random.default_rng(2))
@@ -291,7 +291,7 @@ def test_swap_mixes_towards_the_other_image_so_the_target_alpha_is_one_minus_alp
 def test_torch_f_act_matches_numpy_and_alpha_is_clipped():
     import torch
 
-    from mcbench.nn.progressive import f_act, mixing_alpha
+    from mcbench.nn.progressive_mixing import f_act, mixing_alpha
 
     rng = np.random.default_rng(3)
     x1, x2, x3 = rng.normal(0, 1, (3, 4, 5))

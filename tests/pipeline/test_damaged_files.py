@@ -147,14 +147,14 @@ def _run_timings(tree: Path, out: Path) -> None:
 
 
 def _run_rankings(tree: Path, out: Path) -> None:
-    from mcbench.pipeline.report import write_rankings
+    from mcbench.pipeline.rankings import write_rankings
 
     write_rankings(str(tree / "metrics.csv"), "relmse", str(out / "ranking.csv"), str(out / "ranking.md"),
                    candidates=ENTRIES, labels=LABELS)
 
 
 def _run_scene_table(tree: Path, out: Path) -> None:
-    from mcbench.pipeline.report import write_scene_table
+    from mcbench.pipeline.rankings import write_scene_table
 
     write_scene_table(str(tree / "metrics.csv"), {SCENE: str(tree / "reference.exr")}, {SCENE: 4096},
                       str(out / "scenes.csv"), str(out / "scenes.md"),

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from mcbench.io.buffers import Denoised
-from mcbench.io.exchange import EXTRA_RENDER_FILES, RENDER_FILES, denoiser_files, read_image
+from mcbench.io.case_folders import EXTRA_RENDER_FILES, RENDER_FILES, denoiser_files, read_image
 from mcbench.io.exr import ExrError, write_layers
 from mcbench.pipeline.export import REFERENCE_FILE, export_case
 

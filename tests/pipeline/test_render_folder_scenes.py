@@ -15,7 +15,7 @@ import scenes
 from mcbench import BenchError
 from mcbench.analysis.metrics import relmse
 from mcbench.io.buffers import Denoised, RenderBuffers
-from mcbench.io.exchange import write_image
+from mcbench.io.case_folders import write_image
 from mcbench.io.exr import read_metadata
 from mcbench.pipeline.config import resolve_config
 from mcbench.pipeline.plan import plan_study

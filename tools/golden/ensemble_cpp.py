@@ -7,7 +7,7 @@ For each case (scene x spp of :data:`CASES`, at :data:`RESOLUTION`): renders the
 project's renderer (fixed seed), runs the base denoisers :data:`BASES` (this project's), scales
 the radiance (noisy halves and outputs) by :data:`EXPOSURE`, clamps the outputs at 0 (the program sets negative inputs to 0 when it reads them, ``main.cpp:55-61``:
 clamping first gives both programs the same data), writes the case in the authors' layout
-(:func:`mcbench.io.exchange.write_case`, without the extra files) and runs
+(:func:`mcbench.io.case_folders.write_case`, without the extra files) and runs
 
     OPENCV_IO_ENABLE_OPENEXR=1 EnsembleDenoising -i CASE -o CASE/out -m nfor,oidn,rdfc -s fbstab -d
 
@@ -31,7 +31,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 from mcbench.io.buffers import Denoised  # noqa: E402
-from mcbench.io.exchange import write_case  # noqa: E402
+from mcbench.io.case_folders import write_case  # noqa: E402
 from mcbench.pipeline.registry import load_method, load_scene  # noqa: E402
 from mcbench.render.renderer import render_buffers  # noqa: E402
 from mcbench.io.buffers import RenderBuffers  # noqa: E402

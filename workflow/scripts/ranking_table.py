@@ -3,7 +3,7 @@ from mcbench.pipeline.threads import limit_threads
 limit_threads(snakemake.threads)  # before any heavy import (numba, torch, OpenBLAS, OIDN read it)  # noqa: F821
 
 from mcbench.pipeline.logs import run_logged  # noqa: E402
-from mcbench.pipeline.report import write_extras_rankings, write_rankings  # noqa: E402
+from mcbench.pipeline.rankings import write_extras_rankings, write_rankings  # noqa: E402
 
 if snakemake.rule == "extras_table":
     run_logged(snakemake.log[0], write_extras_rankings, snakemake.input[0], snakemake.wildcards.metric,

@@ -4,13 +4,13 @@ limit_threads(snakemake.threads)  # before any heavy import (numba, torch, OpenB
 
 import os  # noqa: E402
 
-# the two rules of workflow/rules/progressive.smk
+# the two rules of workflow/rules/progressive_study.smk
 if snakemake.rule == "progressive_curve":
     os.environ["MCBENCH_WEIGHTS_DIR"] = os.path.abspath(snakemake.params.weights_dir)
 
 from mcbench.pipeline.logs import run_logged  # noqa: E402
-from mcbench.pipeline.progressive import write_progressive_tables  # noqa: E402
-from mcbench.pipeline.progressive import run_consistency_curve  # noqa: E402
+from mcbench.pipeline.progressive_study import write_progressive_tables  # noqa: E402
+from mcbench.pipeline.progressive_study import run_consistency_curve  # noqa: E402
 
 params = snakemake.params
 if snakemake.rule == "progressive_curve":

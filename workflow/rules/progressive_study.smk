@@ -1,5 +1,5 @@
 # Progressive denoising (Firmino et al. 2022; methods/progressive.py, mcbench.analysis.progressive_tables,
-# mcbench.pipeline.progressive): with at least one combiner of module `progressive` in the config,
+# mcbench.pipeline.progressive_study): with at least one combiner of module `progressive` in the config,
 # its consistency over the test cases (each case's relMSE against the noisy input's, per spp),
 # per-spp errors and added time beside each entry's input, and one scene rendered up to
 # progressive_curve.spp (8192 by default) with its base, progressive and noisy curves.
@@ -46,7 +46,7 @@ rule progressive_tables:
     log:
         f"{RESULTS}/logs/progressive_tables.log",
     script:
-        "../scripts/progressive.py"
+        "../scripts/progressive_study.py"
 
 
 rule progressive_curve:
@@ -87,4 +87,4 @@ rule progressive_curve:
     benchmark:
         f"{RESULTS}/benchmarks/progressive/{{scene}}.tsv"
     script:
-        "../scripts/progressive.py"
+        "../scripts/progressive_study.py"

@@ -1,4 +1,4 @@
-"""The work behind ``workflow/rules/report.smk``: the ranking tables (Zheng et al. 2021 Table 3
+"""The work behind ``workflow/rules/rankings.smk``: the ranking tables (Zheng et al. 2021 Table 3
 layout), the extra methods' tables, the scene table with reference noise floors, the gallery.
 """
 
@@ -107,7 +107,7 @@ def write_scene_table(metrics_csv: str, reference_paths: dict[str, str], referen
     (``noisy_records``) and reference chunk jobs (``reference_records``), inputs of the rule.
     """
 
-    from mcbench.analysis.reports import reference_relmse_floor, scene_latex, scene_markdown, scene_rows
+    from mcbench.analysis.scene_summary import reference_relmse_floor, scene_latex, scene_markdown, scene_rows
     from mcbench.pipeline.registry import load_scene
 
     metrics = read_table(metrics_csv, columns=["scene", "spp", "candidate", "metric", "value"])
@@ -141,7 +141,7 @@ def write_scene_table(metrics_csv: str, reference_paths: dict[str, str], referen
 
 def write_gallery(reference_paths: dict[str, str], png_path: str) -> None:
     """Gallery of all references with their names (Fig. 3 of Zheng et al.)."""
-    from mcbench.analysis.reports import gallery_figure
+    from mcbench.analysis.scene_summary import gallery_figure
 
     references = {}
     for scene, path in reference_paths.items():

@@ -1,4 +1,4 @@
-"""Progressive denoising's consistency curve (mcbench.pipeline.progressive): one tiny end-to-end curve
+"""Progressive denoising's consistency curve (mcbench.pipeline.progressive_study): one tiny end-to-end curve
 (cornell_box at 16x16 from a 32x32 reference averaged 2x2) with its files, the noisy error falling
 roughly as 1/spp and PD's staying near it; determinism; the block-mean reference variance;
 early errors naming the config key or the file; and the curve's seed slot
@@ -43,7 +43,7 @@ def reference(tmp_path_factory) -> str:
 
 @pytest.fixture(scope="module")
 def curve(reference, tmp_path_factory):
-    from mcbench.pipeline.progressive import run_consistency_curve
+    from mcbench.pipeline.progressive_study import run_consistency_curve
 
     folder = tmp_path_factory.mktemp("curve")
     files = paths(folder)
@@ -103,7 +103,7 @@ def test_progressive_stays_near_the_noisy_render_at_high_spp(curve):
 def test_same_seed_same_numbers(reference, tmp_path):
     """Two runs with the same seed give identical errors (the seconds differ); another seed gives
     other renders. spp 2 (one bin per half) and 8 (two bins) both run."""
-    from mcbench.pipeline.progressive import run_consistency_curve
+    from mcbench.pipeline.progressive_study import run_consistency_curve
 
     kwargs = dict(spp_levels=[2, 8], downscale=2, resolution=(32, 32), threads=1)
     first = run_consistency_curve("cornell_box", reference, **kwargs, **paths(tmp_path, "first"))
@@ -121,7 +121,7 @@ def test_block_mean_variance_is_the_block_average_over_downscale_squared(tmp_pat
     is no corrected relMSE and no floor."""
     from mcbench.io.exr import write_layers
     from mcbench.combine.oracle import block_average
-    from mcbench.pipeline.progressive import block_reference, reference_floor
+    from mcbench.pipeline.progressive_study import block_reference, reference_floor
 
     rng = np.random.default_rng(0)
     color, variance = rng.uniform(0.1, 2.0, (24, 22, 3)), rng.uniform(0.0, 0.01, (24, 22, 3))
@@ -164,7 +164,7 @@ def test_block_mean_variance_matches_simulated_noise():
     ({"resolution": (48, 48)}, r"reference\.exr.*32x32.*48x48"),
 ])
 def test_bad_inputs_name_the_key_or_file(reference, tmp_path, changes, match):
-    from mcbench.pipeline.progressive import run_consistency_curve
+    from mcbench.pipeline.progressive_study import run_consistency_curve
 
     kwargs = dict(spp_levels=[4, 8], downscale=2, resolution=(32, 32), **paths(tmp_path)) | changes
     with pytest.raises(BenchError, match=match):
@@ -173,7 +173,7 @@ def test_bad_inputs_name_the_key_or_file(reference, tmp_path, changes, match):
 
 
 def test_missing_reference_names_the_file(tmp_path):
-    from mcbench.pipeline.progressive import run_consistency_curve
+    from mcbench.pipeline.progressive_study import run_consistency_curve
 
     missing = str(tmp_path / "nowhere.exr")
     with pytest.raises(BenchError, match="nowhere.exr"):
@@ -181,7 +181,7 @@ def test_missing_reference_names_the_file(tmp_path):
 
 
 def test_unknown_scene_names_the_key(reference, tmp_path):
-    from mcbench.pipeline.progressive import run_consistency_curve
+    from mcbench.pipeline.progressive_study import run_consistency_curve
 
     with pytest.raises(BenchError, match="progressive_curve.scene|no_such_scene"):
         run_consistency_curve("no_such_scene", reference, spp_levels=[4, 8], resolution=(32, 32), **paths(tmp_path))

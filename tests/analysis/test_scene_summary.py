@@ -6,7 +6,7 @@ import pandas as pd
 import pytest
 
 from mcbench.analysis.metrics import relmse
-from mcbench.analysis.reports import ReferenceNoiseWarning, gallery_figure, reference_relmse_floor, scene_rows
+from mcbench.analysis.scene_summary import ReferenceNoiseWarning, gallery_figure, reference_relmse_floor, scene_rows
 
 
 def test_floor_closed_form():
@@ -51,7 +51,7 @@ def test_gallery_writes_png(tmp_path):
 def test_scene_table_as_latex_escapes_text_and_bolds_too_noisy_references():
     import pandas as pd
 
-    from mcbench.analysis.reports import scene_latex
+    from mcbench.analysis.scene_summary import scene_latex
 
     table = pd.DataFrame([
         {"scene": "cornell_box", "category": "diffuse", "reference_spp": 65536, "reference_relmse": 5e-6,

@@ -62,7 +62,7 @@ from mcbench.analysis.metrics import relmse, relmse_corrected, smape
 from mcbench.analysis.oracle_tables import table_markdown
 from mcbench.combine.oracle import block_average
 from mcbench.progress import eta_seconds, progress_line
-from mcbench.analysis.reports import reference_relmse_floor
+from mcbench.analysis.scene_summary import reference_relmse_floor
 from mcbench.render.seeds import MAX_PROGRESSIVE_CURVE_LEVELS, MAX_PROGRESSIVE_CURVE_PASSES, progressive_curve_seed
 from mcbench.pipeline.oracle import oracle_size
 
@@ -142,7 +142,7 @@ def block_reference(reference_path: str, width: int, height: int, downscale: int
 
 
 def reference_floor(mu: np.ndarray, variance: np.ndarray | None) -> float | None:
-    """The reference's relMSE noise floor, mean of Var / (μ² + 0.01) (:func:`mcbench.analysis.reports.reference_relmse_floor`):
+    """The reference's relMSE noise floor, mean of Var / (μ² + 0.01) (:func:`mcbench.analysis.scene_summary.reference_relmse_floor`):
     the relMSE a perfect image would show against it; None without a variance."""
     return None if variance is None else reference_relmse_floor(mu, variance)
 

@@ -1,4 +1,4 @@
-"""The authors' case layout (mcbench.io.exchange): files, channels, round trips and refusals."""
+"""The authors' case layout (mcbench.io.case_folders): files, channels, round trips and refusals."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import OpenEXR
 import pytest
 
 from mcbench.io.buffers import Denoised
-from mcbench.io.exchange import (EXTRA_RENDER_FILES, RENDER_FILES, check_denoiser_name, denoiser_files, read_image,
+from mcbench.io.case_folders import (EXTRA_RENDER_FILES, RENDER_FILES, check_denoiser_name, denoiser_files, read_image,
                                  write_case, write_image)
 from mcbench.io.exr import ExrError, NonFiniteError
 

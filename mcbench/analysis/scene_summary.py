@@ -115,7 +115,7 @@ def scene_latex(table: pd.DataFrame, *, caption: str, label: str = "tab:scenes")
                  "n/a" if math.isnan(row.reference_relmse) else f"{row.reference_relmse:.3g}", f"{row.noisy_relmse:.3g}", latex_escape(row.best_candidate),
                  f"{row.best_relmse:.3g}", ratio if row.floor_ok else rf"\textbf{{{ratio}}}"]
         rows.append("    " + " & ".join(cells) + r" \\")
-    lines = [r"% Requires \usepackage{booktabs}. Written by mcbench (mcbench.analysis.reports.scene_latex).",
+    lines = [r"% Requires \usepackage{booktabs}. Written by mcbench (mcbench.analysis.scene_summary.scene_latex).",
              r"\begin{table}", r"  \centering", rf"  \caption{{{latex_escape(caption)}}}", rf"  \label{{{label}}}",
              r"  \begin{tabular}{llrrrlrr}", r"    \toprule", "    " + " & ".join(header) + r" \\", r"    \midrule",
              *rows, r"    \bottomrule", r"  \end{tabular}", r"\end{table}"]
