@@ -1,9 +1,15 @@
 """End-to-end runs of the Snakemake DAG on the tiny smoke config (a few 32×32 scenes, two
-spp levels): tables exist, the ensemble beats the noisy input, a killed run resumes, and bad
-inputs stop the run with an error naming the file or config key while keeping finished outputs."""
+spp levels). One shared run (the session's ``smoke_results``) is checked a family of outputs a
+test: metrics.csv, the ranking and extras tables, the study's tables and figures, the
+comparisons, progressive denoising, the oracle study, the timings and the report's figures, each
+recomputed from metrics.csv or held to the ranges of its definitions, figures decoded and sized
+in pixels. Then: the ensemble beats the noisy input, a killed run resumes, and bad inputs stop
+the run with an error naming the file or config key while keeping finished outputs."""
 
 from __future__ import annotations
 
+import base64
+import io
 import os
 import re
 import shutil
@@ -97,9 +103,10 @@ def _assert_within(low, estimate, high, *, tol: float, what: str) -> None:
     assert not bad.any(), f"{what}: estimate outside its interval at rows {np.flatnonzero(bad)}"
 
 
-def _assert_png(path: Path, *, inches: tuple[float, float] | None = None, width_inches: float | None = None) -> None:
-    """``path`` decodes as a PNG of figsize ``inches`` (or only the width) at :data:`DPI`, with a
-    drawing on it (many colours: lines, text, antialiasing; a blank or single-colour image fails)."""
+def _assert_png(path, *, inches: tuple[float, float] | None = None, width_inches: float | None = None) -> None:
+    """``path`` (a file's path, or a binary file object) decodes as a PNG of figsize ``inches`` (or
+    only the width) at :data:`DPI`, with a drawing on it (many colours: lines, text, antialiasing;
+    a blank or single-colour image fails)."""
     from PIL import Image
 
     with Image.open(path) as image:
@@ -118,7 +125,8 @@ def _assert_png(path: Path, *, inches: tuple[float, float] | None = None, width_
 def test_metrics_table_holds_every_case_candidate_and_metric_once(smoke_run, metrics):
     _, config = smoke_run
     assert list(metrics.columns) == ["scene", "spp", "candidate", "metric", "value"]
-    assert not metrics.duplicated(["scene", "spp", "candidate", "metric"]).any()
+    twice = metrics[metrics.duplicated(["scene", "spp", "candidate", "metric"], keep=False)]
+    assert twice.empty, f"rows written twice:\n{twice}"
     assert sorted(set(metrics.scene)) == sorted(config["scenes"]) and sorted(set(metrics.spp)) == SPPS
     assert set(metrics.candidate) == set(RANKED + EXTRAS) and set(metrics.metric) == set(METRICS)
     assert len(metrics) == 3 * 2 * 16 * 5  # scenes × spp × (candidates + noisy) × metrics
@@ -255,6 +263,7 @@ def test_study_recommendations_pick_the_best_scored_ensemble(results):
                 continue
             column, place = picks[row.scope, str(row.key)]
             assert row.ours in PAIRS and row.candidates == 2, row
+            assert row.ours_id == POOL_IDS[POOL_SLICE.index(row.ours)], row
             other = next(name for name in PAIRS if name != row.ours)
             assert row.ours_score == pytest.approx(ranking.loc[row.ours, column], abs=2 * SCORE_TOL), row
             better = row.ours_score >= ranking.loc[other, column] - 2 * SCORE_TOL
@@ -414,7 +423,7 @@ def test_comparison_ranking_scores_the_comparison_methods_with_their_ensemble(re
     assert table["role"].to_dict() == roles
     assert table["compared_with"].fillna("").to_dict() == {n: "" if n in ("ensemble", "noisy") else "ensemble"
                                                            for n in roles}
-    assert table["Avg."].is_monotonic_decreasing                     # best first
+    assert table["Avg."].is_monotonic_decreasing, table                # best first
     expected = _mean_scores(_wide(metrics, metric), list(roles))
     for column in (4, 64, "Avg."):
         np.testing.assert_allclose(table[str(column)], expected.loc[table.index, column], atol=SCORE_TOL)
@@ -483,7 +492,7 @@ def test_oracle_table_has_the_nine_panels_and_the_weight_maps(smoke_run, results
     assert list(oracle["name"]) == panels + ["noisy", *bases]
     assert list(oracle["panel"]) == list("abcdefghi") + ["-"] * (1 + len(bases))
     assert np.isfinite(oracle[["relmse", "dssim"]].to_numpy()).all()
-    assert (oracle["relmse"] >= 0).all() and oracle["dssim"].between(0, 2).all()
+    assert (oracle["relmse"] >= 0).all() and oracle["dssim"].between(0, 2).all(), oracle
     assert len(_markdown_rows((folder / "table.md").read_text())) == len(oracle)
     # one row per base denoiser, one column per panel (mcbench.analysis.oracle_tables.weight_maps_figure)
     _assert_png(folder / "weights.png", inches=(1.7 * 9 + 1.6, 1.7 * len(bases) + 1.2))
@@ -497,7 +506,7 @@ def test_timings_hold_one_positive_row_per_method_run(smoke_run, results, timing
     keys = list(zip(timings["scene"], timings["spp"], timings["method"]))
     assert len(keys) == len(set(keys))
     assert set(keys) == {(s, n, m) for s in config["scenes"] for n in SPPS for m in POOL_SLICE + EXTRAS}
-    assert (timings["seconds"] > 0).all() and np.isfinite(timings["seconds"]).all()
+    assert (timings["seconds"] > 0).all() and np.isfinite(timings["seconds"]).all(), timings[timings["seconds"] <= 0]
     assert (timings[["width", "height"]] == 32).all().all()
     assert list(keys) == sorted(keys, key=lambda k: (k[2], k[0], k[1]))   # sorted by method, scene, spp
     # one job per case runs every method (batch_methods), with its benchmark record
@@ -607,7 +616,10 @@ def test_notebook_executes_headless_on_results(smoke_run, monkeypatch):
                    resources={"metadata": {"path": str(REPO / "workflow/notebooks")}}).execute()
     outputs = [o for cell in notebook.cells if cell.cell_type == "code" for o in cell.outputs]
     assert not [o for o in outputs if o.output_type == "error"]
-    assert sum(1 for o in outputs if "image/png" in o.get("data", {})) >= 5   # curves, scatter, images, weights
+    images = [o["data"]["image/png"] for o in outputs if "image/png" in o.get("data", {})]
+    assert len(images) >= 5                                   # curves, scatter, images, weights
+    for image in images:
+        _assert_png(io.BytesIO(base64.b64decode(image)))
     text = "".join(o.get("text", "") for o in outputs)
     assert "# Ranking by relmse" in text and "no combiner with weight maps" not in text
 
