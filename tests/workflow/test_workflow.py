@@ -88,6 +88,17 @@ def _mean_scores(values: pd.DataFrame, entries: list[str]) -> pd.DataFrame:
     return table
 
 
+def _score_table(path: Path, candidates: list[str]) -> pd.DataFrame:
+    """A table of scores (ranking, extras) read from ``path``: columns candidate, the spp and
+    ``Avg.``, rows ``candidates`` in that order, every score finite; indexed by candidate."""
+    table = pd.read_csv(path)
+    assert list(table.columns) == ["candidate", "4", "64", "Avg."], path
+    assert list(table["candidate"]) == candidates, path
+    table = table.set_index("candidate")
+    assert np.isfinite(table.to_numpy()).all(), path
+    return table
+
+
 def _markdown_rows(text: str) -> list[list[str]]:
     """The cells of a Markdown pipe table's body rows (header and rule left out)."""
     lines = [line for line in text.splitlines() if line.startswith("|")]
@@ -155,12 +166,8 @@ def test_the_ensembles_beat_the_noisy_input_and_their_worst_member(results, metr
 
 @pytest.mark.parametrize("metric", METRICS)
 def test_ranking_table_is_the_pool_scored_case_by_case(results, metrics, metric):
-    table = pd.read_csv(results / f"tables/ranking_{metric}.csv")
-    assert list(table.columns) == ["candidate", "4", "64", "Avg."]
     # the ranking pool: the pool's slice in ID order, then the noisy input; nothing else
-    assert list(table["candidate"]) == RANKED
-    table = table.set_index("candidate")
-    assert np.isfinite(table.to_numpy()).all()
+    table = _score_table(results / f"tables/ranking_{metric}.csv", RANKED)
     k = len(RANKED)
     assert ((table >= 1 - SCORE_TOL) & (table <= k + SCORE_TOL)).all().all(), table
     # every case's scores are a permutation of 1..K (ties averaged), so every spp column, a mean
@@ -188,10 +195,7 @@ def test_ranking_table_is_the_pool_scored_case_by_case(results, metrics, metric)
 
 @pytest.mark.parametrize("metric", METRICS)
 def test_extras_table_scores_each_extra_added_alone_to_the_pool(results, metrics, metric):
-    extras = pd.read_csv(results / f"tables/extras_{metric}.csv")
-    assert list(extras.columns) == ["candidate", "4", "64", "Avg."]
-    assert list(extras["candidate"]) == EXTRAS
-    extras = extras.set_index("candidate")
+    extras = _score_table(results / f"tables/extras_{metric}.csv", EXTRAS)
     values = _wide(metrics, metric)
     for name in EXTRAS:
         alone = _mean_scores(values, RANKED + [name]).loc[name]
