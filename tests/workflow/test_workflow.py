@@ -1,9 +1,15 @@
 """End-to-end runs of the Snakemake DAG on the tiny smoke config (a few 32×32 scenes, two
-spp levels): tables exist, the ensemble beats the noisy input, a killed run resumes, and bad
-inputs stop the run with an error naming the file or config key while keeping finished outputs."""
+spp levels). One shared run (the session's ``smoke_results``) is checked a family of outputs a
+test: metrics.csv, the ranking and extras tables, the study's tables and figures, the
+comparisons, progressive denoising, the oracle study, the timings and the report's figures, each
+recomputed from metrics.csv or held to the ranges of its definitions, figures decoded and sized
+in pixels. Then: the ensemble beats the noisy input, a killed run resumes, and bad inputs stop
+the run with an error naming the file or config key while keeping finished outputs."""
 
 from __future__ import annotations
 
+import base64
+import io
 import os
 import re
 import shutil
@@ -37,10 +43,36 @@ def smoke_run(smoke_results):
     return smoke_results
 
 
+@pytest.fixture(scope="module")
+def results(smoke_run) -> Path:
+    return smoke_run[0] / "results"
+
+
+@pytest.fixture(scope="module")
+def metrics(results) -> pd.DataFrame:
+    return pd.read_csv(results / "metrics.csv")
+
+
+@pytest.fixture(scope="module")
+def timings(results) -> pd.DataFrame:
+    return pd.read_csv(results / "timings.csv")
+
+
+SPPS = [4, 64]                                                     # the smoke config's spp
 POOL_SLICE = ["kpcn", "nfor", "oidn", "rdfc", "ens10", "ens15"]   # study.ensembles [10, 15], in ID order
+POOL_IDS = [1, 4, 6, 8, 10, 15]
+PAIRS = {"ens10": ["kpcn", "nfor"], "ens15": ["oidn", "rdfc"]}     # the size-2 ensembles and their members
+RANKED = POOL_SLICE + ["noisy"]                                    # the ranking pool, in its tables' order
 EXTRAS = ["jbf", "ensemble", "ensemble_exact", "onehot_sbf", "onehot_nfor", "onehot_post", "naive",
           "ensemble_unconstrained", "pd_oidn"]
 METRICS = ("relmse", "relmse_corrected", "smape", "dssim", "flip")
+SCORE_TOL = 5e-5              # scores and score means are written with 4 decimals
+DPI = 110                     # mcbench.analysis.figures.save_figure: PNGs of figsize x 110 pixels, no cropping
+
+
+def _wide(metrics: pd.DataFrame, metric: str) -> pd.DataFrame:
+    """metrics.csv's values of one metric: index (scene, spp), one column per candidate."""
+    return metrics[metrics.metric == metric].pivot_table(index=["scene", "spp"], columns="candidate", values="value")
 
 
 def _scores_by_counting(values: pd.DataFrame) -> pd.DataFrame:
@@ -48,84 +80,452 @@ def _scores_by_counting(values: pd.DataFrame) -> pd.DataFrame:
     return values.apply(lambda row: row.map(lambda v: 1 + (row > v).sum() + ((row == v).sum() - 1) / 2), axis=1)
 
 
-def test_tables_exist_and_ensemble_beats_noisy(smoke_run):
-    workdir, config = smoke_run
-    for metric in METRICS:
-        table = pd.read_csv(workdir / f"results/tables/ranking_{metric}.csv")
-        # the ranking pool: the pool's slice in ID order, then the noisy input; nothing else
-        assert list(table["candidate"]) == POOL_SLICE + ["noisy"]
-        assert list(table.columns) == ["candidate", "4", "64", "Avg."]
-        text = (workdir / f"results/tables/ranking_{metric}.md").read_text()
-        assert text.startswith("# Ranking") and "Partial pool: 6 of the 39 candidates" in text
-        extras = pd.read_csv(workdir / f"results/tables/extras_{metric}.csv")
-        assert list(extras["candidate"]) == EXTRAS
-    metrics = pd.read_csv(workdir / "results/metrics.csv")
+def _mean_scores(values: pd.DataFrame, entries: list[str]) -> pd.DataFrame:
+    """The entries scored among themselves case by case, averaged over scenes: rows entries,
+    columns spp (ints) and ``Avg.`` (the mean over spp)."""
+    table = _scores_by_counting(values[entries]).groupby(level="spp").mean().T
+    table["Avg."] = table.mean(axis=1)
+    return table
+
+
+def _score_table(path: Path, candidates: list[str]) -> pd.DataFrame:
+    """A table of scores (ranking, extras) read from ``path``: columns candidate, the spp and
+    ``Avg.``, rows ``candidates`` in that order, every score finite; indexed by candidate."""
+    table = pd.read_csv(path)
+    assert list(table.columns) == ["candidate", "4", "64", "Avg."], path
+    assert list(table["candidate"]) == candidates, path
+    table = table.set_index("candidate")
+    assert np.isfinite(table.to_numpy()).all(), path
+    return table
+
+
+def _markdown_rows(text: str) -> list[list[str]]:
+    """The cells of a Markdown pipe table's body rows (header and rule left out)."""
+    lines = [line for line in text.splitlines() if line.startswith("|")]
+    return [[cell.strip() for cell in line.strip("|").split("|")] for line in lines[2:]]
+
+
+def _assert_within(low, estimate, high, *, tol: float, what: str) -> None:
+    """low <= estimate <= high (to ``tol``) wherever an interval is written (both bounds present)."""
+    low, estimate, high = (np.asarray(v, np.float64) for v in (low, estimate, high))
+    present = np.isfinite(low) & np.isfinite(high)
+    assert present.any(), f"{what}: no interval at all"
+    bad = present & ~((low <= estimate + tol) & (estimate <= high + tol))
+    assert not bad.any(), f"{what}: estimate outside its interval at rows {np.flatnonzero(bad)}"
+
+
+def _assert_png(path, *, inches: tuple[float, float] | None = None, width_inches: float | None = None) -> None:
+    """``path`` (a file's path, or a binary file object) decodes as a PNG of figsize ``inches`` (or
+    only the width) at :data:`DPI`, with a drawing on it (many colours: lines, text, antialiasing;
+    a blank or single-colour image fails)."""
+    from PIL import Image
+
+    with Image.open(path) as image:
+        assert image.format == "PNG", path
+        rgb = image.convert("RGB")                    # decodes every pixel
+    width, height = rgb.size
+    if inches is not None:
+        assert (width, height) == (round(inches[0] * DPI), round(inches[1] * DPI)), (path, width, height)
+    if width_inches is not None:
+        assert width == round(width_inches * DPI), (path, width)
+    assert rgb.getcolors(maxcolors=16) is None, f"{path}: blank figure (16 colours or fewer)"
+
+
+# --- metrics.csv and the claims checked on it -------------------------------------------------
+
+def test_metrics_table_holds_every_case_candidate_and_metric_once(smoke_run, metrics):
+    _, config = smoke_run
+    assert list(metrics.columns) == ["scene", "spp", "candidate", "metric", "value"]
+    twice = metrics[metrics.duplicated(["scene", "spp", "candidate", "metric"], keep=False)]
+    assert twice.empty, f"rows written twice:\n{twice}"
+    assert sorted(set(metrics.scene)) == sorted(config["scenes"]) and sorted(set(metrics.spp)) == SPPS
+    assert set(metrics.candidate) == set(RANKED + EXTRAS) and set(metrics.metric) == set(METRICS)
     assert len(metrics) == 3 * 2 * 16 * 5  # scenes × spp × (candidates + noisy) × metrics
     assert np.isfinite(metrics["value"]).all()
-    relmse = metrics[metrics.metric == "relmse"].pivot_table(index=["scene", "spp"], columns="candidate", values="value")
+    # the ranges of the definitions (mcbench.analysis.metrics): relMSE >= 0, SMAPE and FLIP in [0, 1],
+    # DSSIM = 1 - SSIM in [0, 2]
+    for metric, (low, high) in {"relmse": (0, np.inf), "smape": (0, 1), "flip": (0, 1), "dssim": (0, 2)}.items():
+        values = metrics.loc[metrics.metric == metric, "value"]
+        assert values.between(low, high).all(), (metric, values.min(), values.max())
+
+
+def test_the_ensembles_beat_the_noisy_input_and_their_worst_member(results, metrics):
+    relmse = _wide(metrics, "relmse")
     # At 32x32 the denoisers' blur of the Cornell box's light edge can cost more relMSE than
     # the noise they remove in a single case, so the claim is checked over all cases: the
     # ensemble's mean relMSE and its relMSE ranking score beat the noisy input's.
     assert relmse["ensemble"].mean() < relmse["noisy"].mean(), relmse
-    ranking = pd.read_csv(workdir / "results/tables/ranking_relmse.csv").set_index("candidate")
+    ranking = pd.read_csv(results / "tables/ranking_relmse.csv").set_index("candidate")
     assert ranking.loc["ens15", "Avg."] > ranking.loc["noisy", "Avg."]
     # the ensembles are never worse than their worst base denoiser, case by case
     assert (relmse["ensemble"] <= relmse[["oidn", "jbf"]].max(axis=1)).all(), relmse
     assert (relmse["ens15"] <= relmse[["oidn", "rdfc"]].max(axis=1)).all(), relmse
-    # every ranking value recomputed independently from metrics.csv, and every extra method's
-    # score with it added alone to the pool
+
+
+# --- ranking and extras tables ------------------------------------------------------------------
+
+@pytest.mark.parametrize("metric", METRICS)
+def test_ranking_table_is_the_pool_scored_case_by_case(results, metrics, metric):
+    # the ranking pool: the pool's slice in ID order, then the noisy input; nothing else
+    table = _score_table(results / f"tables/ranking_{metric}.csv", RANKED)
+    k = len(RANKED)
+    assert ((table >= 1 - SCORE_TOL) & (table <= k + SCORE_TOL)).all().all(), table
+    # every case's scores are a permutation of 1..K (ties averaged), so every spp column, a mean
+    # over scenes, sums to K (K + 1) / 2
+    np.testing.assert_allclose(table[["4", "64"]].sum(), k * (k + 1) / 2, atol=k * SCORE_TOL)
+    # every value recomputed independently from metrics.csv
+    expected = _mean_scores(_wide(metrics, metric), RANKED)
+    for spp in SPPS:
+        np.testing.assert_allclose(table[str(spp)], expected.loc[RANKED, spp], atol=SCORE_TOL)
+    np.testing.assert_allclose(table["Avg."], expected.loc[RANKED, "Avg."], atol=SCORE_TOL)
+    # the Markdown: the pool note, one row per candidate with the CSV's scores to one decimal, the
+    # best of each column in bold
+    text = (results / f"tables/ranking_{metric}.md").read_text()
+    assert text.startswith(f"# Ranking by {metric}") and "Partial pool: 6 of the 39 candidates" in text
+    rows = _markdown_rows(text)
+    assert len(rows) == k and all(len(row) == 4 for row in rows), rows
+    for j, column in enumerate(["4", "64", "Avg."], start=1):
+        shown = [float(row[j].strip("*")) for row in rows]
+        np.testing.assert_allclose(shown, table[column].round(1), atol=0.051)
+        bold = [row[j].startswith("**") for row in rows]
+        assert bold == list(np.isclose(table[column], table[column].max())), (column, rows)
+    tex = (results / f"tables/ranking_{metric}.tex").read_text()
+    assert r"\begin{tabular}{lrrr}" in tex and tex.count(r" \\" + "\n") == k + 1   # header and a row each
+
+
+@pytest.mark.parametrize("metric", METRICS)
+def test_extras_table_scores_each_extra_added_alone_to_the_pool(results, metrics, metric):
+    extras = _score_table(results / f"tables/extras_{metric}.csv", EXTRAS)
+    values = _wide(metrics, metric)
+    for name in EXTRAS:
+        alone = _mean_scores(values, RANKED + [name]).loc[name]
+        np.testing.assert_allclose(extras.loc[name, ["4", "64", "Avg."]].to_numpy(float),
+                                   alone[[4, 64, "Avg."]].to_numpy(float), atol=SCORE_TOL, err_msg=name)
+    assert ((extras >= 1 - SCORE_TOL) & (extras <= len(RANKED) + 1 + SCORE_TOL)).all().all(), extras
+    text = (results / f"tables/extras_{metric}.md").read_text()
+    assert len(_markdown_rows(text)) == len(EXTRAS)
+
+
+# --- the study's tables (results/tables/study) ------------------------------------------------
+
+def test_study_writes_every_table_with_its_columns(results):
+    from mcbench.analysis.study import (BOTH_COLUMNS, FINDING_COLUMNS, PAIR_COLUMNS, REC_COLUMNS,
+                                        REFERENCE_NOISE_COLUMNS, SCORE_CI_COLUMNS, STUDY_FILES)
+
+    from mcbench.io.checksums import check_bytes
+
+    study = results / "tables/study"
+    files = sorted(p for p in study.iterdir() if not p.name.startswith("."))     # hidden: checksum side files
+    assert [p.name for p in files] == sorted([*STUDY_FILES, *(f"scores_ci_{m}.csv" for m in METRICS)])
+    for path in files:
+        check_bytes(path, path.read_bytes())          # each matches the checksum written with it
+    columns = {"recommendations": REC_COLUMNS, "recommendations_metrics": BOTH_COLUMNS, "findings": FINDING_COLUMNS,
+               "pair_members": PAIR_COLUMNS, "reference_noise": REFERENCE_NOISE_COLUMNS,
+               "paper_table3": ["id", "candidate", "spp", "ours", "paper", "difference", "note"],
+               **{f"scores_ci_{m}": SCORE_CI_COLUMNS for m in METRICS}}
+    for stem, expected in columns.items():
+        table = pd.read_csv(study / f"{stem}.csv")
+        assert list(table.columns) == list(expected), stem
+        assert len(table), f"{stem}.csv has no rows"
+    for path in study.glob("*.md"):
+        assert path.read_text().startswith("# "), path.name
+    summary = (study / "summary.md").read_text()
+    for label in ("relMSE", "SMAPE", "DSSIM"):
+        assert f"- {label}: 3 scene(s), spp 4, 64, 7 entries (the paper: 40)" in summary, label
+    for heading in ("## Recommendations", "## Beside the paper's Table 3", "## References", "## Findings"):
+        assert heading in summary
+
+
+@pytest.mark.parametrize("metric", METRICS)
+def test_study_score_intervals_hold_the_ranking_scores(results, metric):
+    ci = pd.read_csv(results / f"tables/study/scores_ci_{metric}.csv")
+    ranking = pd.read_csv(results / f"tables/ranking_{metric}.csv").set_index("candidate")
+    assert list(ci["candidate"]) == RANKED
+    assert list(ci["id"].iloc[:-1].astype(int)) == POOL_IDS and pd.isna(ci["id"].iloc[-1])
+    # Avg. and the spp bands (low: 4-32 spp, medium: 32-256 spp; none of our spp is high)
+    for column, source in (("avg", "Avg."), ("low", "4"), ("medium", "64")):
+        np.testing.assert_allclose(ci[column], ranking.loc[RANKED, source], atol=2 * SCORE_TOL, err_msg=column)
+        _assert_within(ci[f"{column}_ci_low"], ci[column], ci[f"{column}_ci_high"], tol=2e-4, what=column)
+    assert ci[["high", "high_ci_low", "high_ci_high"]].isna().all().all()
+    assert set(ci["ci_method"]) <= {"BCa", "percentile (BCa degenerate)"}
+
+
+def test_study_recommendations_pick_the_best_scored_ensemble(results):
+    rec = pd.read_csv(results / "tables/study/recommendations.csv")
+    # per metric: size 2 (both ensembles), the spp bands low, medium, high, overall best, second, fewer
+    scopes = [("size", "2"), ("band", "low"), ("band", "medium"), ("band", "high"), ("overall", "best"),
+              ("overall", "second"), ("overall", "fewer")]
+    assert list(zip(rec["metric"], rec["scope"], rec["key"].astype(str))) == [(m, *s) for m in METRICS for s in scopes]
+    # (scope, key) -> the ranking column the pick is scored on and the place it holds
+    picks = {("size", "2"): ("Avg.", 1), ("band", "low"): ("4", 1), ("band", "medium"): ("64", 1),
+             ("overall", "best"): ("Avg.", 1), ("overall", "second"): ("Avg.", 2), ("overall", "fewer"): ("Avg.", 1)}
     for metric in METRICS:
-        pool = POOL_SLICE + ["noisy"]
-        values = metrics[(metrics.metric == metric)].pivot_table(index=["scene", "spp"], columns="candidate",
-                                                                values="value")
-        per_spp = _scores_by_counting(values[pool]).groupby(level="spp").mean().T
-        table = pd.read_csv(workdir / f"results/tables/ranking_{metric}.csv").set_index("candidate")
-        for spp in (4, 64):
-            np.testing.assert_allclose(table[str(spp)], per_spp.loc[table.index, spp], atol=5e-5)
-        np.testing.assert_allclose(table["Avg."], per_spp.loc[table.index].mean(axis=1), atol=5e-5)
-        extras = pd.read_csv(workdir / f"results/tables/extras_{metric}.csv").set_index("candidate")
-        for name in ("ensemble", "jbf"):
-            alone = _scores_by_counting(values[pool + [name]])[name].groupby(level="spp").mean()
-            np.testing.assert_allclose(extras.loc[name, ["4", "64"]].to_numpy(float), alone.to_numpy(), atol=5e-5)
-    # the study's tables and figures
-    study = workdir / "results/tables/study"
-    for name in ("paper_table3.md", "recommendations.md", "findings.md", "summary.md"):
-        assert (study / name).stat().st_size > 0, name
-    recommendations = pd.read_csv(study / "recommendations.csv")
-    assert set(recommendations["ours"].dropna()) <= {"ens10", "ens15"}
+        ranking = pd.read_csv(results / f"tables/ranking_{metric}.csv").set_index("candidate")
+        for row in rec[rec["metric"] == metric].itertuples():
+            if (row.scope, str(row.key)) == ("band", "high"):
+                assert pd.isna(row.ours) and row.note == "no spp of the band in our data"
+                continue
+            column, place = picks[row.scope, str(row.key)]
+            assert row.ours in PAIRS and row.candidates == 2, row
+            assert row.ours_id == POOL_IDS[POOL_SLICE.index(row.ours)], row
+            other = next(name for name in PAIRS if name != row.ours)
+            assert row.ours_score == pytest.approx(ranking.loc[row.ours, column], abs=2 * SCORE_TOL), row
+            better = row.ours_score >= ranking.loc[other, column] - 2 * SCORE_TOL
+            assert better if place == 1 else row.ours_score <= ranking.loc[other, column] + 2 * SCORE_TOL, row
+            assert 0 <= row.ours_fraction <= 1, row
+    _assert_within(rec["ours_ci_low"], rec["ours_score"], rec["ours_ci_high"], tol=2e-4, what="recommendations")
+    both = pd.read_csv(results / "tables/study/recommendations_metrics.csv")
+    assert set(both["set"]) == {"all", "paper-named"}
+    chosen = both.dropna(subset=["combined"])
+    assert set(chosen["combined"]) <= set(PAIRS) and chosen["combined_fraction"].between(0, 1).all()
+    _assert_within(chosen["combined_ci_low"], chosen["combined_score"], chosen["combined_ci_high"], tol=2e-4,
+                   what="recommendations_metrics")
+    # the relMSE pick among every ensemble is recommendations.csv's
+    relmse = rec[rec["metric"] == "relmse"]
+    mine = relmse.set_index(["scope", relmse["key"].astype(str)])["ours"]
+    for row in chosen[chosen["set"] == "all"].itertuples():
+        assert row.relmse == mine[row.scope, str(row.key)], row
+
+
+def test_study_pair_members_recount_the_wins_from_metrics(results, metrics):
+    pairs = pd.read_csv(results / "tables/study/pair_members.csv", dtype={"spp": str, "failures": str})
+    expected = [(metric, ensemble, member, spp) for metric in METRICS for ensemble, members in PAIRS.items()
+                for member in [*members, "both"] for spp in ["4", "64", "all"]]
+    assert list(zip(pairs["metric"], pairs["ensemble"], pairs["member"], pairs["spp"])) == expected
     for metric in METRICS:
-        for key in ("error_curves", "score_curves", "score_size", "speed_score", "equal_time"):
-            assert (workdir / f"results/figures/study/{key}_{metric}.png").stat().st_size > 1000
-    # progressive denoising: its exceptions recounted from metrics.csv, per-spp means, the curve
-    consistency = pd.read_csv(workdir / "results/tables/progressive/consistency.csv")
-    assert list(consistency["spp"]) == [4, 64] and set(consistency["entry"]) == {"pd_oidn"}
-    for _, row in consistency.iterrows():
-        case = relmse.xs(int(row["spp"]), level="spp")
-        assert row["worse"] == int((case["pd_oidn"] > case["noisy"]).sum())
-        assert row["value"] == pytest.approx(case["pd_oidn"].mean(), rel=1e-5)
-    per_spp = pd.read_csv(workdir / "results/tables/progressive/per_spp.csv")
-    assert set(per_spp["entry"]) >= {"noisy", "oidn", "pd_oidn"} and {"relmse", "smape", "seconds"} <= set(per_spp["quantity"])
-    curve = pd.read_csv(workdir / f"results/progressive/{config['scenes'][0]}/curve.csv")
-    assert sorted(set(curve["spp"])) == [4, 16] and np.isfinite(curve[["relmse", "smape"]].to_numpy()).all()
-    assert (workdir / f"results/progressive/{config['scenes'][0]}/curve.png").stat().st_size > 1000
-    # the comparison methods: in metrics.csv and their own tables, not in the ranking pool
-    relmse_all = metrics[metrics.metric == "relmse"].pivot_table(index=["scene", "spp"], columns="candidate",
-                                                                 values="value")
-    table1 = pd.read_csv(workdir / "results/tables/comparisons/table1_relmse.csv")
-    cell = table1[(table1["size"].astype(str) == "2") & (table1["spp"].astype(str) == "4")].iloc[0]
-    wins = (relmse_all.xs(4, level="spp")["ensemble"]
-            < relmse_all.xs(4, level="spp")[["onehot_sbf", "onehot_nfor"]].min(axis=1))
-    assert (int(cell["cases"]), int(cell["wins"])) == (3, int(wins.sum())), table1
-    ranking_cmp = pd.read_csv(workdir / "results/tables/comparisons/ranking_relmse.csv")
-    assert {"onehot_sbf", "onehot_nfor", "onehot_post", "naive", "ensemble_unconstrained"} <= set(ranking_cmp["candidate"])
-    assert "unconstrained weights (5.2.1)" in (workdir / "results/tables/comparisons/ablations.md").read_text()
-    oracle = pd.read_csv(workdir / f"results/oracle/{config['scenes'][0]}/table.csv")
-    assert len(oracle) >= 9 and np.isfinite(oracle.select_dtypes("number")).all().all(), oracle
-    timings = pd.read_csv(workdir / "results/timings.csv")
-    assert set(timings["method"]) == set(POOL_SLICE + EXTRAS)
-    assert (timings["seconds"] > 0).all()
+        values = _wide(metrics, metric)
+        for row in pairs[pairs["metric"] == metric].itertuples():
+            chosen = values if row.spp == "all" else values.xs(int(row.spp), level="spp", drop_level=False)
+            members = PAIRS[row.ensemble] if row.member == "both" else [row.member]
+            wins = (chosen[row.ensemble].to_numpy()[:, None] < chosen[members].to_numpy()).all(axis=1)
+            assert (row.cases, row.wins) == (len(chosen), int(wins.sum())), row
+            assert row.fraction == pytest.approx(wins.mean(), abs=1e-4), row
+            lost = [f"{scene}@{spp}" for (scene, spp), won in zip(chosen.index, wins) if not won]
+            assert sorted(("" if pd.isna(row.failures) else row.failures).split()) == sorted(lost), row
+    _assert_within(pairs["ci_low"], pairs["fraction"], pairs["ci_high"], tol=2e-4, what="pair_members")
+    assert pairs[["ci_low", "ci_high"]].stack().between(0, 1).all()
+    assert set(pairs["verdict"]) <= {"reproduced", "not reproduced", "inconclusive"}
+
+
+def test_study_findings_have_verdicts_and_intervals(results):
+    findings = pd.read_csv(results / "tables/study/findings.csv")
+    assert set(findings["metric"]) == set(METRICS)
+    for metric in METRICS:
+        assert {"a", "b"} <= set(findings.loc[findings["metric"] == metric, "finding"]), metric
+    assert set(findings["verdict"].dropna()) <= {"reproduced", "not reproduced", "inconclusive"}
+    assert findings["claim"].notna().all() and findings["quantity"].notna().all()
+    _assert_within(findings["ci_low"], findings["estimate"], findings["ci_high"], tol=2e-4, what="findings")
+    # an interval decides a verdict by its side of the threshold: reproduced "gain" rows lie above 0
+    gains = findings[findings["quantity"].str.startswith("gain size") & (findings["verdict"] == "reproduced")]
+    assert (gains["ci_low"] > 0).all(), gains
+
+
+def test_study_paper_table3_and_reference_noise_agree_with_the_rankings(results):
+    from mcbench.analysis.pool import PAPER_TABLE3
+
+    paper = pd.read_csv(results / "tables/study/paper_table3.csv", dtype={"spp": str})
+    assert sorted(set(paper["id"])) == sorted(PAPER_TABLE3)         # the paper's rows, ours beside them
+    ranking = pd.read_csv(results / "tables/ranking_relmse.csv").set_index("candidate")
+    ours = paper.dropna(subset=["ours"])
+    # the bases of our pool slice are in the paper's Table 3 (its ensembles #10, #15 are not)
+    assert set(ours["candidate"]) == {"kpcn", "nfor", "oidn", "rdfc"}
+    assert set(ours["spp"]) == {"4", "64", "Avg.", "Avg. (common spp)"}
+    for row in ours[ours["spp"].isin(["4", "64", "Avg."])].itertuples():
+        assert row.ours == pytest.approx(ranking.loc[row.candidate, row.spp], abs=2 * SCORE_TOL), row
+    both = paper.dropna(subset=["ours", "paper"])
+    np.testing.assert_allclose(both["difference"], both["ours"] - both["paper"], atol=2e-4)
+    assert (paper.loc[~paper["candidate"].isin(POOL_SLICE), "note"].str.endswith("not in our ranking")).all()
+    assert paper.loc[~paper["candidate"].isin(POOL_SLICE), "ours"].isna().all()
+
+    noise = pd.read_csv(results / "tables/study/reference_noise.csv", dtype={"spp": str, "changed": str})
+    assert list(noise["spp"]) == ["4", "64", "Avg."]
+    assert noise["kendall_tau"].between(-1, 1).all()
+    changed = noise["changed"].fillna("").str.split()
+    assert list(noise["real_changes"]) == [len(c) for c in changed]
+    assert list(noise["agree"]) == ["yes" if not c else "no" for c in changed]
+    corrected = pd.read_csv(results / "tables/ranking_relmse_corrected.csv").set_index("candidate")
+    for row in noise.itertuples():
+        for column, table in (("top_raw", ranking), ("top_corrected", corrected)):
+            top = getattr(row, column).split()
+            assert len(top) == 3 and set(top) <= set(RANKED), row
+            # the top three by mean score, best first
+            scores = table.loc[top, row.spp].to_numpy()
+            assert (np.diff(scores) <= 2 * SCORE_TOL).all(), (column, row)
+            assert scores[-1] >= table[row.spp].drop(top).max() - 2 * SCORE_TOL, (column, row)
+
+
+@pytest.mark.parametrize("metric", METRICS)
+def test_study_figures_decode_at_their_size(results, metric):
+    figures = results / "figures/study"
+    _assert_png(figures / f"score_size_{metric}.png", inches=(7.2, 4.8))
+    _assert_png(figures / f"speed_score_{metric}.png", inches=(9.6, 5.4))
+    _assert_png(figures / f"equal_time_{metric}.png", inches=(8.6, 4.8))
+    # score curves: a row of height per entry, 4.2 inches at least
+    _assert_png(figures / f"score_curves_{metric}.png", inches=(11.5, max(4.2, 0.16 * len(RANKED) + 1.0)))
+    # error curves: one 2.9-inch panel per scene and the mean over scenes
+    _assert_png(figures / f"error_curves_{metric}.png", width_inches=2.9 * 4)
+
+
+# --- comparisons (results/tables/comparisons) ---------------------------------------------------
+
+@pytest.mark.parametrize("metric", METRICS)
+def test_comparison_tables_1_and_2_recount_the_wins_from_metrics(results, metrics, metric):
+    values = _wide(metrics, metric)
+    # the one full ensemble with one-hot variants (ensemble, of oidn and jbf): 3 scenes per spp
+    for number, rivals in ((1, ["onehot_sbf", "onehot_nfor"]), (2, ["onehot_post"])):
+        table = pd.read_csv(results / f"tables/comparisons/table{number}_{metric}.csv", dtype={"size": str, "spp": str})
+        assert list(table.columns) == ["size", "spp", "cases", "wins", "percent"]
+        assert list(zip(table["size"], table["spp"])) == [(size, spp) for size in ("2", "Avg.")
+                                                          for spp in ("4", "64", "Avg.")]
+        wins = values["ensemble"] < values[rivals].min(axis=1)
+        for row in table.itertuples():
+            chosen = wins if row.spp == "Avg." else wins.xs(int(row.spp), level="spp")
+            assert (row.cases, row.wins) == (len(chosen), int(chosen.sum())), (number, row)
+            assert row.percent == pytest.approx(100 * chosen.mean(), abs=1e-4), (number, row)
+        text = (results / f"tables/comparisons/table{number}_{metric}.md").read_text()
+        assert text.startswith(f"# Table {number} (")
+        assert "Not in this table (variant set incomplete)" in text   # the pool's ensembles have no variants
+
+
+def test_ablation_table_compares_each_ablation_with_its_full_ensemble(results, metrics, timings):
+    table = pd.read_csv(results / "tables/comparisons/ablations.csv", dtype={"spp": str}, keep_default_na=False,
+                        na_values=[""])                                 # "n/a" is a value of reproduced
+    kinds = {"unconstrained weights": "ensemble_unconstrained", "exact solver": "ensemble_exact",
+             "naive averaging": "naive"}
+    assert list(zip(table["kind"], table["spp"])) == [(k, s) for k in kinds for s in ("4", "64", "Avg.")]
+    relmse, dssim = _wide(metrics, "relmse"), _wide(metrics, "dssim")
+    seconds = timings.pivot_table(index=["scene", "spp"], columns="method", values="seconds")
+    for row in table.itertuples():
+        ablation = kinds[row.kind]
+
+        def of_spp(frame):
+            return frame if row.spp == "Avg." else frame.xs(int(row.spp), level="spp")
+
+        r, d, s = of_spp(relmse), of_spp(dssim), of_spp(seconds)
+        assert row.cases == len(r), row
+        for value, expected in ((row.relmse_ablation, r[ablation].mean()), (row.relmse_full, r["ensemble"].mean()),
+                                (row.dssim_ablation, d[ablation].mean()), (row.dssim_full, d["ensemble"].mean()),
+                                (row.loses, (r[ablation] > r["ensemble"]).mean()),
+                                (row.time_ratio, (s[ablation] / s["ensemble"]).mean())):
+            assert value == pytest.approx(expected, rel=1e-5, abs=1e-12), row
+        assert row.reproduced == ("n/a" if row.kind == "exact solver" else
+                                  "yes" if row.loses >= 0.5 and row.relmse_ablation > row.relmse_full else "no"), row
+    text = (results / "tables/comparisons/ablations.md").read_text()
+    assert "unconstrained weights (5.2.1)" in text and "naive averaging (5.2.5)" in text
+    assert len(_markdown_rows(text.split("Rules of")[0])) == len(table)
+
+
+@pytest.mark.parametrize("metric", METRICS)
+def test_comparison_ranking_scores_the_comparison_methods_with_their_ensemble(results, metrics, metric):
+    table = pd.read_csv(results / f"tables/comparisons/ranking_{metric}.csv")
+    assert list(table.columns) == ["candidate", "role", "compared_with", "4", "64", "Avg."]
+    roles = {"ensemble": "full ensemble", "ensemble_exact": "exact solver", "onehot_sbf": "one-hot sbf",
+             "onehot_nfor": "one-hot nfor", "onehot_post": "one-hot post", "naive": "naive average",
+             "ensemble_unconstrained": "unconstrained weights", "noisy": "noisy"}
+    assert sorted(table["candidate"]) == sorted(roles)
+    table = table.set_index("candidate")
+    assert table["role"].to_dict() == roles
+    assert table["compared_with"].fillna("").to_dict() == {n: "" if n in ("ensemble", "noisy") else "ensemble"
+                                                           for n in roles}
+    assert table["Avg."].is_monotonic_decreasing, table                # best first
+    expected = _mean_scores(_wide(metrics, metric), list(roles))
+    for column in (4, 64, "Avg."):
+        np.testing.assert_allclose(table[str(column)], expected.loc[table.index, column], atol=SCORE_TOL)
+    # kept out of the main ranking
+    assert not (set(roles) - {"noisy"}) & set(pd.read_csv(results / f"tables/ranking_{metric}.csv")["candidate"])
+
+
+# --- progressive denoising (results/tables/progressive, results/progressive) ---------------------
+
+def test_progressive_consistency_recounts_the_exceptions_from_metrics(results, metrics):
+    consistency = pd.read_csv(results / "tables/progressive/consistency.csv")
+    assert list(consistency["spp"]) == SPPS and set(consistency["entry"]) == {"pd_oidn"}
+    assert set(consistency["input"]) == {"oidn"}
+    relmse = _wide(metrics, "relmse")
+    for row in consistency.itertuples():
+        case = relmse.xs(row.spp, level="spp")
+        x, z, y = case["noisy"], case["pd_oidn"], case["oidn"]
+        assert (row.cases, row.worse, row.input_worse) == (3, int((z > x).sum()), int((y > x).sum())), row
+        for value, expected in ((row.noisy, x.mean()), (row.value, z.mean()), (row.input_value, y.mean()),
+                                (row.gap, (z - x).abs().mean()), (row.ratio, np.exp(np.log(z / x).mean())),
+                                (row.input_ratio, np.exp(np.log(y / x).mean()))):
+            assert value == pytest.approx(expected, rel=1e-5), row
+
+
+def test_progressive_per_spp_holds_each_entrys_means(results, metrics, timings):
+    per_spp = pd.read_csv(results / "tables/progressive/per_spp.csv")
+    assert list(per_spp.columns) == ["entry", "4", "64", "avg", "quantity"]
+    # noisy, then the input followed by its progressive entry; errors of relMSE and SMAPE, then the
+    # seconds of the methods (the noisy input has none)
+    assert list(zip(per_spp["quantity"], per_spp["entry"])) == [
+        (q, e) for q in ("relmse", "smape") for e in ("noisy", "oidn", "pd_oidn")] + [
+        ("seconds", "oidn"), ("seconds", "pd_oidn")]
+    own = timings.pivot_table(index=["scene", "spp"], columns="method", values="seconds")
+    for row in per_spp.to_dict("records"):
+        values = own if row["quantity"] == "seconds" else _wide(metrics, row["quantity"])
+        means = values[row["entry"]].groupby(level="spp").mean()
+        np.testing.assert_allclose([row["4"], row["64"], row["avg"]], [means[4], means[64], means.mean()],
+                                   rtol=1e-5, err_msg=str(row))
+    assert (per_spp[["4", "64", "avg"]] > 0).all().all()
+
+
+def test_progressive_curve_has_every_entry_per_spp_and_its_figure(smoke_run, results):
+    _, config = smoke_run
+    folder = results / f"progressive/{config['scenes'][0]}"
+    curve = pd.read_csv(folder / "curve.csv")
+    entries = list(dict.fromkeys(curve["entry"]))
+    assert len(entries) == 4 and entries[0] == "noisy"            # noisy, base, PD, the t-test bound
+    assert list(zip(curve["spp"], curve["entry"])) == [(spp, e) for spp in (4, 16) for e in entries]
+    errors = curve[["relmse", "smape"]].to_numpy()
+    assert np.isfinite(errors).all() and (errors >= 0).all() and (curve["smape"] <= 1).all()
+    assert (curve["seconds"] > 0).all()
+    _assert_png(folder / "curve.png", inches=(11, 4.4))
+
+
+# --- the oracle study (results/oracle) --------------------------------------------------------
+
+def test_oracle_table_has_the_nine_panels_and_the_weight_maps(smoke_run, results):
+    _, config = smoke_run
+    folder = results / f"oracle/{config['scenes'][0]}"
+    oracle = pd.read_csv(folder / "table.csv")
+    assert list(oracle.columns) == ["name", "panel", "statistics", "weights", "relmse", "dssim"]
+    panels = [f"gt_{statistics}_{solve}" for statistics in ("full", "half")
+              for solve in ("one_hot", "unconstrained", "simplex")] + ["dual_one_hot", "dual_unconstrained",
+                                                                       "dual_ensemble"]
+    bases = config["oracle"]["denoisers"]
+    assert list(oracle["name"]) == panels + ["noisy", *bases]
+    assert list(oracle["panel"]) == list("abcdefghi") + ["-"] * (1 + len(bases))
+    assert np.isfinite(oracle[["relmse", "dssim"]].to_numpy()).all()
+    assert (oracle["relmse"] >= 0).all() and oracle["dssim"].between(0, 2).all(), oracle
+    assert len(_markdown_rows((folder / "table.md").read_text())) == len(oracle)
+    # one row per base denoiser, one column per panel (mcbench.analysis.oracle_tables.weight_maps_figure)
+    _assert_png(folder / "weights.png", inches=(1.7 * 9 + 1.6, 1.7 * len(bases) + 1.2))
+
+
+# --- timings and benchmark records ------------------------------------------------------------
+
+def test_timings_hold_one_positive_row_per_method_run(smoke_run, results, timings):
+    _, config = smoke_run
+    assert {"scene", "spp", "method", "seconds", "width", "height"} <= set(timings.columns)
+    keys = list(zip(timings["scene"], timings["spp"], timings["method"]))
+    assert len(keys) == len(set(keys))
+    assert set(keys) == {(s, n, m) for s in config["scenes"] for n in SPPS for m in POOL_SLICE + EXTRAS}
+    assert (timings["seconds"] > 0).all() and np.isfinite(timings["seconds"]).all(), timings[timings["seconds"] <= 0]
+    assert (timings[["width", "height"]] == 32).all().all()
+    assert list(keys) == sorted(keys, key=lambda k: (k[2], k[0], k[1]))   # sorted by method, scene, spp
     # one job per case runs every method (batch_methods), with its benchmark record
-    assert len(list((workdir / "results/benchmarks/batches").glob("*_methods.tsv"))) == 3 * 2
+    records = sorted(p.name for p in (results / "benchmarks/batches").glob("*_methods.tsv"))
+    assert len(records) == 3 * 2, records
+
+
+# --- the report's figures (results/figures) -------------------------------------------------
+
+def test_report_figures_decode_at_their_size(results):
+    for metric in METRICS:
+        # one 2.9-inch panel per scene and the mean over scenes
+        _assert_png(results / f"figures/error_{metric}.png", width_inches=2.9 * 4)
+    _assert_png(results / "figures/speed_error.png", inches=(6.4, 4.6))
+    _assert_png(results / "figures/gallery.png")
 
 
 def test_rerun_has_nothing_to_do(smoke_run):
@@ -220,7 +620,10 @@ def test_notebook_executes_headless_on_results(smoke_run, monkeypatch):
                    resources={"metadata": {"path": str(REPO / "workflow/notebooks")}}).execute()
     outputs = [o for cell in notebook.cells if cell.cell_type == "code" for o in cell.outputs]
     assert not [o for o in outputs if o.output_type == "error"]
-    assert sum(1 for o in outputs if "image/png" in o.get("data", {})) >= 5   # curves, scatter, images, weights
+    images = [o["data"]["image/png"] for o in outputs if "image/png" in o.get("data", {})]
+    assert len(images) >= 5                                   # curves, scatter, images, weights
+    for image in images:
+        _assert_png(io.BytesIO(base64.b64decode(image)))
     text = "".join(o.get("text", "") for o in outputs)
     assert "# Ranking by relmse" in text and "no combiner with weight maps" not in text
 
