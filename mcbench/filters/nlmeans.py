@@ -149,7 +149,7 @@ def _clamp(i, n):
 def _add_pixel_distances(guide, variance, yp, yq, x0, x1, dx, k2, alpha, epsilon, out):
     """out[i] += sum over the C channels of the per-pixel distance term (module docstring, RKZ12
     Eq. 5-6) of p = (yp, x0 + i) and p + o = (yq, x0 + i + dx), for i < x1 - x0, channels in
-    order. guide, variance: (C, H, W) float64 planes; both columns ranges must lie inside the
+    order. guide, variance: (C, H, W) float64 planes; both column ranges must lie inside the
     image. The loop runs over views indexed from 0, so that it vectorises."""
     for ch in range(guide.shape[0]):
         gp, gq = guide[ch, yp, x0:x1], guide[ch, yq, x0 + dx:x1 + dx]
