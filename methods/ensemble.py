@@ -148,15 +148,14 @@ def combine(buffers: RenderBuffers, inputs: list[Denoised], *,
     Raises ValueError if an input holds NaN/Inf, or if a combined image is not finite in
     float32 (only unconstrained weights, bounded by 5e11, on radiance above ~1e26 could).
     """
-    return ensemble_in_bands(buffers, inputs, block_pixels=BLOCK_PIXELS, solver=solver, seed=seed,
-                             max_iterations=max_iterations, tolerance=tolerance, filter=filter,
-                             weights=weights, channels=channels, radius=radius,
-                             sigma_spatial=sigma_spatial, sigma_color=sigma_color,
-                             sigma_albedo=sigma_albedo, sigma_normal=sigma_normal,
-                             guide_variance_blur=guide_variance_blur, outlier_removal=outlier_removal,
-                             colour_distance=colour_distance, filter_border=filter_border,
-                             normal_features=normal_features, variance_sum_floor=variance_sum_floor,
-                             start=start)
+    images, extras = ensemble_in_bands(
+        buffers, inputs, block_pixels=BLOCK_PIXELS, solver=solver, seed=seed, max_iterations=max_iterations,
+        tolerance=tolerance, filter=filter, weights=weights, channels=channels, radius=radius,
+        sigma_spatial=sigma_spatial, sigma_color=sigma_color, sigma_albedo=sigma_albedo,
+        sigma_normal=sigma_normal, guide_variance_blur=guide_variance_blur, outlier_removal=outlier_removal,
+        colour_distance=colour_distance, filter_border=filter_border, normal_features=normal_features,
+        variance_sum_floor=variance_sum_floor, start=start)
+    return Denoised(full=images["full"], a=images["a"], b=images["b"], extras=extras)
 
 
 def check_config(params: dict, *, config_key: str) -> None:

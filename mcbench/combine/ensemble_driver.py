@@ -15,7 +15,6 @@ from mcbench.combine.blending import blend_band, combine_with
 from mcbench.combine.ensemble_weights import (check_choices, check_shapes, nonfinite_pixels, raise_nonfinite,
                                               solve_block)
 from mcbench.combine.weight_filter import filter_band, planar64, tile_rows
-from mcbench.io.buffers import Denoised
 
 __all__ = ["ensemble_in_bands"]
 
@@ -100,10 +99,13 @@ def ensemble_in_bands(buffers, inputs, *, block_pixels: int, solver: str, seed: 
                       sigma_spatial: float, sigma_color: float, sigma_albedo: float, sigma_normal: float,
                       guide_variance_blur: str, outlier_removal: str, colour_distance: str,
                       filter_border: str, normal_features: str, variance_sum_floor: float,
-                      start: str) -> Denoised:
-    """Ensemble of the Denoised ``inputs`` of the render ``buffers`` (Sec. 4): raw weights from
-    the half buffers, filtered (unless ``filter`` is False), combined (Eq. 35). The options are
-    those of the ``ensemble`` combiner (``methods/ensemble.py``, ``combine``), every one given.
+                      start: str) -> tuple[dict, dict]:
+    """Ensemble of the ``inputs`` of the render ``buffers`` (Sec. 4): raw weights from the half
+    buffers, filtered (unless ``filter`` is False), combined (Eq. 35). ``buffers`` has the layers
+    ``color_a``, ``color_b``, ``albedo``, ``normal`` as attributes and each input the images
+    ``full``, ``a``, ``b`` (:class:`mcbench.io.buffers.RenderBuffers` and
+    :class:`~mcbench.io.buffers.Denoised`). The options are those of the ``ensemble`` combiner
+    (``methods/ensemble.py``, ``combine``), every one given.
 
     One pass down the image in bands of :data:`mcbench.combine.weight_filter.FILTER_BLOCK_PIXELS`
     pixels. For each band the rows are solved (blocks of ``block_pixels`` pixels, float64 copies
@@ -117,7 +119,7 @@ def ensemble_in_bands(buffers, inputs, *, block_pixels: int, solver: str, seed: 
     array-likes read from their files by rows (:class:`mcbench.io.exr.LayerRows`): then no input
     is ever held whole. Each input row is read twice (solve, blend).
 
-    Returns Denoised(full, a, b, extras) with float32 images; ``extras`` holds
+    Returns ``(images, extras)``: ``images`` {"full", "a", "b"} float32 (H, W, C); ``extras`` holds
     ``weights_raw_{i}`` and ``weights_filtered_{i}`` (H, W, 3) per input i (with
     ``filter=False`` the filtered maps equal the raw ones).
 
@@ -185,4 +187,4 @@ def ensemble_in_bands(buffers, inputs, *, block_pixels: int, solver: str, seed: 
     if bad:
         raise ValueError(f"ensemble ({weights} weights) combined image(s) {bad} overflow "
                          f"float32")
-    return Denoised(full=images["full"], a=images["a"], b=images["b"], extras=extras)
+    return images, extras
