@@ -1,5 +1,5 @@
-"""The implementation of a method at an earlier commit, loaded beside today's for a same-run
-baseline in the benchmarks (no copy of the old code in the tree).
+"""The implementation of a method at an earlier commit, loaded beside the current one for a
+same-run baseline in the benchmarks (no copy of the old code in the tree).
 
 ``load_baseline("methods/nfor.py", "9ec8741")`` reads the file as it was at that commit
 (``git show``), makes its ``mcbench.filters.nlmeans`` import use :func:`mcbench.filters.nlmeans.nl_means_filter_reference`
@@ -15,7 +15,7 @@ import types
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-BASELINE_COMMIT = "9ec8741"   # the last commit before the NFOR/RDFC speed-ups (issue 14 target 4)
+BASELINE_COMMIT = "9ec8741"   # NFOR and RDFC with the NumPy NL-means, without the numba kernels
 OLD_IMPORT = "from mcbench.filters.nlmeans import nl_means_filter\n"
 NEW_IMPORT = "from mcbench.filters.nlmeans import nl_means_filter_reference as nl_means_filter\n"
 

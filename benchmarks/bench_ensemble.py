@@ -1,4 +1,4 @@
-"""Speed and memory of the ensemble combiner (Zheng et al. 2021, Sec. 4), issue 14 target 1.
+"""Speed and memory of the ensemble combiner (Zheng et al. 2021, Sec. 4).
 A script, not a timed test:
 
     python benchmarks/bench_ensemble.py [--quick] [--keep DIR] [--baseline COMMIT | --no-baseline]
@@ -9,13 +9,14 @@ an ensemble job, with its wall time, CPU seconds (user + system: what a loaded m
 least) and peak RSS (``os.wait4`` of the child). Printed:
 
 1. 1024^2, N = 2, 4, 8, ``solver=iterative`` and ``exact``: wall, peak RSS and the phases, beside
-   the authors' C++ program run on the same case in the same minute with ``--cpp PATH`` (else quoted from
-   ``../shared/study/public-code-facts.md``, an earlier run:
-   9.0 / 13.0 / 20.4 s, 274 / 395 / 635 MiB) as ratios (target: wall <= 0.25x, RSS <= 1.2x).
-   Three jobs per line, one after the other: ``rows`` (the job reading the render and the
-   inputs by rows, the path proposed for ``run_methods``), ``eager`` (every layer read whole,
-   as ``run_methods`` reads today) and ``base`` (the whole job as of ``--baseline``, default
-   :data:`BASELINE_COMMIT`, the code before the issue-14 memory work: its files extracted from
+   the authors' C++ program run on the same case in the same minute with ``--cpp PATH`` (else
+   :data:`CPP_REFERENCE`, the program's whole-process figures at 1024^2 on an idle 2-core machine
+   of the project's kind: 9.0 / 13.0 / 20.4 s, 274 / 395 / 635 MiB) as ratios (target: wall
+   <= 0.25x, RSS <= 1.2x). Three jobs per line, one after the other: ``rows`` (the job reading
+   the render and the inputs by rows, as ``run_methods`` reads for a batch of ``reads_rows``
+   methods), ``eager`` (every layer read whole, as ``run_methods`` reads for any other batch)
+   and ``base`` (the whole job as of ``--baseline``, default :data:`BASELINE_COMMIT`, the
+   whole-image combine without bands or row reads: its files extracted from
    git (``git archive``) into the temporary folder and run from there, so it loads its own numba
    cache; ``baseline.load_baseline`` loads one module into this process, which would compile
    its kernels in the job and count the compiler's memory); then the ratios rows / base of
@@ -55,7 +56,7 @@ sys.path.insert(0, str(HERE.parent))
 from mcbench.io.exr import write_layers  # noqa: E402
 
 CPP_REFERENCE = {2: (9.0, 274.0), 4: (13.0, 395.0), 8: (20.4, 635.0)}  # N: (wall s, peak MiB)
-BASELINE_COMMIT = "cedab75"   # the last commit before the band-wise combine (issue 14 target 1)
+BASELINE_COMMIT = "cedab75"   # the whole-image combine, without bands or row reads
 WALL_TARGET, RSS_TARGET = 0.25, 1.2
 
 
@@ -277,12 +278,12 @@ def main(argv=None):
     ap.add_argument("--quick", action="store_true", help="small sizes (a smoke run of the script)")
     ap.add_argument("--keep", type=Path, help="folder for the synthetic EXRs (kept between runs)")
     ap.add_argument("--baseline", default=BASELINE_COMMIT,
-                    help=f"commit whose job runs beside today's in 1. (default {BASELINE_COMMIT})")
+                    help=f"commit whose job runs beside the current one in 1. (default {BASELINE_COMMIT})")
     ap.add_argument("--no-baseline", action="store_true", help="skip the baseline and eager jobs")
     ap.add_argument("--cpp", default=os.environ.get("MCBENCH_ENSEMBLE_CPP"),
                     help="the authors' built EnsembleDenoising (tests/data/golden/ensemble_cpp/README.md): "
                          "run beside each job of 1. on the same case, in the same minute (default "
-                         "$MCBENCH_ENSEMBLE_CPP; without it the C++ figures are quoted from an earlier run)")
+                         "$MCBENCH_ENSEMBLE_CPP; without it the C++ figures are CPP_REFERENCE's)")
     args = ap.parse_args(argv)
     sys.path.insert(0, str(HERE))
     main_size = 256 if args.quick else 1024
@@ -317,7 +318,7 @@ def main(argv=None):
         return results[key]
 
     cpp_source = (f"measured beside each job: {args.cpp}, solver brute" if args.cpp
-                  else "quoted from public-code-facts.md, 1024^2, an earlier run")
+                  else "CPP_REFERENCE: 1024^2, an idle 2-core machine, not this run")
     print(f"\n1. whole process at {main_size}^2 (C++ {cpp_source}; target "
           f"wall <= {WALL_TARGET}x, RSS <= {RSS_TARGET}x)")
     print(f"{'N':>2} {'solver':>9} {'job':>5} {'wall_s':>7} {'cpu_s':>6} {'import':>7} {'read':>6} "

@@ -1,12 +1,12 @@
 """Time NFOR (methods/nfor.py) per image at 128², 256², 512² on synthetic inputs, against the
-implementation before the speed-ups (``benchmarks/baseline.py``) in the same run.
+baseline implementation with the NumPy NL-means (``benchmarks/baseline.py``) in the same run.
 
 Inputs: the piecewise-smooth synthetic scene of tests/methods/test_nfor.py (two albedo regions, a disk
 with another normal and depth) with Gaussian noise of sigma 0.1 per half buffer
 (tests/conftest.py's ``build_render_buffers``). A 24² run of each implementation first
 compiles / loads the numba kernels, so the timings exclude JIT. Prints per size the wall and
-CPU seconds of both, the speed-ups and the relMSE of today's outputs against the baseline's
-and against the baseline with today's one behaviour change (``baseline_fix``: feature
+CPU seconds of both, the speed-ups and the relMSE of the current outputs against the baseline's
+and against the baseline with the current code's one behaviour change (``baseline_fix``: feature
 differences within 1e-9 relative of zero count as 0, see methods/nfor.py).
 The DAG runs methods at one thread: ``NUMBA_NUM_THREADS=1``.
 
@@ -47,14 +47,14 @@ def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sizes", type=int, nargs="+", default=[128, 256, 512])
     parser.add_argument("--repeats", type=int, default=1)
-    parser.add_argument("--no-baseline", action="store_true", help="time today's implementation only")
+    parser.add_argument("--no-baseline", action="store_true", help="time the current implementation only")
     args = parser.parse_args(argv)
 
     denoisers = {"new": nfor.denoise}
     if not args.no_baseline:
         denoisers["baseline"] = load_baseline("methods/nfor.py").denoise
-        # the baseline with today's one behaviour change (feature differences within 1e-9
-        # relative of zero count as 0), untimed: today's outputs equal it to rounding
+        # the baseline with the current code's one behaviour change (feature differences within 1e-9
+        # relative of zero count as 0), untimed: the current outputs equal it to rounding
         denoisers["baseline_fix"] = load_baseline("methods/nfor.py", patches={SNAP_OLD: SNAP_NEW},
                                                   suffix="_fix").denoise
     for denoise in denoisers.values():

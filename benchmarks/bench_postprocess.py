@@ -11,7 +11,7 @@ Reads ``renders/{scene}/spp{N}.exr`` (RenderBuffers), the base outputs
 ``outputs/{scene}/spp{N}/{method}.exr`` (Denoised) and ``references/{scene}.exr``; runs the
 ensemble (iterative solver, the paper's filter parameters) per variant and prints, per input set
 and variant, the mean over the cases of relMSE and DSSIM (``mcbench.analysis.metrics``), the change of mean
-relMSE against today's default in percent, and the fraction of cases the variant improves.
+relMSE against the default in percent, and the fraction of cases the variant improves.
 As a check of the harness it also prints the largest relMSE between our default and the run's
 own ``ens_*`` output where the run has one (it was written by the code of that run).
 """

@@ -1,5 +1,5 @@
-"""Timing benchmark of RDFC (methods/rdfc.py) on synthetic buffers, against the implementation
-before the speed-ups (``benchmarks/baseline.py``) in the same run. A script, not a test:
+"""Timing benchmark of RDFC (methods/rdfc.py) on synthetic buffers, against the baseline
+implementation with the NumPy NL-means (``benchmarks/baseline.py``) in the same run. A script, not a test:
 
     NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/bench_rdfc.py [--sizes 128 256 512] [--repeats 1] [--no-baseline]
 
@@ -9,8 +9,8 @@ warm-up call (numba compilation) on a 32^2 image. Reported per size: total secon
 (full + both half buffers, i.e. one ``denoise`` call), the stages (feature prefiltering; one
 candidate-filter kernel call, 3 candidates, r = 10; one select-and-blend), and the ratio of
 the total to the 128^2 total next to the pixel-count ratio; then (unless ``--no-baseline``) the
-wall and CPU seconds of today's and the baseline's ``denoise``, the speed-ups and the relMSE of
-today's outputs against the baseline's. The DAG runs methods at one thread: NUMBA_NUM_THREADS=1.
+wall and CPU seconds of the current and the baseline's ``denoise``, the speed-ups and the relMSE of
+the current outputs against the baseline's. The DAG runs methods at one thread: NUMBA_NUM_THREADS=1.
 """
 
 from __future__ import annotations
@@ -56,7 +56,7 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sizes", type=int, nargs="+", default=[128, 256, 512])
     parser.add_argument("--repeats", type=int, default=1)
-    parser.add_argument("--no-baseline", action="store_true", help="time today's implementation only")
+    parser.add_argument("--no-baseline", action="store_true", help="time the current implementation only")
     args = parser.parse_args(argv)
 
     rdfc.denoise(synthetic(32))   # warm-up (numba compile / cache load)

@@ -2,7 +2,7 @@
 solvers -- iterative (Sec. 4.1), exact (hull projection) and a general-purpose QP
 (``solver="qp"``: qpsolvers with quadprog, one call per problem) -- for N = 2..8 base
 denoisers, and each one's objective gap to the exact optimum; then both fast solvers on
-image-sized problem sets (``--image-side``, issue 14 target 2) with the iterative solver's
+image-sized problem sets (``--image-side``) with the iterative solver's
 fraction of problems stopped at the 1024-iteration limit, for each of its starts
 (``start=`` random: the paper's; vertex; pair). A script, not a timed test:
 
@@ -47,7 +47,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench_ensemble import synthetic  # noqa: E402
 from mcbench.combine.ensemble_weights import CHANNELS, solve_weights  # noqa: E402
-from mcbench.combine.simplex_solvers import QP_BACKEND, STARTS, objective  # noqa: E402
+from mcbench.combine.simplex_solvers.iterative import STARTS  # noqa: E402
+from mcbench.combine.simplex_solvers.problem import objective  # noqa: E402
+from mcbench.combine.simplex_solvers.qp import QP_BACKEND  # noqa: E402
 from timing import timed  # noqa: E402
 
 

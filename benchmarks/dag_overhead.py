@@ -1,4 +1,4 @@
-"""Where a finished Snakemake run's time went: compute against overhead (issue 14, target 3).
+"""Where a finished Snakemake run's time went: compute against overhead.
 
     python benchmarks/dag_overhead.py [--results results] [--log .snakemake/log/<run>.log] [--cores 2]
 

@@ -2,16 +2,16 @@
 
     python benchmarks/ensemble_job.py RENDER.exr OUT.exr INPUT1.exr ... [--eager] [--param key=value ...]
 
-Like :func:`mcbench.pipeline.methods.run_methods` for a batch of ensembles: the render's ``RENDER_LAYERS``
-and each input's three images, ``methods.ensemble.combine``, write the output EXR
-(``write_layers``). Two ways to read them:
+Like :func:`mcbench.pipeline.methods.run_methods` for a batch of ensembles: the render's
+``render_layers`` (declared in ``methods.ensemble.METHOD``) and each input's three images,
+``methods.ensemble.combine``, write the output EXR (``write_layers``). Two ways to read them:
 
-* default (the job path proposed for ``run_methods``, issue 14): a combiner that declares
-  ``READS_ROWS`` gets the render's layers and the inputs' images as
+* default (as ``run_methods`` reads for a batch of such methods): a combiner that declares
+  ``reads_rows`` gets the render's layers and the inputs' images as
   :class:`mcbench.io.exr.LayerRows` (:func:`mcbench.io.exr.layer_rows`: only headers are read here;
   combine reads rows as it goes, so no input is held whole);
-* ``--eager``: as ``run_methods`` reads today, every layer whole (``RenderBuffers.load`` of the
-  ``RENDER_LAYERS``, ``Denoised.load``; the ensemble reads no extras).
+* ``--eager``: as ``run_methods`` reads for any other batch, every layer whole
+  (``RenderBuffers.load`` of the ``render_layers``, ``Denoised.load``; the ensemble reads no extras).
 
 Prints one JSON line: seconds spent importing, reading, loading the numba cache (a combine of
 an 8 x 8 crop, ``jit_s``), combining and writing (wall, ``time.perf_counter``). The parent
@@ -55,17 +55,18 @@ def main(argv):
     if "--param" in argv:
         at = argv.index("--param")
         argv, params = argv[:at], [p for p in argv[at + 1:] if p != "--param"]
-    eager = "--eager" in argv or not getattr(ensemble, "READS_ROWS", False)
+    spec = ensemble.METHOD
+    eager = "--eager" in argv or not spec.reads_rows
     argv = [a for a in argv if a != "--eager"]
     render, output, *inputs = argv
     imported = time.perf_counter()
     if eager:
-        buffers = RenderBuffers.load(render, layers=ensemble.RENDER_LAYERS)  # as run_methods reads it
+        buffers = RenderBuffers.load(render, layers=spec.render_layers)  # as run_methods reads it
         denoised = [Denoised.load(path) for path in inputs]                    # combine() reads no extras
     else:
         from mcbench.io.exr import layer_rows, read_metadata
 
-        buffers = RenderBuffers(layers=layer_rows(render, ["color", *ensemble.RENDER_LAYERS]),
+        buffers = RenderBuffers(layers=layer_rows(render, ["color", *spec.render_layers]),
                                 spp=int(read_metadata(render).get("spp", 0)), source=render)
         denoised = []
         for path in inputs:

@@ -10,7 +10,7 @@ constant ones). From each it reads:
   and the rule that wrote it (by folder: ``render_noisy/``, ``render_reference/`` ->
   ``render_reference_chunk``, ``methods/`` -> ``run_method``, ``batches/*_methods`` ->
   ``run_case_methods`` (``batches/*_combiners`` -> ``run_combiners`` and ``batches/*_learned_denoisers``
-  -> ``run_learned_denoisers`` in runs before it), ``metrics/``
+  -> ``run_learned_denoisers`` in runs that batched them separately), ``metrics/``
   -> ``case_metrics``, ``viewer/`` -> ``viewer_case``, ``viewer.tsv`` -> ``viewer``, ``oracle/``
   -> ``oracle_study``, ``training/example_*`` -> ``training_example``, ``training/correlated_*``
   -> ``training_correlated``, ``training/train_*`` -> ``train_network``);

@@ -15,7 +15,7 @@ polled every 20 ms). Two jobs:
 * ``metrics`` -- :func:`mcbench.pipeline.metrics.compute_case_metrics` with every metric
   (HDR-FLIP's OpenMP pool, OpenBLAS under SciPy).
 
-Configurations: ``defaults`` is the environment before this change (the method scripts set only
+Configurations: ``defaults`` leaves the libraries their own pools (the method scripts set only
 ``NUMBA_NUM_THREADS`` and ``OMP_NUM_THREADS``, the metrics script nothing); ``limited`` is
 :func:`mcbench.pipeline.threads.thread_environment` of 1. Prints a Markdown table with the
 ratios limited / defaults measured in the same run, and the machine's load averages.
@@ -63,7 +63,7 @@ def environment(config: str, job: str) -> dict[str, str]:
     env["PYTHONPATH"] = str(ROOT)
     if config == "limited":
         env.update(thread_environment(1))
-    elif job == "methods":   # what workflow/scripts/run_methods.py set before mcbench.pipeline.threads
+    elif job == "methods":   # the two variables a method script sets without mcbench.pipeline.threads
         env.update(NUMBA_NUM_THREADS="1", OMP_NUM_THREADS="1")
     return env
 

@@ -1,4 +1,4 @@
-"""Every performance figure of issue 14 in one run (each script's own output, in order).
+"""The performance figures of the benchmarks in one run (each script's own output, in order).
 
     python benchmarks/performance.py [--quick] [--results results]
 
@@ -7,8 +7,8 @@
    exponents of time against pixels and N, numba against NumPy;
 2. ``bench_solvers.py --image-side 1024``: both solvers on image-sized problems, optimality gaps,
    the fraction of pixel-channels stopped at 1024 iterations per start, and the QP baseline (Fig. 6);
-3. ``bench_nfor.py`` and ``bench_rdfc.py`` at 128^2 and 512^2, against the pre-speed-up
-   implementation timed in the same run;
+3. ``bench_nfor.py`` and ``bench_rdfc.py`` at 128^2 and 512^2, against the baseline
+   implementation (``benchmarks/baseline.py``) timed in the same run;
 4. ``dag_overhead.py`` on a finished run's ``--results`` (when it has a timings.csv): compute
    against overhead per stage, overhead share and core utilisation.
 

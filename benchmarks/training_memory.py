@@ -2,7 +2,7 @@
 
 For each network a child process does what the job does (``mcbench.pipeline.training.train_learned_method``:
 the data loading of ``training_data`` -- a denoiser's crops, a combiner's crops with its
-``CORRELATED_BASES``' results -- then ``train_network``) for ``--steps`` steps, with a validation
+declared ``correlated_bases``' results -- then ``train_network``) for ``--steps`` steps, with a validation
 pass and a checkpoint at the last step, into a temporary folder; the parent reads the child's peak
 RSS from ``os.wait4`` (``ru_maxrss``; MiB, like the ``max_rss`` of Snakemake's benchmark records).
 
@@ -13,7 +13,7 @@ memory is the same: every file read is stored), which the table says; a smaller 
 evenly spaced crops (quick checks).
 
 ``--code DIR`` imports ``mcbench`` and ``methods`` from another copy of the code (e.g. an older
-commit, ``git archive <rev> mcbench methods | tar -x -C DIR``) to measure before/after.
+commit, ``git archive <rev> mcbench methods | tar -x -C DIR``), to compare two versions' memory.
 
     .venv/bin/python benchmarks/training_memory.py [--networks kpcn deep_combiner] [--steps 20]
         [--data results/training] [--crops 640] [--combiner-crops 112] [--code DIR]
@@ -47,16 +47,17 @@ def repeated(paths: list, count: int) -> list:
 def child(args: argparse.Namespace) -> None:
     """Train one network as the job does; print one JSON line (items, seconds, files read)."""
     sys.path.insert(0, str(Path(args.code).resolve()))
+    from mcbench.io.method_spec import method_spec
     from mcbench.nn.data import crop_paths
     from mcbench.nn.train import correlated_paths
     from mcbench.pipeline.training import learned_method, train_learned_method
 
-    module = learned_method(args.child)
+    spec = method_spec(learned_method(args.child))
     files = crop_paths(args.data)
     correlated = None
     count = args.crops
-    if getattr(module, "KIND", "denoiser") == "combiner":
-        files, correlated = correlated_paths(args.data, module.CORRELATED_BASES, files)
+    if spec.kind == "combiner":
+        files, correlated = correlated_paths(args.data, spec.correlated_bases, files)
         count = args.combiner_crops
     available = len(files)
     files = repeated(files, count)

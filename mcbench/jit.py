@@ -9,10 +9,10 @@
   ``methods/ensemble.py``, derived from the package folders around the file) caches. Numba keys
   cache entries by source file and function, not by module name, and records the module by name
   (``<dynamic>`` when the module is not in ``sys.modules``); a compilation cached while the
-  file was loaded under another name (``importlib.util.spec_from_file_location``, a notebook, a
-  plugin loader, pytest's ``--import-mode=importlib``) was later loaded by every normal import,
-  which then died with ``ModuleNotFoundError: No module named '<dynamic>'``. Such loads now
-  compile without a cache.
+  file is loaded under another name (``importlib.util.spec_from_file_location``, a notebook, a
+  plugin loader, pytest's ``--import-mode=importlib``) would be loaded by every later normal
+  import, which would then die with ``ModuleNotFoundError: No module named '<dynamic>'``. So such
+  loads compile without a cache.
 
 Numba reads ``NUMBA_CACHE_DIR`` from the environment (it re-reads the environment before each
 compilation), so this module sets the variable (only if unset) and reloads numba's config;

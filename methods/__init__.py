@@ -1,42 +1,34 @@
 """Method registry: one module per base denoiser or combiner.
 
-A method module declares
+A method module declares itself in one module-level object, ``METHOD``, a
+:class:`mcbench.io.method_spec.MethodSpec` (the contract: every hook and flag with its type,
+default and meaning is a field there), e.g.::
 
-* ``KIND``: ``"denoiser"`` or ``"combiner"``;
-* ``LABEL``: the name shown in tables (a stand-in says so, e.g. ``"OptiX† (our autoencoder)"``);
-* a denoiser: ``denoise(buffers: RenderBuffers, **params) -> Denoised`` returning the denoised
-  full image and the two denoised half buffers. Methods that denoise each image on its own use
-  :func:`denoise_each_buffer`; methods that compute half-buffer results internally (NFOR, RDFC)
-  return them directly.
-* a combiner: ``combine(buffers: RenderBuffers, inputs: list[Denoised], **params) -> Denoised``;
-  its output may feed another combiner like any base denoiser output.
-* optionally ``RENDER_LAYERS``: the render layers the method reads (a tuple of names; absent:
-  all). A job whose methods all declare it reads only their union (``mcbench.pipeline.methods``),
-  which saves most of a large render's memory.
-* optionally ``IMAGE_QUANTITIES``: a single-image denoiser (one that filters each of the full
-  image and the halves on its own, :func:`denoise_each_buffer`) names the quantities it reads of
-  each image, e.g. ``("color", "albedo", "normal")``. It may then run on renders imported without
-  half buffers (``scenes/<name>.yaml``, :mod:`mcbench.io.render_folders`), giving the full image
-  only; a method that declares neither this nor ``RENDER_LAYERS`` needs every layer of a render
-  (:func:`mcbench.pipeline.methods.needed_layers`, checked when the DAG is parsed).
-* optionally ``check_config(params, *, config_key)``: checks of param values that no annotation
-  describes (raise ``ValueError`` naming ``config_key``), run when the DAG is parsed;
-  ``WARM_UP = False``: no untimed warm-up run on a crop before the timed run; ``TIMES_ITSELF =
-  True`` with ``program_seconds()``: the recorded time is what it reports (an external program's
-  wall time). Keyword parameters ``name``, ``scene`` and ``spp`` receive the method's config name
-  and the case unless the config sets them (``methods/external.py``, ``methods/precomputed.py``);
-  ``required_files(params, *, name, scene, spp)``: files each case needs, checked when the DAG is
-  parsed (``mcbench.pipeline.plan``).
+    METHOD = MethodSpec(kind="denoiser", label="#6 OIDN", run=denoise, denoise_image=denoise_image,
+                        image_quantities=("color", "albedo", "normal"))
 
-Config parameters are the keyword-only parameters of ``denoise``/``combine``, each annotated
-(``int``, ``float``, ``bool``, ``str`` or ``typing.Literal[...]`` for a choice): when the DAG is
-parsed, :func:`method_table` checks every config entry's ``params`` against them
-(:func:`check_params`), so a misspelt key or a value outside the choices stops the run before any
-job, naming e.g. ``combiners[3].params.solvr``.
+* a denoiser's ``run`` is ``denoise(buffers: RenderBuffers, *, <params>) -> Denoised`` returning
+  the denoised full image and the two denoised half buffers. Methods that denoise each image on
+  their own use :func:`denoise_each_buffer`; methods that compute half-buffer results internally
+  (NFOR, RDFC) return them directly.
+* a combiner's ``run`` is ``combine(buffers: RenderBuffers, inputs: list[Denoised], *, <params>)
+  -> Denoised``; its output may feed another combiner like any base denoiser output.
 
-A learned method imports torch only inside ``build_network``/``denoise``: its ``nn.Module``
-classes are defined by a cached ``network_classes()`` function on first use, so importing the
-module (as parsing the DAG does) never imports torch; its ``denoise`` calls
+:func:`load_method` refuses a module without a declaration, with a field of the wrong type or an
+unknown (misspelt) field -- naming the closest field -- or with a top-level hook of the contract
+(``check_config``, ``RENDER_LAYERS``, ``TIMES_ITSELF``, ...) that its declaration does not carry;
+each error names ``methods/<name>.py``.
+
+Config parameters are the keyword-only parameters of ``run``, each annotated (``int``, ``float``,
+``bool``, ``str`` or ``typing.Literal[...]`` for a choice): when the DAG is parsed,
+:func:`method_table` checks every config entry's ``params`` against them (:func:`check_params`,
+then the declaration's ``check_config``), so a misspelt key or a value outside the choices stops
+the run before any job, naming e.g. ``combiners[3].params.solvr``.
+
+A learned method (``network``, ``training``, ``build_network`` declared) imports torch only inside
+``build_network``/``denoise``: its ``nn.Module`` classes are defined by a cached
+``network_classes()`` function on first use, so importing the module (as parsing the DAG does)
+never imports torch; its ``denoise`` calls
 ``mcbench.nn.inference.denoise_with_network(sys.modules[__name__], buffers)``.
 
 Adding a method is one new file here plus one line in ``config.yaml``.
@@ -56,13 +48,11 @@ from typing import Callable
 
 from mcbench import NOISY, NOISY_LABEL, BenchError  # NOISY*: re-exported
 from mcbench.io.buffers import denoise_each_buffer  # re-exported: single-image methods call it
+from mcbench.io.method_spec import KINDS, MethodSpec, MethodSpecError, method_spec, stray_hooks  # re-exported
 from mcbench.analysis.pool import candidate, expand_methods
 
-__all__ = ["KINDS", "NOISY", "NOISY_LABEL", "UnknownMethodError", "available_methods", "load_method",
+__all__ = ["KINDS", "MethodSpec", "method_spec", "NOISY", "NOISY_LABEL", "UnknownMethodError", "available_methods", "load_method",
            "denoise_each_buffer", "single_image_function", "method_parameters", "check_params", "method_table", "config_method_table"]
-
-KINDS = {"denoiser": "denoise", "combiner": "combine"}
-
 
 class UnknownMethodError(BenchError):
     """A config key names a method that has no module in ``methods/``."""
@@ -74,7 +64,8 @@ def available_methods() -> list[str]:
 
 
 def load_method(name: str, kind: str | None = None, config_key: str = "config") -> ModuleType:
-    """Import ``methods.<name>`` and check it exposes the interface of ``kind``.
+    """Import ``methods.<name>`` and check its declaration ``METHOD`` (module docstring) and, when
+    given, that it is a ``kind``.
 
     ``config_key`` is named in the error (e.g. ``"denoisers[2]"``) so a typo in
     ``config.yaml`` is reported where it is.
@@ -82,29 +73,34 @@ def load_method(name: str, kind: str | None = None, config_key: str = "config") 
     if name not in available_methods():
         raise UnknownMethodError(
             f"{config_key}: unknown method '{name}'; available: {', '.join(available_methods())}")
-    module = importlib.import_module(f"{__name__}.{name}")
-    module_kind = getattr(module, "KIND", None)
-    if module_kind not in KINDS:
-        raise UnknownMethodError(f"{config_key}: methods/{name}.py declares no valid KIND")
-    if kind is not None and module_kind != kind:
-        raise UnknownMethodError(f"{config_key}: '{name}' is a {module_kind}, not a {kind}")
-    if not callable(getattr(module, KINDS[module_kind], None)):
-        raise UnknownMethodError(f"{config_key}: methods/{name}.py lacks {KINDS[module_kind]}()")
+    try:
+        module = importlib.import_module(f"{__name__}.{name}")
+    except MethodSpecError as exc:       # raised by the declaration while the module imports
+        raise UnknownMethodError(f"{config_key}: methods/{name}.py: {exc}") from None
+    try:
+        spec = method_spec(module)
+    except BenchError as exc:
+        raise UnknownMethodError(f"{config_key}: {exc}") from None
+    stray = stray_hooks(module, spec)
+    if stray:
+        raise UnknownMethodError(f"{config_key}: methods/{name}.py defines hook(s) of the method contract that "
+                                 f"its METHOD does not carry: {', '.join(stray)}")
+    if kind is not None and spec.kind != kind:
+        raise UnknownMethodError(f"{config_key}: '{name}' is a {spec.kind}, not a {kind}")
     return module
 
 
 def single_image_function(name: str, *, choices=None) -> Callable:
     """Base denoiser ``name`` as a function of one :class:`mcbench.io.buffers.ImageBuffers` ->
-    (H, W, 3) radiance: its module's ``denoise_image`` (default params), or a learned denoiser's
+    (H, W, 3) radiance: its declared ``denoise_image`` (default params), or a learned denoiser's
     committed network (:func:`mcbench.nn.inference.run_network`). A :class:`BenchError` for a method
     without one (NFOR and RDFC filter the half buffers jointly; combiners), naming ``choices``
     (the names a caller supports) when given."""
-    from mcbench.io.weights import is_learned_method
-
     module = load_method(name, kind="denoiser", config_key=f"single-image base '{name}'")
-    if callable(getattr(module, "denoise_image", None)):
-        return module.denoise_image
-    if is_learned_method(module):
+    spec = method_spec(module)
+    if spec.denoise_image is not None:
+        return spec.denoise_image
+    if spec.learned:
         from mcbench.nn.inference import load_network, run_network
 
         network = load_network(module)
@@ -120,10 +116,10 @@ _POSITIONAL = {"denoiser": 1, "combiner": 2}   # denoise(buffers, ...), combine(
 
 
 def method_parameters(module: ModuleType) -> dict[str, inspect.Parameter]:
-    """The config parameters of a method: the keyword parameters of its ``denoise``/``combine``
-    after the positional ``buffers`` (and ``inputs``)."""
-    function = getattr(module, KINDS[module.KIND])
-    parameters = list(inspect.signature(function).parameters.values())[_POSITIONAL[module.KIND]:]
+    """The config parameters of a method: the keyword parameters of its declared ``run``
+    (``denoise``/``combine``) after the positional ``buffers`` (and ``inputs``)."""
+    spec = method_spec(module)
+    parameters = list(inspect.signature(spec.run).parameters.values())[_POSITIONAL[spec.kind]:]
     return {p.name: p for p in parameters if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)}
 
 
@@ -175,7 +171,8 @@ def check_params(module: ModuleType, params: dict, *, config_key: str) -> None:
     if not isinstance(params, dict):
         raise BenchError(f"{config_key}: params must be a mapping, got {type(params).__name__}")
     known = method_parameters(module)
-    function = getattr(module, KINDS[module.KIND])
+    spec = method_spec(module)
+    function = spec.run
     try:
         hints = _type_hints(function)
     except Exception as exc:   # an annotation that does not evaluate is the module's bug
@@ -190,22 +187,22 @@ def check_params(module: ModuleType, params: dict, *, config_key: str) -> None:
     missing = [key for key, p in known.items() if p.default is p.empty and key not in params]
     if missing:
         raise BenchError(f"{config_key}: {name} needs parameter(s) {', '.join(missing)}")
-    extra_check = getattr(module, "check_config", None)
-    if callable(extra_check):     # a method's own checks of values no annotation describes
+    if spec.check_config is not None:     # a method's own checks of values no annotation describes
         try:
-            extra_check(params, config_key=config_key)
+            spec.check_config(params, config_key=config_key)
         except ValueError as exc:
             raise BenchError(str(exc)) from None
 
 
 def _default_label(module: ModuleType, inputs: list[str], params: dict) -> str:
-    """``LABEL`` plus what tells this entry apart: its inputs (combiners) and its params."""
+    """The declared ``label`` plus what tells this entry apart: its inputs (combiners) and its params."""
     details = []
     if inputs:
         details.append("+".join(inputs))
     if params:
         details.append(", ".join(f"{key}={value}" for key, value in params.items()))
-    return f"{module.LABEL} ({'; '.join(details)})" if details else module.LABEL
+    label = method_spec(module).label
+    return f"{label} ({'; '.join(details)})" if details else label
 
 
 def method_table(denoisers: list, combiners: list, *, is_learned: Callable[[ModuleType], bool],
@@ -251,7 +248,7 @@ def method_table(denoisers: list, combiners: list, *, is_learned: Callable[[Modu
             if input_name in inputs[:position]:
                 raise BenchError(f"{key}.inputs[{position}]: '{input_name}' is already "
                                  f"inputs[{inputs.index(input_name)}]; each input once")
-        expected = getattr(module, "INPUTS", None)
+        expected = method_spec(module).inputs
         if kind == "combiner" and expected is not None and len(inputs) != expected:
             raise BenchError(f"{key}.inputs: {module.__name__.split('.')[-1]} combines exactly {expected} "
                              f"input(s), got {len(inputs)}")

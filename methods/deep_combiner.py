@@ -9,7 +9,7 @@ estimate z (the base's output on the same image),
 ``β_c = z_c + Σ_{i∈Ω'_c} w_i (y_i − z_i) / W_c`` (:func:`mcbench.nn.combination.combine_single`;
 the weights are a softmax, so positive with W_c = 1). The combination works on linear radiance;
 the network sees log-compressed inputs. One network serves every base in
-:data:`CORRELATED_BASES` (the paper trains one network for all its correlated inputs).
+``METHOD.correlated_bases`` (the paper trains one network for all its correlated inputs).
 
 Network inputs (24 channels, :func:`mcbench.nn.combination.image_inputs`): log(1+y), log(1+z),
 log(1+y) − log(1+z), y's log-space noise level, albedo, normal, normalised depth, and the
@@ -45,23 +45,12 @@ from functools import cache
 from types import SimpleNamespace
 
 from mcbench import BenchError
-
-KIND = "combiner"
-LABEL = "Deep combiner† (ours, scaled, trained on our scenes)"
-INPUTS = 1
-
-NETWORK = {"channels": 48, "layers": 6, "dilated_layers": 2, "window": 15}
-TRAINING = {"steps": 2000, "batch_size": 8, "patch": 48, "learning_rate": 5e-4, "loss": "relmse"}
-# Tensors forward() needs beyond color, variance, albedo, normal, depth: name -> channels.
-TRAINING_KEYS = {"correlated": 3, "albedo_variance": 3, "normal_variance": 3, "depth_variance": 1}
-# The bases whose outputs the network is trained on as z (one network for all of them).
-CORRELATED_BASES = ("nfor", "kpcn", "oidn")
-
+from mcbench.io.method_spec import MethodSpec
 
 @cache
 def network_classes() -> SimpleNamespace:
     """The torch modules of the deep combiner, defined on first call so that importing this
-    module does not import torch (the DAG imports it to read NETWORK and check params)."""
+    module does not import torch (the DAG imports it to read METHOD and check params)."""
     import torch
     from torch import nn
 
@@ -69,7 +58,7 @@ def network_classes() -> SimpleNamespace:
         logit_network
 
     class DeepCombinerNetwork(nn.Module):
-        """batch (dict of (N, C, H, W): color, variance, albedo, normal, depth and TRAINING_KEYS)
+        """batch (dict of (N, C, H, W): color, variance, albedo, normal, depth and METHOD.training_keys)
         -> combined radiance (N, 3, H, W)."""
 
         def __init__(self, channels: int = 48, layers: int = 6, dilated_layers: int = 2, window: int = 15):
@@ -87,7 +76,7 @@ def network_classes() -> SimpleNamespace:
 
 
 def build_network(**arch):
-    """A ``torch.nn.Module`` deep combiner of architecture ``arch`` (keys of NETWORK)."""
+    """A ``torch.nn.Module`` deep combiner of architecture ``arch`` (keys of METHOD.network)."""
     return network_classes().DeepCombinerNetwork(**arch)
 
 
@@ -95,8 +84,19 @@ def combine(buffers, inputs):
     """The deep combiner on the full image and on each half buffer; ``inputs`` is exactly one
     base's :class:`mcbench.io.buffers.Denoised`. Each image uses only its own noisy samples and the
     base's result on that image (A never sees B's samples)."""
-    if len(inputs) != INPUTS:
-        raise BenchError(f"deep_combiner combines exactly {INPUTS} base denoiser, got {len(inputs)} inputs")
+    if len(inputs) != METHOD.inputs:
+        raise BenchError(f"deep_combiner combines exactly {METHOD.inputs} base denoiser, got {len(inputs)} inputs")
     from mcbench.nn.inference import combine_with_network
 
     return combine_with_network(sys.modules[__name__], buffers, inputs)
+
+
+METHOD = MethodSpec(
+    kind="combiner", label="Deep combiner† (ours, scaled, trained on our scenes)", run=combine, inputs=1,
+    network={"channels": 48, "layers": 6, "dilated_layers": 2, "window": 15},
+    training={"steps": 2000, "batch_size": 8, "patch": 48, "learning_rate": 5e-4, "loss": "relmse"},
+    build_network=build_network,
+    # tensors forward() needs beyond color, variance, albedo, normal, depth: name -> channels
+    training_keys={"correlated": 3, "albedo_variance": 3, "normal_variance": 3, "depth_variance": 1},
+    # the bases whose outputs the network is trained on as z (one network for all of them)
+    correlated_bases=("nfor", "kpcn", "oidn"))

@@ -36,19 +36,9 @@ from functools import cache
 from types import SimpleNamespace
 
 from mcbench import BenchError
+from mcbench.io.method_spec import MethodSpec
 
-KIND = "combiner"
-LABEL = "Deep combiner, multi-buffer† (ours, scaled, trained on our scenes)"
-INPUTS = 1
 SUB_BUFFERS = 2
-
-NETWORK = {"channels": 48, "layers": 6, "dilated_layers": 2, "window": 15}
-TRAINING = {"steps": 1100, "batch_size": 8, "patch": 48, "learning_rate": 5e-4, "loss": "relmse"}
-# Tensors forward() needs beyond color, variance, albedo, normal, depth: name -> channels.
-TRAINING_KEYS = {"correlated": 3, "albedo_variance": 3, "normal_variance": 3, "depth_variance": 1,
-                 "color_sub": 3 * SUB_BUFFERS, "variance_sub": 3 * SUB_BUFFERS, "correlated_sub": 3 * SUB_BUFFERS}
-# Bases that provide results on sub-buffers (Denoised.sub_outputs): only a kernel method can.
-CORRELATED_BASES = ("kpcn",)
 
 
 @cache
@@ -62,7 +52,7 @@ def network_classes() -> SimpleNamespace:
         combine_multi, image_inputs, logit_network, split_sub_buffers, sub_buffer_inputs
 
     class MultiBufferCombinerNetwork(nn.Module):
-        """batch (dict of (N, C, H, W): color, variance, albedo, normal, depth and TRAINING_KEYS)
+        """batch (dict of (N, C, H, W): color, variance, albedo, normal, depth and METHOD.training_keys)
         -> combined radiance (N, 3, H, W)."""
 
         def __init__(self, channels: int = 48, layers: int = 6, dilated_layers: int = 2, window: int = 15):
@@ -83,15 +73,28 @@ def network_classes() -> SimpleNamespace:
 
 
 def build_network(**arch):
-    """A ``torch.nn.Module`` multi-buffer deep combiner of architecture ``arch`` (keys of NETWORK)."""
+    """A ``torch.nn.Module`` multi-buffer deep combiner of architecture ``arch`` (keys of METHOD.network)."""
     return network_classes().MultiBufferCombinerNetwork(**arch)
 
 
 def combine(buffers, inputs):
     """The multi-buffer deep combiner on the full image and on each half buffer, each from its
     own two sub-buffers and ``inputs[0]``'s results on them (exactly one base, e.g. kpcn)."""
-    if len(inputs) != INPUTS:
-        raise BenchError(f"deep_combiner_mb combines exactly {INPUTS} base denoiser, got {len(inputs)} inputs")
+    if len(inputs) != METHOD.inputs:
+        raise BenchError(f"deep_combiner_mb combines exactly {METHOD.inputs} base denoiser, got {len(inputs)} inputs")
     from mcbench.nn.inference import combine_with_network
 
     return combine_with_network(sys.modules[__name__], buffers, inputs)
+
+
+METHOD = MethodSpec(
+    kind="combiner", label="Deep combiner, multi-buffer† (ours, scaled, trained on our scenes)", run=combine,
+    inputs=1,
+    network={"channels": 48, "layers": 6, "dilated_layers": 2, "window": 15},
+    training={"steps": 1100, "batch_size": 8, "patch": 48, "learning_rate": 5e-4, "loss": "relmse"},
+    build_network=build_network,
+    # tensors forward() needs beyond color, variance, albedo, normal, depth: name -> channels
+    training_keys={"correlated": 3, "albedo_variance": 3, "normal_variance": 3, "depth_variance": 1,
+                   "color_sub": 3 * SUB_BUFFERS, "variance_sub": 3 * SUB_BUFFERS, "correlated_sub": 3 * SUB_BUFFERS},
+    # bases that provide results on sub-buffers (Denoised.sub_outputs): only a kernel method can
+    correlated_bases=("kpcn",))

@@ -67,7 +67,7 @@ Precision and memory: the solvers' geometry is float64; the weight filter works 
 (relative rounding 1e-7, far below what a weight map shows) but for its colour term, and the
 blend accumulates in float64. :func:`combine` makes one pass down the image in bands of rows
 (see its docstring), so whole arrays are only what it returns (three images, 2N weight maps);
-the render's layers and the inputs are read by rows (:data:`READS_ROWS`).
+the render's layers and the inputs are read by rows (``reads_rows`` of :data:`METHOD`).
 """
 
 from __future__ import annotations
@@ -80,18 +80,13 @@ from mcbench.combine.ensemble_driver import ensemble_in_bands
 from mcbench.combine.ensemble_weights import (CHANNELS, ENSEMBLE_DEFAULTS, FILTER_BORDERS,
                                               GUIDE_VARIANCE_BLURS, NORMAL_FEATURES, OUTLIER_PASSES,
                                               WEIGHTS)
-from mcbench.combine.simplex_solvers import MAX_ITERATIONS, SOLVERS, STARTS, TOLERANCE
+from mcbench.combine.simplex_solvers.iterative import MAX_ITERATIONS, STARTS, TOLERANCE
+from mcbench.combine.simplex_solvers.problem import SOLVERS
 from mcbench.combine.weight_filter import FILTER_PARAMETERS
 from mcbench.filters.bilateral import COLOUR_DISTANCES
 from mcbench.io.buffers import Denoised, RenderBuffers
+from mcbench.io.method_spec import MethodSpec
 
-KIND = "combiner"
-LABEL = "Ensemble"
-# what combine() reads of the render: the noisy halves (Eq. 11-14) and the filter's features
-RENDER_LAYERS = ("color_a", "color_b", "albedo", "normal")
-# combine() only ever indexes the render's layers and the inputs' images by rows (x[y0:y1]), so a
-# job may hand it mcbench.io.exr.LayerRows (layers read from their files by rows) instead of arrays
-READS_ROWS = True
 # the choices combine() validates (owned by mcbench.combine; here for its annotations):
 # SOLVERS, STARTS, WEIGHTS, CHANNELS, GUIDE_VARIANCE_BLURS, COLOUR_DISTANCES, OUTLIER_PASSES,
 # FILTER_BORDERS, NORMAL_FEATURES
@@ -138,8 +133,8 @@ def combine(buffers: RenderBuffers, inputs: list[Denoised], *,
     pixels as far as each band's filter halo needs
     (:func:`mcbench.combine.ensemble_driver.ensemble_in_bands`); what stays whole is what is
     returned: the three images and the 2N weight maps. The render's layers and the inputs'
-    images are only ever indexed by rows, so they may be read from their files by rows (see
-    :data:`READS_ROWS`).
+    images are only ever indexed by rows, so they may be read from their files by rows
+    (``reads_rows`` of :data:`METHOD`).
 
     Returns Denoised(full, a, b, extras) with float32 images; ``extras`` holds
     ``weights_raw_{i}`` and ``weights_filtered_{i}`` (H, W, 3) per input i (with
@@ -163,3 +158,12 @@ def check_config(params: dict, *, config_key: str) -> None:
     floor = params.get("variance_sum_floor", ENSEMBLE_DEFAULTS["variance_sum_floor"])
     if not (isinstance(floor, (int, float)) and not isinstance(floor, bool) and np.isfinite(floor) and floor >= 0):
         raise ValueError(f"{config_key}.variance_sum_floor: must be a finite number >= 0, got {floor!r}")
+
+
+METHOD = MethodSpec(
+    kind="combiner", label="Ensemble", run=combine, check_config=check_config,
+    # what combine() reads of the render: the noisy halves (Eq. 11-14) and the filter's features
+    render_layers=("color_a", "color_b", "albedo", "normal"),
+    # combine() only ever indexes the render's layers and the inputs' images by rows (x[y0:y1]), so a
+    # job may hand it mcbench.io.exr.LayerRows (layers read from their files by rows) instead of arrays
+    reads_rows=True)

@@ -19,7 +19,7 @@ B), each time with an input folder of that image alone (``color.exr``, ``varianc
 ``<name>.exr``.
 
 The time recorded for the method is the program's wall time (all its calls), not the harness's
-file writing and reading (:data:`TIMES_ITSELF`). A failure stops the job naming the command, the
+file writing and reading (``METHOD.program_seconds``). A failure stops the job naming the command, the
 case and the program's last stderr lines (:class:`mcbench.io.external_program.ExternalProgramError`).
 """
 
@@ -31,14 +31,8 @@ from pathlib import Path
 from mcbench.io.buffers import BUFFER_SUFFIXES, Denoised, RenderBuffers
 from mcbench.io.exchange import write_case, write_image
 from mcbench.io.external_program import check_command, expand_command, read_results, run_program
+from mcbench.io.method_spec import MethodSpec
 
-KIND = "denoiser"
-LABEL = "External program"
-RENDER_LAYERS = tuple(q + s for q in ("color", "variance", "albedo", "normal", "depth") for s in BUFFER_SUFFIXES.values())
-#: no untimed warm-up run on a crop: a program's start-up is part of what it costs
-WARM_UP = False
-#: the time recorded is the program's wall time (:func:`program_seconds`), not the whole call's
-TIMES_ITSELF = True
 _IMAGE_FILES = {"full": "{name}.exr", "a": "{name}A.exr", "b": "{name}B.exr"}
 _seconds: list[float] = []
 
@@ -91,3 +85,12 @@ def check_config(params: dict, *, config_key: str) -> None:
     timeout = params.get("timeout", 3600.0)
     if isinstance(timeout, bool) or not isinstance(timeout, (int, float)) or not timeout > 0:
         raise ValueError(f"{config_key}.timeout: must be > 0 seconds, got {timeout!r}")
+
+
+METHOD = MethodSpec(
+    kind="denoiser", label="External program", run=denoise, check_config=check_config,
+    render_layers=tuple(q + s for q in ("color", "variance", "albedo", "normal", "depth") for s in BUFFER_SUFFIXES.values()),
+    # no untimed warm-up run on a crop: a program's start-up is part of what it costs
+    warm_up=False,
+    # the time recorded is the program's wall time, not the whole call's
+    program_seconds=program_seconds)

@@ -21,10 +21,8 @@ import numpy as np
 from mcbench.filters.bilateral import cross_bilateral_filter
 from mcbench.io.buffers import ImageBuffers, RenderBuffers
 from methods import denoise_each_buffer
+from mcbench.io.method_spec import MethodSpec
 
-KIND = "denoiser"
-IMAGE_QUANTITIES = ("color", "variance", "albedo", "normal", "depth")   # what denoise_image reads of each image
-LABEL = "JBF (joint bilateral)"
 
 
 def denoise_image(image: ImageBuffers, radius: int = 7, sigma_spatial: float = 4.0,
@@ -50,3 +48,7 @@ def denoise(buffers: RenderBuffers, *, radius: int = 7, sigma_spatial: float = 4
     params = dict(radius=radius, sigma_spatial=sigma_spatial, sigma_color=sigma_color,
                   sigma_albedo=sigma_albedo, sigma_normal=sigma_normal, sigma_depth=sigma_depth)
     return denoise_each_buffer(buffers, lambda image: denoise_image(image, **params))
+
+
+METHOD = MethodSpec(kind="denoiser", label="JBF (joint bilateral)", run=denoise, denoise_image=denoise_image,
+                    image_quantities=("color", "variance", "albedo", "normal", "depth"))   # what denoise_image reads

@@ -39,12 +39,8 @@ from __future__ import annotations
 import sys
 from functools import cache
 from types import SimpleNamespace
+from mcbench.io.method_spec import MethodSpec
 
-KIND = "denoiser"
-LABEL = "#1 KPCN† (ours, scaled, trained on our scenes)"
-
-NETWORK = {"channels": 48, "layers": 9, "kernel_size": 13}
-TRAINING = {"steps": 6000, "batch_size": 8, "patch": 64, "learning_rate": 5e-4, "loss": "l1_log"}
 INPUT_CHANNELS = 31
 
 
@@ -64,7 +60,7 @@ def network_inputs(buffers):
 @cache
 def network_classes() -> SimpleNamespace:
     """The torch modules of KPCN, defined on first call so that importing this module does not
-    import torch (the DAG imports it to read NETWORK and check params)."""
+    import torch (the DAG imports it to read METHOD and check params)."""
     from torch import nn
 
     from mcbench.nn.features import demodulate, remodulate
@@ -97,7 +93,7 @@ def network_classes() -> SimpleNamespace:
 
 
 def build_network(**arch):
-    """A ``torch.nn.Module`` KPCN of architecture ``arch`` (keys of NETWORK)."""
+    """A ``torch.nn.Module`` KPCN of architecture ``arch`` (keys of METHOD.network)."""
     return network_classes().KernelPredictingNetwork(**arch)
 
 
@@ -119,3 +115,10 @@ def denoise(buffers):
             images[which] = tensor_image(output)
             extras.update({name: tensor_image(sub) for name, sub in zip(SUB_OUTPUTS[which], sub_outputs)})
     return Denoised(full=images["full"], a=images["a"], b=images["b"], extras=extras)
+
+
+METHOD = MethodSpec(
+    kind="denoiser", label="#1 KPCN† (ours, scaled, trained on our scenes)", run=denoise,
+    network={"channels": 48, "layers": 9, "kernel_size": 13},
+    training={"steps": 6000, "batch_size": 8, "patch": 64, "learning_rate": 5e-4, "loss": "l1_log"},
+    build_network=build_network)

@@ -16,8 +16,8 @@ convolutions with leaky ReLU and a 3×3 output, trained as a WGAN-GP critic (Gul
 2017, λ_GP = 10; Adam 1e-4, β = (0.5, 0.9)).
 
 Loss: L1 (in log space, see :mod:`mcbench.nn.losses`) plus ``adversarial_weight`` = 0.005 times
-the adversarial term; Xu et al. combine L1 with the adversarial loss -- the paper is not in
-``../shared/papers``, the weight 0.005 is our recollection of it, stated here as our choice.
+the adversarial term; Xu et al. combine L1 with the adversarial loss -- their paper was not
+available to us, the weight 0.005 is our recollection of it, stated here as our choice.
 
 Scaling against the published architecture: one generator on demodulated colour instead of
 separate diffuse and specular generators; 6 residual blocks of width 32 (the paper's generator is
@@ -29,14 +29,8 @@ from __future__ import annotations
 import sys
 from functools import cache
 from types import SimpleNamespace
+from mcbench.io.method_spec import MethodSpec
 
-KIND = "denoiser"
-LABEL = "#3 MCGAN† (ours, scaled, trained on our scenes)"
-
-NETWORK = {"channels": 32, "blocks": 6, "condition_channels": 32}
-CRITIC = {"channels": 32}
-TRAINING = {"steps": 5000, "batch_size": 8, "patch": 64, "learning_rate": 5e-4, "loss": "l1_log",
-            "adversarial_weight": 0.005, "gradient_penalty": 10.0, "critic_learning_rate": 1e-4}
 
 
 @cache
@@ -112,12 +106,12 @@ def network_classes() -> SimpleNamespace:
 
 
 def build_network(**arch):
-    """The generator (a ``torch.nn.Module``) of architecture ``arch`` (keys of NETWORK)."""
+    """The generator (a ``torch.nn.Module``) of architecture ``arch`` (keys of METHOD.network)."""
     return network_classes().Generator(**arch)
 
 
 def build_critic(**arch):
-    """The WGAN-GP critic of architecture ``arch`` (keys of CRITIC)."""
+    """The WGAN-GP critic of architecture ``arch`` (keys of METHOD.critic)."""
     return network_classes().Critic(**arch)
 
 
@@ -126,3 +120,11 @@ def denoise(buffers):
     from mcbench.nn.inference import denoise_with_network
 
     return denoise_with_network(sys.modules[__name__], buffers)
+
+
+METHOD = MethodSpec(
+    kind="denoiser", label="#3 MCGAN† (ours, scaled, trained on our scenes)", run=denoise,
+    network={"channels": 32, "blocks": 6, "condition_channels": 32},
+    training={"steps": 5000, "batch_size": 8, "patch": 64, "learning_rate": 5e-4, "loss": "l1_log",
+              "adversarial_weight": 0.005, "gradient_penalty": 10.0, "critic_learning_rate": 1e-4},
+    build_network=build_network, critic={"channels": 32}, build_critic=build_critic)

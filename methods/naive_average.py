@@ -12,9 +12,8 @@ import numpy as np
 
 from mcbench.io.buffers import Denoised, RenderBuffers
 from mcbench.combine.selection import check_finite_arrays
+from mcbench.io.method_spec import MethodSpec
 
-KIND = "combiner"
-LABEL = "Naive average"
 
 
 def combine(buffers: RenderBuffers, inputs: list[Denoised]) -> Denoised:
@@ -33,3 +32,6 @@ def combine(buffers: RenderBuffers, inputs: list[Denoised]) -> Denoised:
         check_finite_arrays({f"inputs' {which} images": stack}, what="naive_average")
         means[which] = stack.mean(axis=0).astype(np.float32)
     return Denoised(full=means["full"], a=means["a"], b=means["b"])
+
+
+METHOD = MethodSpec(kind="combiner", label="Naive average", run=combine)

@@ -98,9 +98,7 @@ from mcbench.jit import cached_njit
 from mcbench.filters.nlmeans import (BORDER_MODES, CHANNEL_MODES, guide_planes, nl_means_filter,
                                      nl_means_window_weights)
 from mcbench.progress import StageLog
-
-KIND = "denoiser"
-LABEL = "#4 NFOR"
+from mcbench.io.method_spec import MethodSpec
 
 NLM_EPSILON = 1e-10
 NLM_ALPHA = 1.0
@@ -503,3 +501,6 @@ def denoise(buffers: RenderBuffers, *, second_pass_variance_scale: float = 1.0, 
 
     return Denoised(full=f32(full), a=f32(result_a), b=f32(result_b),
                     extras={"selection": f32(selection)})
+
+
+METHOD = MethodSpec(kind="denoiser", label="#4 NFOR", run=denoise)

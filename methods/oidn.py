@@ -14,10 +14,8 @@ import numpy as np
 
 from mcbench.io.buffers import ImageBuffers, RenderBuffers
 from methods import denoise_each_buffer
+from mcbench.io.method_spec import MethodSpec
 
-KIND = "denoiser"
-IMAGE_QUANTITIES = ("color", "albedo", "normal")   # what denoise_image reads of each image
-LABEL = "#6 OIDN"
 Quality = Literal["high", "balanced", "fast", "default"]   # OIDN's filter qualities
 
 
@@ -34,3 +32,7 @@ def denoise_image(image: ImageBuffers, *, quality: Quality = "high") -> np.ndarr
 def denoise(buffers: RenderBuffers, *, quality: Quality = "high"):
     """OIDN on the full buffer and on each half buffer."""
     return denoise_each_buffer(buffers, lambda image: denoise_image(image, quality=quality))
+
+
+METHOD = MethodSpec(kind="denoiser", label="#6 OIDN", run=denoise, denoise_image=denoise_image,
+                    image_quantities=("color", "albedo", "normal"))   # what denoise_image reads of each image

@@ -43,9 +43,8 @@ import numpy as np
 
 from mcbench.combine import selection as sel
 from mcbench.io.buffers import Denoised, RenderBuffers
+from mcbench.io.method_spec import MethodSpec
 
-KIND = "combiner"
-LABEL = "One-hot selection"
 PREFILTERS = ("none", "sbf", "nfor", "post")
 IMAGES = ("full", "a", "b")
 
@@ -90,3 +89,6 @@ def combine(buffers: RenderBuffers, inputs: list[Denoised], *,
     extras.update({f"weights_filtered_{i}": weights["full"][i].astype(np.float32) for i in range(len(inputs))})
     out = {which: sel.blend(weights[which], results[which]).astype(np.float32) for which in IMAGES}
     return Denoised(full=out["full"], a=out["a"], b=out["b"], extras=extras)
+
+
+METHOD = MethodSpec(kind="combiner", label="One-hot selection", run=combine)

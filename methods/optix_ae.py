@@ -27,12 +27,8 @@ from __future__ import annotations
 import sys
 from functools import cache
 from types import SimpleNamespace
+from mcbench.io.method_spec import MethodSpec
 
-KIND = "denoiser"
-LABEL = "#7 OptiX† (our autoencoder, a stand-in)"
-
-NETWORK = {"widths": [32, 48, 64, 80], "bottleneck": 96}
-TRAINING = {"steps": 10000, "batch_size": 8, "patch": 64, "learning_rate": 5e-4, "loss": "l1_log_gradient"}
 INPUT_CHANNELS = 11
 
 
@@ -86,7 +82,7 @@ def network_classes() -> SimpleNamespace:
 
 
 def build_network(**arch):
-    """The autoencoder (a ``torch.nn.Module``) of architecture ``arch`` (keys of NETWORK)."""
+    """The autoencoder (a ``torch.nn.Module``) of architecture ``arch`` (keys of METHOD.network)."""
     return network_classes().DenoisingAutoencoder(**arch)
 
 
@@ -95,3 +91,10 @@ def denoise(buffers):
     from mcbench.nn.inference import denoise_with_network
 
     return denoise_with_network(sys.modules[__name__], buffers)
+
+
+METHOD = MethodSpec(
+    kind="denoiser", label="#7 OptiX† (our autoencoder, a stand-in)", run=denoise,
+    network={"widths": [32, 48, 64, 80], "bottleneck": 96},
+    training={"steps": 10000, "batch_size": 8, "patch": 64, "learning_rate": 5e-4, "loss": "l1_log_gradient"},
+    build_network=build_network)

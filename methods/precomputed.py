@@ -19,12 +19,8 @@ import numpy as np
 
 from mcbench.io.buffers import Denoised, RenderBuffers
 from mcbench.io.exchange import RESULT_PATTERN, check_result_pattern, read_image, result_files
+from mcbench.io.method_spec import MethodSpec
 
-KIND = "denoiser"
-LABEL = "Precomputed results"
-RENDER_LAYERS = ("color",)
-WARM_UP = False
-TIMES_ITSELF = True
 _seconds: list[float] = [0.0]
 
 
@@ -64,3 +60,8 @@ def required_files(params: dict, *, name: str, scene: str, spp: int) -> list[str
     """The files the case (scene, spp) needs, checked when the DAG is parsed."""
     return [str(p) for p in result_files(params.get("pattern", RESULT_PATTERN), dir=params["dir"], scene=scene,
                                          spp=spp, name=name).values()]
+
+
+METHOD = MethodSpec(kind="denoiser", label="Precomputed results", run=denoise, render_layers=("color",),
+                    warm_up=False, program_seconds=program_seconds, check_config=check_config,
+                    required_files=required_files)

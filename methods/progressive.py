@@ -58,7 +58,7 @@ output                 f_act (Eq. 19), 9 channels          the same, α clipped 
 swap augmentation      HDR,VAR ↔ DEN,SURE, random         the same, probability 1/2 per item
 loss                   SMAPE                              SMAPE (ε = 0.01, mcbench.nn.losses)
 optimiser              batch 12, One Cycle, max lr 2e-5,  batch 8 of 48² patches, Adam, cosine
-                       2500 epochs, ~10 h on an RTX 3090  from 1e-3, TRAINING["steps"] steps on
+                       2500 epochs, ~10 h on an RTX 3090  from 1e-3, training["steps"] steps on
                                                           2 CPU threads (minutes)
 training data          1348 crops 128², 2-4096 spp,       our procedural scenes' 64² crops at
                        refs 32k-131k spp                  4-1024 spp (+ halves), 4096-spp targets
@@ -97,21 +97,7 @@ from mcbench.filters import sure as sure_module
 from mcbench.filters.sure import divergence_map
 from mcbench.io.buffers import BUFFER_SUFFIXES, IMAGE_INDEX, Denoised, RenderBuffers
 from methods import single_image_function
-
-KIND = "combiner"
-LABEL = "PD† progressive denoising (ours, scaled, trained on our scenes)"
-INPUTS = 1
-
-NETWORK = {"channels": 48, "first_kernel": 5, "sure_input": True, "f_act": True}
-TRAINING = {"steps": 1500, "batch_size": 8, "patch": 48, "learning_rate": 1e-3, "loss": "smape",
-            "validate_every": 500}
-# Tensors forward() needs beyond the render's: the base's result and its σ²f′ (Eq. 2).
-TRAINING_KEYS = {"correlated": 3, "divergence": 3}
-# Trained on OIDN's results with their divergence term ("+sure": mcbench.pipeline.training writes the
-# divergence layers too, into results/training/correlated/oidn+sure/).
-CORRELATED_BASES = ("oidn+sure",)
-RENDER_LAYERS = tuple(q + s for q in ("color", "variance", "albedo", "normal", "depth")
-                      for s in BUFFER_SUFFIXES.values())
+from mcbench.io.method_spec import MethodSpec
 
 # Bases whose single-image function re-runs for the divergence (module docstring).
 DivergenceBase = Literal["none", "oidn", "jbf", "kpcn", "mcgan", "optix_ae", "wskpn"]
@@ -126,7 +112,7 @@ def network_classes() -> SimpleNamespace:
 
 
 def build_network(**arch):
-    """A ``torch.nn.Module`` h_NN of architecture ``arch`` (keys of NETWORK)."""
+    """A ``torch.nn.Module`` h_NN of architecture ``arch`` (keys of METHOD.network)."""
     return network_classes().MixingNetwork(**arch)
 
 
@@ -164,8 +150,8 @@ def combine_images(buffers: RenderBuffers, inputs: list[Denoised], *, net=None, 
                    t_test: bool = True, iterations: int = sure_module.ITERATIONS, seed: int = 0) -> Denoised:
     """Progressive denoising of each image with network ``net`` (an h_NN module in eval mode, or
     None for α = 1) -- :func:`combine` without loading weights (tests pass a random network)."""
-    if len(inputs) != INPUTS:
-        raise BenchError(f"progressive combines exactly {INPUTS} input, got {len(inputs)}")
+    if len(inputs) != METHOD.inputs:
+        raise BenchError(f"progressive combines exactly {METHOD.inputs} input, got {len(inputs)}")
     base = inputs[0]
     needs_divergence = net is not None and net.sure_input and divergence != "none"
     denoise_image = single_image_function(divergence, choices=DivergenceBase.__args__) if needs_divergence else None
@@ -222,18 +208,31 @@ VARIANTS = {"no_sure": {"sure_input": False}, "no_fact": {"f_act": False}}
 
 def variant_module(variant: str):
     """A stand-in method module for the network variant ``variant`` (a key of :data:`VARIANTS`):
-    this module's attributes with NETWORK changed, named ``progressive_<variant>`` so that the
-    shared training loop (:func:`mcbench.nn.train.train_network`) writes
-    ``methods/weights/progressive_<variant>.{pt,json}``."""
+    this module's declaration with its ``network`` and ``label`` changed, named
+    ``progressive_<variant>`` so that the shared training loop
+    (:func:`mcbench.nn.train.train_network`) writes ``methods/weights/progressive_<variant>.{pt,json}``."""
+    import dataclasses
     import types
 
     if variant not in VARIANTS:
         raise BenchError(f"unknown progressive variant '{variant}'; known: {', '.join(VARIANTS)}")
-    this = sys.modules[__name__]
     module = types.ModuleType(f"methods.progressive_{variant}")
-    for attribute in ("KIND", "INPUTS", "TRAINING", "TRAINING_KEYS", "CORRELATED_BASES", "build_network",
-                      "augment_batch", "combine"):
-        setattr(module, attribute, getattr(this, attribute))
-    module.LABEL = f"{LABEL}, ablation {variant}"
-    module.NETWORK = {**NETWORK, **VARIANTS[variant]}
+    module.METHOD = dataclasses.replace(METHOD, label=f"{METHOD.label}, ablation {variant}",
+                                        network={**METHOD.network, **VARIANTS[variant]})
     return module
+
+
+METHOD = MethodSpec(
+    kind="combiner", label="PD† progressive denoising (ours, scaled, trained on our scenes)", run=combine,
+    inputs=1,
+    network={"channels": 48, "first_kernel": 5, "sure_input": True, "f_act": True},
+    training={"steps": 1500, "batch_size": 8, "patch": 48, "learning_rate": 1e-3, "loss": "smape",
+              "validate_every": 500},
+    build_network=build_network, augment_batch=augment_batch,
+    # tensors forward() needs beyond the render's: the base's result and its σ²f′ (Eq. 2)
+    training_keys={"correlated": 3, "divergence": 3},
+    # trained on OIDN's results with their divergence term ("+sure": mcbench.pipeline.training writes
+    # the divergence layers too, into results/training/correlated/oidn+sure/)
+    correlated_bases=("oidn+sure",),
+    render_layers=tuple(q + s for q in ("color", "variance", "albedo", "normal", "depth")
+                        for s in BUFFER_SUFFIXES.values()))

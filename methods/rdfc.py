@@ -83,9 +83,7 @@ from mcbench.jit import cached_njit
 from mcbench.filters.nlmeans import nl_means_filter, nl_means_patch_distance_maps
 from mcbench.filters.smoothing import box_mean, pyramid_smooth
 from mcbench.progress import StageLog
-
-KIND = "denoiser"
-LABEL = "#8 RDFC"
+from mcbench.io.method_spec import MethodSpec
 
 WINDOW_RADIUS = 10
 K_COLOR = 0.45
@@ -529,3 +527,6 @@ def denoise(buffers: RenderBuffers, *, radius: int = WINDOW_RADIUS, variance: st
     b = np.nan_to_num(final["b"]).astype(np.float32)
     full = ((a.astype(np.float64) + b) / 2.0).astype(np.float32)
     return Denoised(full=full, a=a, b=b)
+
+
+METHOD = MethodSpec(kind="denoiser", label="#8 RDFC", run=denoise)

@@ -1,5 +1,5 @@
-"""Weight-sharing kernel prediction network (Fan et al. 2021,
-``../shared/papers/weight-sharing-kpn-fan2021.md``), an extra learned base denoiser, trained by
+"""Weight-sharing kernel prediction network (Fan et al. 2021, "Real-time Monte Carlo Denoising
+with Weight Sharing Kernel Prediction Network"), an extra learned base denoiser, trained by
 us on our procedural scenes. Weights: ``methods/weights/wskpn.pt``, record ``wskpn.json``.
 
 * **ImportanceNet** (Sec. 4.1): six RepVGG blocks (Ding et al. 2021). In training each block sums
@@ -38,14 +38,8 @@ from __future__ import annotations
 import sys
 from functools import cache
 from types import SimpleNamespace
+from mcbench.io.method_spec import MethodSpec
 
-KIND = "denoiser"
-LABEL = "WSKPN† (Fan et al. 2021; ours, trained on our scenes)"
-
-NETWORK = {"channels": 32, "blocks": 6, "kernel_sizes": [1, 3, 5, 7, 9, 11, 13]}
-# 5000 steps: a first training of 8000 steps gained little validation SMAPE after step 5000, and
-# fewer steps keep a retraining (e.g. with new training scenes) short.
-TRAINING = {"steps": 5000, "batch_size": 8, "patch": 64, "learning_rate": 1e-3, "loss": "smape"}
 INPUT_CHANNELS = 11
 
 
@@ -163,7 +157,7 @@ def network_classes() -> SimpleNamespace:
 
 
 def build_network(**arch):
-    """WSKPN (a ``torch.nn.Module``) of architecture ``arch`` (keys of NETWORK)."""
+    """WSKPN (a ``torch.nn.Module``) of architecture ``arch`` (keys of METHOD.network)."""
     return network_classes().WeightSharingKPN(**arch)
 
 
@@ -172,3 +166,12 @@ def denoise(buffers):
     from mcbench.nn.inference import denoise_with_network
 
     return denoise_with_network(sys.modules[__name__], buffers)
+
+
+METHOD = MethodSpec(
+    kind="denoiser", label="WSKPN† (Fan et al. 2021; ours, trained on our scenes)", run=denoise,
+    network={"channels": 32, "blocks": 6, "kernel_sizes": [1, 3, 5, 7, 9, 11, 13]},
+    # 5000 steps: validation SMAPE gains little after step 5000 of a longer training, and fewer
+    # steps keep a retraining (e.g. with new training scenes) short
+    training={"steps": 5000, "batch_size": 8, "patch": 64, "learning_rate": 1e-3, "loss": "smape"},
+    build_network=build_network)

@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-# A solver call that compiles (and caches) the ensemble's numba kernels (mcbench.combine.simplex_solvers:
+# A solver call that compiles (and caches) the ensemble's numba kernels (mcbench.combine.simplex_solvers.iterative:
 # 20 problems of 2 denoisers, 3 channels sharing the weights).
 SOLVE = """
 import numpy as np
@@ -28,11 +28,11 @@ print("solved", weights.shape)
 BY_PATH = """
 import importlib.util
 spec = importlib.util.spec_from_file_location("ensemble_loaded_by_path",
-                                              "mcbench/combine/simplex_solvers.py")
+                                              "mcbench/combine/simplex_solvers/iterative.py")
 ensemble = importlib.util.module_from_spec(spec)
 spec.loader.exec_module(ensemble)
 """
-NORMAL = "import mcbench.combine.simplex_solvers as ensemble\n"
+NORMAL = "import mcbench.combine.simplex_solvers.iterative as ensemble\n"
 
 
 @pytest.fixture
@@ -57,8 +57,9 @@ def numba_cache_files(folder: Path) -> list[Path]:
 
 
 def test_loading_a_module_by_path_does_not_break_its_normal_import(project_copy):
-    """The sequence of the issue: load the solvers' module by file path and solve, then a normal
-    `import mcbench.combine.simplex_solvers` solves too (it died with No module named '<dynamic>')."""
+    """Load the solvers' module by file path and solve, then a normal
+    `import mcbench.combine.simplex_solvers.iterative` solves too, reading what the first cached
+    (a cache entry recorded under the module name '<dynamic>' must not break the normal import)."""
     copy, env = project_copy
     first = run_python(BY_PATH + SOLVE, copy, env)
     assert first.returncode == 0, first.stderr

@@ -1,7 +1,8 @@
 """The 39-candidate pool of Zheng et al. 2021, Sec. 5.3.1, as data.
 
-Eight base denoisers by the paper's number and 31 ensembles #9-#39 of them, with provenance
-(``../shared/study/candidate-pool.md``): the paper names 12 ensembles (``"paper"``), its ID order
+Eight base denoisers by the paper's number and 31 ensembles #9-#39 of them, with provenance:
+the paper names 12 ensembles (``"paper"``, in the text and Table 3; its sizes follow from the case
+counts behind Tables 1-2), its ID order (lexicographic in the member tuples within a size)
 forces #31 (``"forced"``), the other 18 are our choice (``"filled"``; heterogeneous and
 homogeneous sets, DC variants, the combinations of the paper's figures). Everything the study
 reports about the pool says which rows are filled.

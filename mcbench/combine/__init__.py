@@ -1,7 +1,7 @@
 """Layer ``combine``: per-pixel weighting of several images of one case.
 
 * :mod:`mcbench.combine.simplex_solvers` -- batches of small simplex-constrained least-squares
-  problems: the ensemble's solvers (Zheng et al. 2021 Sec. 4.1, 5.2.1-5.2.3);
+  problems: the ensemble's solvers (Zheng et al. 2021 Sec. 4.1, 5.2.1-5.2.3), one module per family;
 * :mod:`mcbench.combine.ensemble_weights` -- the ensemble's raw weights of an image or a block of
   rows (``solve_weights``), its options' choices, defaults and checks;
 * :mod:`mcbench.combine.weight_filter` -- the cross-bilateral filter of weight maps (Sec. 4.2) and

@@ -8,8 +8,8 @@ For every pixel-channel with base outputs y_i^A, y_i^B (N denoisers) and noisy h
     L(w) = w^T <M> w = 1/2 |A w - b|^2 - 1/2 (x^A - x^B)^2                      (Eq. 13, 25)
 
 (<M> of Eq. 11-12; A's columns a_i = (y_i^A, y_i^B), b = (x^B, x^A)) on the simplex
-(w >= 0, sum w = 1) with the solvers of :mod:`mcbench.combine.simplex_solvers` (whose docstring
-gives the equations and our departures):
+(w >= 0, sum w = 1) with the solvers of :mod:`mcbench.combine.simplex_solvers` (each solver's module gives its
+equations and our departures):
 
 * ``solver``: ``"iterative"`` (Sec. 4.1, Eq. 29-31, the paper's), ``"exact"`` (projection onto
   the convex hull, minimum-norm tie-break; our addition) or ``"qp"`` (a general QP solver, the
@@ -32,10 +32,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from mcbench.combine.simplex_solvers import (MAX_EXACT_N, MAX_ITERATIONS, SOLVERS, STARTS, TOLERANCE,
-                                             exact_weights, iterative_weights, qp_simplex_weights,
-                                             seed_state, shared_exact_weights,
-                                             unconstrained_least_squares, unconstrained_weights)
+from mcbench.combine.simplex_solvers.exact import MAX_EXACT_N, exact_weights
+from mcbench.combine.simplex_solvers.iterative import MAX_ITERATIONS, STARTS, TOLERANCE, iterative_weights, seed_state
+from mcbench.combine.simplex_solvers.problem import SOLVERS
+from mcbench.combine.simplex_solvers.qp import qp_simplex_weights
+from mcbench.combine.simplex_solvers.shared_exact import shared_exact_weights
+from mcbench.combine.simplex_solvers.unconstrained import unconstrained_least_squares, unconstrained_weights
 from mcbench.filters.bilateral import COLOUR_DISTANCES
 
 __all__ = ["WEIGHTS", "CHANNELS", "GUIDE_VARIANCE_BLURS", "OUTLIER_PASSES", "FILTER_BORDERS",

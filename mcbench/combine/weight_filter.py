@@ -17,15 +17,15 @@ clipping).
 rule, sigma = 1.7, borders reflected) before the filter; ``outlier_removal="public_code"``:
 after the filter, a pixel of a weight map where any channel lies 2.5 or more standard
 deviations from the mean of the other 48 pixels of its 7 x 7 window takes the map's 7 x 7
-Gaussian blur (:func:`mcbench.filters.bilateral.remove_outlier_pixels`), ``"neighbour_mean"``
-our earlier reading (one value -> the neighbours' mean,
-:func:`mcbench.filters.bilateral.remove_outliers`), then the weights are projected back onto
+Gaussian blur (:func:`mcbench.filters.blur_and_outliers.remove_outlier_pixels`), ``"neighbour_mean"``
+our own reading (one value -> the neighbours' mean,
+:func:`mcbench.filters.blur_and_outliers.remove_outliers`), then the weights are projected back onto
 the simplex (onto sum one when unconstrained; a pixel-channel left with all weights 0 keeps its
 filtered ones); ``filter_border="reflect101"``: windows reflected at the image borders;
 ``variance_sum_floor=1e-6``: Eq. 33's denominator max(v_p + v_q, 1e-6);
 ``normal_features="standardised"``: the normal feature standardised per channel and clipped to
 +-3. Eq. 33's ||.||^2 is a sum over the channels (the text and the code; ``colour_distance=
-"mean"`` is our earlier reading). The ensemble's defaults
+"mean"`` is our own reading). The ensemble's defaults
 (``mcbench.combine.ensemble_weights.ENSEMBLE_DEFAULTS``) follow the text where it decides and the
 code where it is silent; :data:`PAPER_FILTER` is Sec. 4.2 alone and :data:`PUBLIC_CODE_FILTER`
 the code's choices (with :func:`public_code_sigmas` for its feature terms).
@@ -45,8 +45,8 @@ import numpy as np
 
 from mcbench.combine.blending import combine_with
 from mcbench.combine.ensemble_weights import check_choices
-from mcbench.filters.bilateral import (cross_bilateral_filter_vectors, gaussian_blur, reflect101_tile,
-                                       remove_outlier_pixels, remove_outliers)
+from mcbench.filters.bilateral import cross_bilateral_filter_vectors
+from mcbench.filters.blur_and_outliers import gaussian_blur, reflect101_tile, remove_outlier_pixels, remove_outliers
 
 __all__ = ["FILTER_PARAMETERS", "PAPER_FILTER", "PUBLIC_CODE_FILTER", "OUTLIER_RADIUS", "OUTLIER_THRESHOLD",
            "NORMAL_STD_FLOOR", "NORMAL_CLIP", "PUBLIC_CODE_VARIANCE_SUM_FLOOR",
@@ -154,16 +154,16 @@ def filter_band(values, y0, y1, guide, guide_variance, v0, albedo, normal, *, ra
     (N, y1 - y0, W, C) of ``dtype``.
 
     ``filter_border="reflect101"``: the filter's windows reflect at the image borders
-    (:func:`mcbench.filters.bilateral.reflect101_tile`) instead of being clipped.
+    (:func:`mcbench.filters.blur_and_outliers.reflect101_tile`) instead of being clipped.
     ``normal_statistics`` (mean, std) of the whole normal map: the filter's normal feature is
     :func:`standardised_normal` (None: the normal as given). ``variance_sum_floor``: Eq. 33's
     denominator floor. ``outlier_removal``: ``"none"``, ``"neighbour_mean"``
-    (:func:`mcbench.filters.bilateral.remove_outliers`) or ``"public_code"``
-    (:func:`mcbench.filters.bilateral.remove_outlier_pixels`).
+    (:func:`mcbench.filters.blur_and_outliers.remove_outliers`) or ``"public_code"``
+    (:func:`mcbench.filters.blur_and_outliers.remove_outlier_pixels`).
 
     Each stage works on the rows it needs only; the filter and the blurs give every row exactly
     the whole image's result (:func:`mcbench.filters.bilateral.cross_bilateral_filter_vectors`,
-    :func:`mcbench.filters.bilateral.gaussian_blur`: same sums in the same order), the
+    :func:`mcbench.filters.blur_and_outliers.gaussian_blur`: same sums in the same order), the
     neighbour-mean outlier pass's window statistics start their running sums at the tile
     (float64; differences ~1e-16 relative, tests/combine/test_ensemble.py)."""
     height = values.shape[1]
@@ -181,7 +181,7 @@ def filter_band(values, y0, y1, guide, guide_variance, v0, albedo, normal, *, ra
     if normal_statistics is not None:
         features[1] = standardised_normal(features[1], normal_statistics)
     rows = (o0 - f0, o1 - f0)
-    if filter_border == "reflect101":   # pad by the window's radius: no window is clipped any more
+    if filter_border == "reflect101":   # pad by the window's radius: no window is clipped
         tile = dict(radius=radius, first_row=f0, height=height, rows=(o0, o1))
         weights = reflect101_tile(np.asarray(weights), row_axis=1, **tile)
         z, var = reflect101_tile(z, **tile), reflect101_tile(var, **tile)
@@ -245,9 +245,9 @@ def filter_weights(weights, denoised_full, denoised_a, denoised_b, albedo, norma
     (:data:`FILTER_PARAMETERS`, :data:`PAPER_FILTER`: Eq. 33 summed over the channels, windows
     clipped at the borders). The public code's passes and details (the module docstring;
     :data:`PUBLIC_CODE_FILTER` sets them all): ``guide_variance_blur="gaussian9"`` blurs Var[z]
-    with :func:`mcbench.filters.bilateral.gaussian_blur` (9 x 9) first; ``outlier_removal``
-    ``"public_code"`` (:func:`mcbench.filters.bilateral.remove_outlier_pixels`) or
-    ``"neighbour_mean"`` (ours, :func:`mcbench.filters.bilateral.remove_outliers`) cleans the
+    with :func:`mcbench.filters.blur_and_outliers.gaussian_blur` (9 x 9) first; ``outlier_removal``
+    ``"public_code"`` (:func:`mcbench.filters.blur_and_outliers.remove_outlier_pixels`) or
+    ``"neighbour_mean"`` (ours, :func:`mcbench.filters.blur_and_outliers.remove_outliers`) cleans the
     filtered maps, which are then re-projected; ``colour_distance="mean"`` averages Eq. 33 over
     the channels instead; ``filter_border="reflect101"`` reflects the windows at the borders;
     ``normal_features="standardised"`` standardises the normal (:func:`standardised_normal`);

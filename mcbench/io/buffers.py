@@ -136,7 +136,7 @@ class RenderBuffers:
         """Read a render EXR, refusing missing layers or NaN/Inf pixels (errors name the file).
 
         ``layers``: only these layers (plus ``color``, which gives the shape), e.g. a method's
-        ``RENDER_LAYERS``; the rest are not kept (a render holds several times the layers most
+        ``render_layers``; the rest are not kept (a render holds several times the layers most
         methods read). None: every layer, after checking :data:`REQUIRED_LAYERS` (an imported
         render, header key ``imported_from``: only ``color``; the pipeline checked its layers
         against its methods' when the DAG was parsed)."""

@@ -5,7 +5,7 @@ only when it is called.
 
 * Folder: ``$MCBENCH_WEIGHTS_DIR`` when set (the workflow sets it from the config key
   ``weights_dir``), else the committed ``methods/weights`` of this checkout.
-* ``<name>.pt`` -- a ``torch.save`` of ``{"arch": NETWORK, "state_dict": network.state_dict()}``
+* ``<name>.pt`` -- a ``torch.save`` of ``{"arch": network, "state_dict": state_dict()}``
   (:data:`WEIGHTS_KEYS`): plain tensors and containers only, so it loads with
   ``torch.load(..., weights_only=True)``, which never runs code from the file.
 * ``<name>.json`` -- the training record (data, settings, losses, machine; see
@@ -15,8 +15,9 @@ only when it is called.
 * Training checkpoints use the same format with the keys :data:`CHECKPOINT_KEYS` (plus the
   critic's states for adversarial training).
 
-A learned method is a method module that declares ``NETWORK`` (architecture hyperparameters),
-``TRAINING`` (training settings) and ``build_network(**NETWORK)`` (:data:`LEARNED_ATTRIBUTES`).
+A learned method is a method module whose declaration (:class:`mcbench.io.method_spec.MethodSpec`)
+sets ``network`` (architecture hyperparameters), ``training`` (training settings) and
+``build_network(**network)`` (:attr:`~mcbench.io.method_spec.MethodSpec.learned`).
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ from pathlib import Path
 from types import ModuleType
 
 from mcbench import BenchError
+from mcbench.io.method_spec import method_spec
 
 WEIGHTS_DIR_ENV = "MCBENCH_WEIGHTS_DIR"
 COMMITTED_WEIGHTS = Path(__file__).resolve().parents[2] / "methods" / "weights"
@@ -34,7 +36,6 @@ WEIGHTS_SUFFIX = ".pt"
 RECORD_SUFFIX = ".json"
 WEIGHTS_KEYS = ("arch", "state_dict")
 CHECKPOINT_KEYS = ("arch", "settings", "step", "seconds", "network", "optimizer", "history")
-LEARNED_ATTRIBUTES = ("NETWORK", "TRAINING", "build_network")
 #: Key of a training record holding the SHA-256 of its weights file (checked by :func:`load_weights`).
 WEIGHTS_DIGEST_KEY = "weights_sha256"
 
@@ -66,16 +67,16 @@ def method_name(module: ModuleType) -> str:
 
 
 def is_learned_method(module: ModuleType) -> bool:
-    """Whether ``module`` declares every one of :data:`LEARNED_ATTRIBUTES` (an attribute check, imports nothing)."""
-    return all(hasattr(module, attribute) for attribute in LEARNED_ATTRIBUTES)
+    """Whether method module ``module``'s declaration makes it a learned method (imports nothing)."""
+    return method_spec(module).learned
 
 
 def check_learned_method(module: ModuleType) -> ModuleType:
     """``module`` itself if it is a learned method, else a :class:`BenchError` naming its file and
-    the first attribute it lacks."""
-    for attribute in LEARNED_ATTRIBUTES:
-        if not hasattr(module, attribute):
-            raise BenchError(f"methods/{method_name(module)}.py is not a learned method: it lacks {attribute}")
+    what its declaration lacks."""
+    if not is_learned_method(module):
+        raise BenchError(f"methods/{method_name(module)}.py is not a learned method: its METHOD declares no "
+                         f"network, training and build_network")
     return module
 
 

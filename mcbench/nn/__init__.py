@@ -15,8 +15,9 @@
 The weights' location and file format, the safe loader and :func:`mcbench.io.weights.is_learned_method`
 are in the torch-free :mod:`mcbench.io.weights`.
 
-A learned method is one module in ``methods/`` that declares ``NETWORK`` (architecture
-hyperparameters), ``TRAINING`` (training settings) and ``build_network(**NETWORK)``; the network's
+A learned method is one module in ``methods/`` whose declaration
+(:class:`mcbench.io.method_spec.MethodSpec`) sets ``network`` (architecture hyperparameters),
+``training`` (training settings) and ``build_network(**network)``; the network's
 ``forward`` takes a dict of raw buffers (see :data:`mcbench.nn.data.BUFFER_KEYS`) and returns
 linear HDR radiance (N, 3, H, W). Its weights live in ``methods/weights/<name>.pt`` with a record
 ``methods/weights/<name>.json``. The functions here take the method's *module* (core never imports

@@ -24,7 +24,7 @@ Combiners (the deep combiner, Back et al. 2020) also need a base denoiser's resu
 training input: :func:`load_combiner_crops` reads the crops together with the base outputs written
 by :func:`mcbench.pipeline.training.write_correlated_training_inputs` (``correlated/<base>/example_<seed>_<k>.exr``,
 layers ``correlated<half>_spp<N>`` and, for bases that expose a kernel, ``correlated<half>_sub<j>_spp<N>``),
-one item per (crop, base), with the extra input keys the combiner declares (``TRAINING_KEYS``):
+one item per (crop, base), with the extra input keys the combiner declares (``training_keys``):
 render layers by name (e.g. ``albedo_variance``), ``correlated`` (the base's result on that image),
 ``color_sub``/``variance_sub`` (the image's two sample subsets, :data:`mcbench.io.buffers.SUB_BUFFERS`,
 concatenated), ``correlated_sub`` (the base's result on each) and ``divergence`` (layers
@@ -419,7 +419,7 @@ def load_combiner_crops(crop_files: list[str | Path], correlated_files: dict[str
                         keys: dict[str, int]) -> CropSet:
     """Training items of a combiner: each crop once per base of ``correlated_files`` ({base:
     files}, ``files[i]`` the base's results on ``crop_files[i]``), base by base, with the inputs
-    ``keys`` ({name: channels}: :data:`BUFFER_KEYS` first, then the combiner's ``TRAINING_KEYS``).
+    ``keys`` ({name: channels}: :data:`BUFFER_KEYS` first, then the combiner's ``training_keys``).
     Items of one crop share its scene seed, so the train/validation split keeps every base of a
     scene on one side, and its render planes (only the base's planes are per item). Errors name
     the file (missing, corrupt, NaN/Inf, missing layers, other levels)."""

@@ -6,8 +6,9 @@ runs in float32 with ``torch.use_deterministic_algorithms(True)`` under ``torch.
 with the same thread count the same input gives bit-identical output (tested). A network that
 provides ``fuse()`` (WSKPN's RepVGG blocks) is re-parameterised once after loading.
 
-Every function takes the learned method's *module* (``NETWORK``, ``TRAINING``,
-``build_network``), never its name: core code does not import ``methods``.
+Every function takes the learned method's *module* (its declaration ``METHOD``,
+:func:`mcbench.io.method_spec.method_spec`: ``network``, ``build_network``, ...), never its name:
+core code does not import ``methods``.
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ import torch
 
 from mcbench import BenchError
 from mcbench.io.buffers import BUFFER_SUFFIXES, Denoised, ImageBuffers, RenderBuffers, denoise_each_buffer
+from mcbench.io.method_spec import method_spec
 from mcbench.io.weights import check_learned_method, load_weights, method_name, weights_path
 
 
@@ -44,7 +46,7 @@ def load_network(module: ModuleType, path: str | Path | None = None) -> torch.nn
 def _cached_network(module: ModuleType, path: str, mtime_ns: int) -> torch.nn.Module:
     blob = load_weights(path)
     try:
-        network = module.build_network(**blob["arch"])
+        network = method_spec(module).build_network(**blob["arch"])
         network.load_state_dict(blob["state_dict"])
     except (RuntimeError, KeyError, TypeError, ValueError) as exc:
         raise BenchError(f"{path}: cannot load weights of '{method_name(module)}' ({exc})") from exc
@@ -117,7 +119,7 @@ def combiner_image_tensors(buffers: RenderBuffers, inputs: list[Denoised], which
                            keys: dict[str, int]) -> dict[str, torch.Tensor]:
     """The tensors a combiner network needs on image ``which`` (``"full"``, ``"a"``, ``"b"``):
     :func:`image_tensors` of ``buffers.image(which)`` plus each of ``keys`` (name -> channels,
-    a module's ``TRAINING_KEYS``; names in :data:`COMBINER_KEYS`), all (1, C, H, W) float32:
+    a declaration's ``training_keys``; names in :data:`COMBINER_KEYS`), all (1, C, H, W) float32:
 
     * ``correlated`` -- ``inputs[0].image(which)``, the base's result on this image;
     * ``albedo_variance``, ``normal_variance``, ``depth_variance`` -- the render's layers of this
@@ -175,16 +177,17 @@ def run_network_on(network: torch.nn.Module, tensors: dict[str, torch.Tensor]) -
 
 def combine_with_network(module: ModuleType, buffers: RenderBuffers, inputs: list[Denoised], *,
                          network: torch.nn.Module | None = None) -> Denoised:
-    """Run the combiner network of learned method ``module`` (``INPUTS``, ``TRAINING_KEYS``) on
+    """Run the combiner network of learned method ``module`` (its ``inputs``, ``training_keys``) on
     the full image and on each half buffer, each from its own samples and ``inputs``' results on
     that image (:func:`combiner_image_tensors`). ``network`` defaults to the committed weights
     (:func:`load_network`, loaded only after every input is checked). The result is float32 and
     finite (a non-finite output is a :class:`BenchError` naming the method)."""
     name = method_name(module)
-    expected = getattr(module, "INPUTS", 1)
+    spec = method_spec(module)
+    expected = spec.inputs or 1
     if len(inputs) != expected:
         raise BenchError(f"{name} combines exactly {expected} input(s), got {len(inputs)}")
-    tensors = {which: combiner_image_tensors(buffers, inputs, which, module.TRAINING_KEYS)
+    tensors = {which: combiner_image_tensors(buffers, inputs, which, spec.training_keys)
                for which in BUFFER_SUFFIXES}
     network = load_network(module) if network is None else network
     results = {which: run_network_on(network, tensors[which]) for which in BUFFER_SUFFIXES}

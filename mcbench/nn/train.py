@@ -4,20 +4,21 @@
 network of a learned method module (``methods/<name>.py``, resolved from its name by the caller:
 core code never imports ``methods``) on training crops (:mod:`mcbench.nn.data`) and writes
 
-* ``weights_path`` -- ``{"arch": NETWORK, "state_dict": ...}`` (format and location:
+* ``weights_path`` -- ``{"arch": network, "state_dict": ...}`` (``network`` of its declaration) (format and location:
   :mod:`mcbench.io.weights`), loadable with ``torch.load(..., weights_only=True)``;
 * ``record_path`` -- JSON: data, settings, loss, validation loss (overall and per validation
   scene), loss history, wall time, machine, torch version.
 
-Settings (a method's ``TRAINING`` dict, overridable from ``config.yaml``):
+Settings (the ``training`` dict of a method's declaration, :class:`mcbench.io.method_spec.MethodSpec`,
+overridable from ``config.yaml``):
 
 ``steps``, ``batch_size``, ``patch`` (square training patches, pixels), ``learning_rate``
 (Adam; cosine-decayed to ``learning_rate * final_lr_fraction`` over the run), ``loss`` (a name
 in :data:`mcbench.nn.losses.LOSSES`), ``grad_clip`` (global gradient-norm clip; HDR fireflies
 make rare huge gradients), ``seed``, ``validate_every``, ``checkpoint_every``, ``threads``, and
-a method may define ``augment_batch(buffers, rng)`` (extra training inputs drawn from
+a method may declare ``augment_batch(buffers, rng)`` (extra training inputs drawn from
 ``default_rng([seed, step, 1])``, e.g. the swap flags of progressive denoising); for adversarial
-training (a method that also defines ``build_critic``): ``adversarial_weight``,
+training (a method that also declares ``critic`` and ``build_critic``): ``adversarial_weight``,
 ``gradient_penalty``, ``critic_learning_rate``.
 
 Determinism and resuming: weights are initialised from ``torch.manual_seed(seed)``; batch
@@ -52,6 +53,7 @@ import numpy as np
 import torch
 
 from mcbench import BenchError
+from mcbench.io.method_spec import method_spec
 from mcbench.io.tables import read_json, write_json
 from mcbench.nn.data import CropSet, crop_paths, load_crops, sample_batch, validation_batches
 from mcbench.nn.losses import LOSSES
@@ -87,9 +89,10 @@ VALIDATION_BATCH = 2
 
 
 def training_settings(module, overrides: dict | None = None) -> dict:
-    """DEFAULT_SETTINGS < the method's TRAINING < ``overrides`` (unknown keys are refused)."""
+    """DEFAULT_SETTINGS < the ``training`` of the method's declaration < ``overrides`` (unknown keys
+    are refused)."""
     settings = dict(DEFAULT_SETTINGS)
-    for source, values in (("TRAINING", module.TRAINING), ("config", overrides or {})):
+    for source, values in (("METHOD.training", method_spec(module).training), ("config", overrides or {})):
         unknown = sorted(set(values) - set(DEFAULT_SETTINGS))
         if unknown:
             raise BenchError(f"{source} of '{module.__name__}': unknown training setting(s) {unknown}; "
@@ -173,6 +176,7 @@ def train_network(module: ModuleType, data: list[str | Path] | CropSet, weights_
     on ``data``: training crop files, or a :class:`CropSet` already loaded (a combiner's, from
     :func:`mcbench.nn.data.load_combiner_crops`); returns the record."""
     name = method_name(check_learned_method(module))
+    spec = method_spec(module)
     settings = training_settings(module, overrides)
     torch.set_num_threads(int(settings["threads"]))
     checkpoint = Path(checkpoint)
@@ -186,14 +190,14 @@ def train_network(module: ModuleType, data: list[str | Path] | CropSet, weights_
         f"levels {crops.spp[:, 0].astype(int).tolist()}, settings {settings}")
 
     torch.manual_seed(int(settings["seed"]))
-    network = module.build_network(**module.NETWORK)
+    network = spec.build_network(**spec.network)
     optimizer = torch.optim.Adam(network.parameters(), lr=settings["learning_rate"])
     adversarial = settings["adversarial_weight"] > 0
     critic = critic_optimizer = None
     if adversarial:
-        if not hasattr(module, "build_critic"):
-            raise BenchError(f"methods/{name}.py sets adversarial_weight but has no build_critic")
-        critic = module.build_critic(**getattr(module, "CRITIC", {}))
+        if spec.build_critic is None:
+            raise BenchError(f"methods/{name}.py sets adversarial_weight but its METHOD declares no build_critic")
+        critic = spec.build_critic(**spec.critic)
         critic_optimizer = torch.optim.Adam(critic.parameters(), lr=settings["critic_learning_rate"],
                                             betas=(0.5, 0.9))
     loss_fn = LOSSES[settings["loss"]]
@@ -202,7 +206,7 @@ def train_network(module: ModuleType, data: list[str | Path] | CropSet, weights_
         required = CHECKPOINT_KEYS + (("critic", "critic_optimizer") if adversarial else ())
         state = load_weights(checkpoint, required=required, what="checkpoint")
         fixed = {k: v for k, v in settings.items() if k not in RESUMABLE_CHANGES}
-        if state["arch"] != module.NETWORK or {k: v for k, v in state["settings"].items()
+        if state["arch"] != spec.network or {k: v for k, v in state["settings"].items()
                                                if k not in RESUMABLE_CHANGES} != fixed:
             raise BenchError(f"{checkpoint}: checkpoint of other architecture or settings; delete it to "
                              f"train from scratch")
@@ -215,13 +219,13 @@ def train_network(module: ModuleType, data: list[str | Path] | CropSet, weights_
         log(f"{name}: resuming from {checkpoint} at step {start_step}")
 
     def save_checkpoint(step: int, seconds: float) -> None:
-        state = {"arch": module.NETWORK, "settings": settings, "step": step, "seconds": seconds,
+        state = {"arch": spec.network, "settings": settings, "step": step, "seconds": seconds,
                  "network": network.state_dict(), "optimizer": optimizer.state_dict(), "history": history}
         if adversarial:
             state.update(critic=critic.state_dict(), critic_optimizer=critic_optimizer.state_dict())
         _save_atomic(state, checkpoint)
 
-    augment = getattr(module, "augment_batch", None)
+    augment = spec.augment_batch
     network.train()
     started = time.perf_counter() - elapsed
     session_started = interval_started = time.perf_counter()
@@ -292,8 +296,8 @@ def train_network(module: ModuleType, data: list[str | Path] | CropSet, weights_
     final = evaluate(network, validation_set, settings["loss"])
     record = {
         "network": name,
-        "label": module.LABEL,
-        "arch": module.NETWORK,
+        "label": spec.label,
+        "arch": spec.network,
         "parameters": count_parameters(network),
         "settings": settings,
         "data": {
@@ -302,7 +306,7 @@ def train_network(module: ModuleType, data: list[str | Path] | CropSet, weights_
             "training_scenes": sorted(int(s) for s in set(train_set.seeds.tolist())),
             "validation_scenes": sorted(int(s) for s in set(validation_set.seeds.tolist())),
             "folder": folder,
-            "source": "procedural training scenes of mcbench.training (no test scene)",
+            "source": "procedural training scenes of mcbench.training_data (no test scene)",
         },
         "loss": settings["loss"],
         # one epoch = every (training crop, level, buffer) once, as a full crop
@@ -317,7 +321,7 @@ def train_network(module: ModuleType, data: list[str | Path] | CropSet, weights_
         "torch": torch.__version__,
         "finished": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
     }
-    _save_atomic({"arch": module.NETWORK, "state_dict": network.state_dict()}, Path(weights_out))
+    _save_atomic({"arch": spec.network, "state_dict": network.state_dict()}, Path(weights_out))
     record[WEIGHTS_DIGEST_KEY] = file_sha256(weights_out)
     write_json(record_out, record, checksum=False)   # committed beside the weights: a checkout may change it
     log(f"{name}: done in {seconds:.0f} s, validation {settings['loss']} {final['loss']:.5f}")
@@ -348,23 +352,23 @@ def main(argv: list[str] | None = None, *, load_method: Callable[[str], ModuleTy
     """Command line: ``train <name>`` or ``evaluate <name>``; ``load_method`` resolves a method
     name to its module (the caller's, e.g. ``methods.load_method``: core never imports ``methods``);
     ``load_data(name, crop_files, correlated_files)`` builds a learned combiner's training data
-    (the crops with results of its ``CORRELATED_BASES`` under ``<data>/correlated/<base>/``)."""
+    (the crops with results of its declared ``correlated_bases`` under ``<data>/correlated/<base>/``)."""
     parser = argparse.ArgumentParser(prog="python -m mcbench.pipeline.training",
                                      description="Train a learned denoiser, or evaluate its committed weights.")
     parser.add_argument("command", choices=["train", "evaluate"])
     parser.add_argument("name", help="method module in methods/ (kpcn, mcgan, optix_ae, wskpn, ...)")
     parser.add_argument("--data", default="results/training", help="folder of training crops")
-    parser.add_argument("--steps", type=int, default=None, help="override TRAINING['steps']")
+    parser.add_argument("--steps", type=int, default=None, help="override the steps of its training settings")
     parser.add_argument("--checkpoint", default=None)
     args = parser.parse_args(argv)
     try:
         module = check_learned_method(load_method(args.name))
         files = crop_paths(args.data)
         data = files
-        if getattr(module, "KIND", "denoiser") == "combiner":
+        if method_spec(module).kind == "combiner":
             if load_data is None:
                 raise BenchError(f"{args.name} is a combiner: no loader for its base results")
-            files, correlated = correlated_paths(args.data, module.CORRELATED_BASES, files)
+            files, correlated = correlated_paths(args.data, method_spec(module).correlated_bases, files)
             data = load_data(args.name, files, correlated)
         if args.command == "train":
             overrides = {"steps": args.steps} if args.steps else {}

@@ -13,6 +13,7 @@ import numpy as np
 from mcbench import BenchError
 from mcbench.io.buffers import Denoised, RenderBuffers
 from mcbench.io.exr import check_finite, read_metadata, write_layers
+from mcbench.io.method_spec import method_spec
 from mcbench.io.tables import write_json
 
 
@@ -84,14 +85,15 @@ def run_methods(entries: list[dict], render_path: str, *, scene: str = "", spp: 
             if key in method_parameters(module) and key not in params:
                 params[key] = value          # a method that names its files gets its name and case
         key = (module_name, json.dumps(params, sort_keys=True, default=str))
-        if key not in warmed and getattr(module, "WARM_UP", True):
+        spec = method_spec(module)
+        if key not in warmed and spec.warm_up:
             _apply(module, *_corner_crop(buffers, inputs), params)
             warmed.add(key)
         start = time.perf_counter()
         result = _apply(module, buffers, inputs, params)
         seconds = time.perf_counter() - start
-        if getattr(module, "TIMES_ITSELF", False):      # e.g. an external program: its own wall time
-            seconds = float(module.program_seconds())
+        if spec.program_seconds is not None:      # e.g. an external program: its own wall time
+            seconds = float(spec.program_seconds())
         layers = result.layers()
         bad = {name: layer for name, layer in layers.items() if not np.all(np.isfinite(layer))}
         if bad:
@@ -99,7 +101,7 @@ def run_methods(entries: list[dict], render_path: str, *, scene: str = "", spp: 
         write_layers(entry["exr"], layers, metadata={"method": method, "scene": scene, "spp": spp,
                                                      "seconds": f"{seconds:.6f}"})
         write_json(entry["timing"], {"scene": scene, "spp": spp, "method": method, "module": module_name,
-                                     "kind": module.KIND, "seconds": seconds, "width": width,
+                                     "kind": spec.kind, "seconds": seconds, "width": width,
                                      "height": height, "threads": threads, "machine": _machine()})
 
 
@@ -108,13 +110,13 @@ WARM_UP_SIZE = 32  # pixels per side of the untimed warm-up crop of run_methods
 
 def reads_rows(modules) -> bool:
     """Whether a job of these method modules reads its render and inputs by rows: every module
-    declares ``READS_ROWS`` (methods/__init__.py; the ensemble), so no layer is held whole
+    declares ``reads_rows`` (:class:`mcbench.io.method_spec.MethodSpec`; the ensemble), so no layer is held whole
     (``benchmarks/bench_ensemble.py`` measures the peak memory saved). Such a method reads the
     rows it needs inside its own call, so its recorded seconds include those reads (uncompressed
     scanlines, cheap next to its compute); a batch with any other
     method reads every file whole, before the timed call."""
     modules = list(modules)
-    return bool(modules) and all(getattr(module, "READS_ROWS", False) for module in modules)
+    return bool(modules) and all(method_spec(module).reads_rows for module in modules)
 
 
 def _render_by_rows(path: str, layers: tuple[str, ...] | None) -> RenderBuffers:
@@ -135,7 +137,7 @@ def _render_by_rows(path: str, layers: tuple[str, ...] | None) -> RenderBuffers:
 def _denoised_by_rows(path: str) -> Denoised:
     """A method's output as :class:`mcbench.io.exr.LayerRows` of ``color``, ``color_a``, ``color_b``
     (read by rows when the method indexes them, after a pass that checks the checksum and refuses
-    NaN/Inf; no extras: a READS_ROWS method reads none)."""
+    NaN/Inf; no extras: a method declaring ``reads_rows`` reads none)."""
     from mcbench.io.exr import layer_rows
 
     layers = layer_rows(path, ["color", "color_a", "color_b"], finite=True)
@@ -144,10 +146,11 @@ def _denoised_by_rows(path: str) -> Denoised:
 
 def render_layers(modules) -> tuple[str, ...] | None:
     """The render layers a job of these method modules reads: the union of their
-    ``RENDER_LAYERS`` (methods/__init__.py), or None (every layer) when one does not declare it."""
+    declared ``render_layers`` (:class:`mcbench.io.method_spec.MethodSpec`), or None (every layer)
+    when one does not declare them."""
     names: dict[str, None] = {}
     for module in modules:
-        declared = getattr(module, "RENDER_LAYERS", None)
+        declared = method_spec(module).render_layers
         if declared is None:
             return None
         names.update(dict.fromkeys(declared))
@@ -156,18 +159,18 @@ def render_layers(modules) -> tuple[str, ...] | None:
 
 def needed_layers(module, *, halves: bool = True) -> tuple[str, ...]:
     """The render layers a method cannot run without, checked against an imported render's when
-    the DAG is parsed (:mod:`mcbench.pipeline.plan`): its ``RENDER_LAYERS``; or, for a
-    single-image denoiser declaring ``IMAGE_QUANTITIES`` (methods/__init__.py), those quantities
+    the DAG is parsed (:mod:`mcbench.pipeline.plan`): its declared ``render_layers``; or, for a
+    single-image denoiser declaring ``image_quantities`` (:class:`mcbench.io.method_spec.MethodSpec`), those quantities
     of the full image plus the halves' own colour (and variance, if it reads variance) when
     ``halves`` (half-buffer features fall back to the full image's,
     :meth:`mcbench.io.buffers.RenderBuffers.image`); else every layer of
     :data:`mcbench.io.buffers.REQUIRED_LAYERS`."""
     from mcbench.io.buffers import REQUIRED_LAYERS
 
-    declared = getattr(module, "RENDER_LAYERS", None)
-    if declared is not None:
-        return tuple(declared)
-    quantities = getattr(module, "IMAGE_QUANTITIES", None)
+    spec = method_spec(module)
+    if spec.render_layers is not None:
+        return spec.render_layers
+    quantities = spec.image_quantities
     if quantities is None:
         return REQUIRED_LAYERS
     own = [q for q in ("color", "variance") if q in quantities]
@@ -175,9 +178,10 @@ def needed_layers(module, *, halves: bool = True) -> tuple[str, ...]:
 
 
 def _apply(module, buffers: RenderBuffers, inputs: list[Denoised], params: dict) -> Denoised:
-    if module.KIND == "denoiser":
-        return module.denoise(buffers, **params)
-    return module.combine(buffers, inputs, **params)
+    spec = method_spec(module)
+    if spec.kind == "denoiser":
+        return spec.run(buffers, **params)
+    return spec.run(buffers, inputs, **params)
 
 
 def _corner_crop(buffers: RenderBuffers, inputs: list[Denoised]) -> tuple[RenderBuffers, list[Denoised]]:

@@ -42,6 +42,7 @@ import re
 from mcbench import NOISY, NOISY_LABEL, BenchError
 from mcbench.analysis.comparisons import comparison_role, find_comparisons
 from mcbench.analysis.pool import POOL
+from mcbench.io.method_spec import method_spec
 from mcbench.pipeline.config import ConfigError, key_path, schema_defaults
 from mcbench.pipeline.oracle import oracle_size, usable_downscale
 from mcbench.pipeline.registry import available_scenes, config_method_table, load_method, load_scene
@@ -172,14 +173,14 @@ def _plan(config: dict, is_learned) -> dict:
 
 
 def _check_case_files(methods: dict, scenes: list[str], spps: list[int]) -> None:
-    """Files a method needs per case (its ``required_files``, e.g. precomputed results) exist for
+    """Files a method needs per case (its declared ``required_files``, e.g. precomputed results) exist for
     every (scene, spp) of the config; else a BenchError naming the method and the first missing
     files, before any job."""
     from pathlib import Path
 
     for name, spec in methods.items():
-        required = getattr(load_method(spec["module"]), "required_files", None)
-        if not callable(required):
+        required = method_spec(load_method(spec["module"])).required_files
+        if required is None:
             continue
         missing = [path for scene in scenes for spp in spps
                    for path in required(spec["params"], name=name, scene=scene, spp=spp) if not Path(path).is_file()]

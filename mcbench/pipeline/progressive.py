@@ -55,6 +55,7 @@ import pandas as pd
 from mcbench import NOISY, BenchError
 from mcbench.io.buffers import RenderBuffers
 from mcbench.io.exr import ExrError, check_finite, read_layers
+from mcbench.io.method_spec import method_spec
 from mcbench.analysis.figures import pyplot_agg, save_figure
 from mcbench.io.tables import read_table, write_csv, write_text
 from mcbench.analysis.metrics import relmse, relmse_corrected, smape
@@ -262,6 +263,7 @@ def run_consistency_curve(scene: str, reference_path: str, *, table_csv: str, ta
     downscale = int(downscale)
     base_module = load_method(base, kind="denoiser", config_key="progressive_curve.base")
     combiner = load_method("progressive", kind="combiner", config_key="progressive_curve")
+    denoise, combine = method_spec(base_module).run, method_spec(combiner).run
     divergences = combiner.DivergenceBase.__args__    # the names the plugin's ``divergence`` param takes
     if divergence not in divergences:
         raise BenchError(f"config key 'progressive_curve.divergence': '{divergence}' is not one of "
@@ -283,7 +285,7 @@ def run_consistency_curve(scene: str, reference_path: str, *, table_csv: str, ta
     load_scene_dict(desc, key=key, variant=variant)        # the scene's load is no level's time
 
     entries = entry_names(base)
-    base_label = getattr(base_module, "LABEL", base)
+    base_label = method_spec(base_module).label
     # PD's weights are ours (trained on our scenes): the mark † as in every table
     labels = {entries[0]: NOISY_LABEL, entries[1]: base_label,
               entries[2]: f"PD† over {base_label} (divergence: {divergence})",
@@ -299,15 +301,15 @@ def run_consistency_curve(scene: str, reference_path: str, *, table_csv: str, ta
         buffers = RenderBuffers(layers=layers, spp=spp, source=f"progressive curve render of '{scene}' at {spp} spp")
         spent = {entries[0]: time.perf_counter() - clock}
         if index == 0:      # warm-up, untimed: imports, PD's weights, OIDN's device (outputs are deterministic)
-            combiner.combine(buffers, [base_module.denoise(buffers)], divergence=divergence)
+            combine(buffers, [denoise(buffers)], divergence=divergence)
         clock = time.perf_counter()
-        base_out = base_module.denoise(buffers)
+        base_out = denoise(buffers)
         spent[entries[1]] = time.perf_counter() - clock
         clock = time.perf_counter()
-        pd_out = combiner.combine(buffers, [base_out], divergence=divergence)
+        pd_out = combine(buffers, [base_out], divergence=divergence)
         spent[entries[2]] = time.perf_counter() - clock
         clock = time.perf_counter()
-        bound = combiner.combine(buffers, [base_out], network=False)
+        bound = combine(buffers, [base_out], network=False)
         spent[entries[3]] = time.perf_counter() - clock
         images = {entries[0]: buffers.color, entries[1]: base_out.full, entries[2]: pd_out.full,
                   entries[3]: bound.full}

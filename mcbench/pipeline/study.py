@@ -12,9 +12,9 @@ from mcbench.io.tables import read_table
 
 def write_study(metrics_csv: str, out_dir: str, *, metrics: list[str], labels: dict[str, str],
                 candidates: list[str], n_resamples: int, seed: int) -> dict:
-    """The 39-candidate study's tables (:func:`mcbench.analysis.study.write_study_tables`) under ``out_dir``:
+    """The 39-candidate study's tables (:func:`mcbench.analysis.study.writers.write_study_tables`) under ``out_dir``:
     beside the paper's Table 3, recommendations, findings, bootstrap intervals, summary."""
-    from mcbench.analysis.study import write_study_tables
+    from mcbench.analysis.study.writers import write_study_tables
 
     return write_study_tables(metrics_csv, out_dir, metrics=list(metrics), labels=labels,
                               candidates=[c for c in candidates if c != NOISY], noisy=NOISY,
@@ -35,10 +35,10 @@ def recommended_names(recommendations_csv: str, metric: str) -> list[str]:
 def write_study_figures_of(metrics_csv: str, timings_csv: str, recommendations_csv: str, scores_ci_csv: str,
                            render_paths: list[str], paths: dict[str, str], *, metric: str, candidates: list[str],
                            labels: dict[str, str], inputs: dict[str, list[str]]) -> None:
-    """The study's figures for one metric (:func:`mcbench.analysis.study_figures.write_study_figures`): the
+    """The study's figures for one metric (:func:`mcbench.analysis.study.figures.write_study_figures`): the
     bases and the ensembles the study recommends (``recommendations_csv``) as curves, the bootstrap
     intervals of ``scores_ci_csv`` on the size figure, render times from the renders' EXRs."""
-    from mcbench.analysis.study_figures import curve_candidates, write_study_figures
+    from mcbench.analysis.study.figures import curve_candidates, write_study_figures
 
     recommended = [n for n in recommended_names(recommendations_csv, metric) if n in candidates]
     intervals = read_table(scores_ci_csv)

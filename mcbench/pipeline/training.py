@@ -11,6 +11,7 @@ import numpy as np
 from mcbench import BenchError
 from mcbench.io.buffers import RenderBuffers
 from mcbench.io.exr import check_finite, read_layers, read_metadata, write_layers
+from mcbench.io.method_spec import method_spec
 from mcbench.pipeline.render import resolution_pair
 
 
@@ -57,7 +58,7 @@ def write_correlated_training_inputs(base: str, crop_paths: list[str], output_pa
         except ImportError:
             pass
     name, with_sure = (base[:-len(SURE_SUFFIX)], True) if base.endswith(SURE_SUFFIX) else (base, False)
-    module = load_method(name, kind="denoiser", config_key=f"base '{base}'")
+    denoise = method_spec(load_method(name, kind="denoiser", config_key=f"base '{base}'")).run
     if with_sure:
         from mcbench.filters.sure import divergence_map
         from mcbench.io.buffers import IMAGE_INDEX
@@ -76,7 +77,7 @@ def write_correlated_training_inputs(base: str, crop_paths: list[str], output_pa
         for level in levels:
             buffers = RenderBuffers(layers=crop_render_layers(layers, level), spp=level,
                                     source=f"{crop_path} at {level} spp")
-            result = module.denoise(buffers)
+            result = denoise(buffers)
             for half, which in HALF_OF.items():
                 out[f"correlated{half}_spp{level}"] = result.image(which)
                 extras = result.extras or {}
@@ -94,34 +95,31 @@ def write_correlated_training_inputs(base: str, crop_paths: list[str], output_pa
 
 
 def learned_method(name: str):
-    """``methods/<name>.py`` checked to be a learned method (NETWORK, TRAINING, build_network):
-    a denoiser, or a combiner trained on base results (``CORRELATED_BASES``, ``TRAINING_KEYS``)."""
+    """``methods/<name>.py`` checked to be a learned method (its declaration sets ``network``,
+    ``training``, ``build_network``): a denoiser, or a combiner trained on base results (its
+    ``correlated_bases``, ``training_keys``; :class:`mcbench.io.method_spec.MethodSpec` refuses a
+    learned combiner without them)."""
     from mcbench.io.weights import check_learned_method
     from mcbench.pipeline.registry import load_method
 
-    module = check_learned_method(load_method(name, config_key=f"network '{name}'"))
-    if module.KIND == "combiner":
-        missing = [a for a in ("CORRELATED_BASES", "TRAINING_KEYS") if not hasattr(module, a)]
-        if missing:
-            raise BenchError(f"methods/{name}.py: a learned combiner needs {', '.join(missing)}")
-    return module
+    return check_learned_method(load_method(name, config_key=f"network '{name}'"))
 
 
 def training_data(name: str, crop_files: list[str], correlated_files: dict[str, list[str]] | None = None):
     """The training data of learned method ``name``: its crops (a denoiser: the crop paths
     themselves) or, for a combiner, :func:`mcbench.nn.data.load_combiner_crops` over the results
-    of its ``CORRELATED_BASES`` (``correlated_files``: {base: files, one per crop})."""
-    module = learned_method(name)
-    if module.KIND != "combiner":
+    of its ``correlated_bases`` (``correlated_files``: {base: files, one per crop})."""
+    spec = method_spec(learned_method(name))
+    if spec.kind != "combiner":
         return list(crop_files)
     from mcbench.nn.data import load_combiner_crops
 
     correlated_files = correlated_files or {}
-    missing = [b for b in module.CORRELATED_BASES if b not in correlated_files]
+    missing = [b for b in spec.correlated_bases if b not in correlated_files]
     if missing:
         raise BenchError(f"{name}: no results of base(s) {missing} for its training")
-    return load_combiner_crops(crop_files, {b: correlated_files[b] for b in module.CORRELATED_BASES},
-                               module.TRAINING_KEYS)
+    return load_combiner_crops(crop_files, {b: correlated_files[b] for b in spec.correlated_bases},
+                               spec.training_keys)
 
 
 def train_learned_method(name: str, crop_files: list[str], *args, correlated_files=None, **kwargs):
@@ -136,7 +134,7 @@ def train_progressive_variant(variant: str, data: str = "results/training", step
                               threads: int | None = None) -> dict:
     """Train progressive denoising's h_NN (``methods/progressive.py``): ``full`` (the committed
     ``progressive.pt``) or an ablation of its ``VARIANTS`` (``no_sure``, ``no_fact``; Firmino et al.
-    2022 Table 4), on the crops with results of its ``CORRELATED_BASES`` under
+    2022 Table 4), on the crops with results of its declared ``correlated_bases`` under
     ``<data>/correlated/``; weights and record in ``methods/weights/``, checkpoint
     ``results/training/checkpoints/<name>.ckpt`` (a run resumes from it)."""
     import sys
@@ -150,7 +148,7 @@ def train_progressive_variant(variant: str, data: str = "results/training", step
     if variant != "full" and variant not in progressive.VARIANTS:
         raise BenchError(f"unknown progressive variant '{variant}'; known: full, {', '.join(progressive.VARIANTS)}")
     module = progressive if variant == "full" else progressive.variant_module(variant)
-    files, correlated = correlated_paths(data, progressive.CORRELATED_BASES, crop_paths(data))
+    files, correlated = correlated_paths(data, method_spec(progressive).correlated_bases, crop_paths(data))
     crops = training_data("progressive", [str(f) for f in files],
                           {b: [str(f) for f in fs] for b, fs in correlated.items()})
     name = "progressive" if variant == "full" else f"progressive_{variant}"

@@ -15,7 +15,7 @@ import qpsolvers
 
 from mcbench.combine import weight_filter
 from mcbench.combine.ensemble_weights import CHANNELS, solve_weights
-from mcbench.combine.simplex_solvers import SOLVERS, objective
+from mcbench.combine.simplex_solvers.problem import SOLVERS, objective
 from mcbench.combine.weight_filter import PAPER_FILTER, filter_weights
 from mcbench.io.buffers import Denoised
 from methods import ensemble as E
@@ -240,8 +240,8 @@ def test_iterative_never_below_exact():
 def test_iterative_reaches_the_optimum_on_99_percent(problems):
     """At least 99 % of pixel-channels end within 1e-6 s^2 of the exact optimum of Eq. 13.
 
-    With the paper's alpha in [0, 1] (no away steps) this measured 67 % and 86 %; with away
-    steps (mcbench/combine/simplex_solvers.py docstring) 99.6 % and 99.96 %."""
+    The away steps (mcbench/combine/simplex_solvers/iterative.py docstring) are what lets the solver reach
+    this: with the paper's alpha in [0, 1] alone the share on these problems is far below 99 %."""
     xa, xb, ya, yb = problems()
     gap = gap_above_optimum(solve_weights(xa, xb, ya, yb, solver="iterative"), xa, xb, ya, yb)
     share = float(np.mean(gap <= 1e-6))
@@ -648,22 +648,23 @@ def test_combine_end_to_end(filter_, make_render_buffers):
 
 
 # ---------------------------------------------------------------------------------------
-# the output before the float32, block-wise rewrite (issue 14)
+# a float64, whole-image reference of the blends
 # ---------------------------------------------------------------------------------------
-BEFORE = Path(__file__).resolve().parents[1] / "data" / "ensemble_blend_before.npz"
+FLOAT64_REFERENCE = Path(__file__).resolve().parents[1] / "data" / "ensemble_blend_float64.npz"
 
 
 @pytest.mark.parametrize("n", [3, 5])
 @pytest.mark.parametrize("solver", ["iterative", "exact"])
-def test_combine_matches_the_output_before_the_rewrite(n, solver, make_render_buffers,
-                                                       monkeypatch):
-    """tests/data/ensemble_blend_before.npz holds combine()'s full, A and B blends on this
-    deterministic case as computed by the float64, whole-image code before issue 14 (commit
-    9ec8741, the paper's filter alone with Eq. 33 averaged over the channels, our reading then).
+def test_combine_matches_the_float64_whole_image_blends(n, solver, make_render_buffers,
+                                                        monkeypatch):
+    """tests/data/ensemble_blend_float64.npz holds the full, A and B blends of this deterministic
+    case computed in float64 on the whole image at once (an implementation of the same equations
+    without float32 storage, blocks or bands, kept in the repository's history), with the paper's
+    filter alone and Eq. 33 averaged over the channels (``PAPER_FILTER``, ``colour_distance="mean"``).
     The float32 filter and the block-wise solve (blocks of 5 rows here, so blocks and filter
     bands both cut the 32 x 36 image) must stay within 1e-6 relMSE of it."""
     monkeypatch.setattr(E, "BLOCK_PIXELS", 5 * 36)
-    before = np.load(BEFORE)
+    before = np.load(FLOAT64_REFERENCE)
     buffers, inputs, _ = synthetic_scene(make_render_buffers, np.random.default_rng(100 + n),
                                          H=32, W=36, n=n)
     out = E.combine(buffers, inputs, solver=solver, **dict(PAPER_FILTER, colour_distance="mean"))
@@ -695,26 +696,26 @@ def test_solve_in_blocks_equals_whole_image(monkeypatch, make_render_buffers):
 
 
 # ---------------------------------------------------------------------------------------
-# the band-wise pass (issue 14, memory): tiles with their halos equal the whole image
+# the band-wise pass (bounded memory): tiles with their halos equal the whole image
 # ---------------------------------------------------------------------------------------
 def test_gaussian_blur_kernel_and_tiles_equal_the_numpy_blur():
-    """mcbench.filters.bilateral.gaussian_blur (numba) equals its NumPy formulation bit for bit, on
+    """mcbench.filters.blur_and_outliers.gaussian_blur (numba) equals its NumPy formulation bit for bit, on
     whole images (axes of length 1, 2, 3: NumPy's repeated reflection) and on tiles holding
     only the rows within 4 of the rows asked for (or the image's border)."""
-    from mcbench.filters import bilateral
+    from mcbench.filters import blur_and_outliers
     rng = np.random.default_rng(3)
     for shape in [(1, 1, 3), (1, 6, 3), (2, 3, 3), (3, 9, 1), (5, 4, 3), (17, 2), (40, 33, 3)]:
         image = rng.normal(size=shape) * 10
-        assert np.array_equal(bilateral.gaussian_blur(image),
-                              bilateral.gaussian_blur_reference(image)), shape
+        assert np.array_equal(blur_and_outliers.gaussian_blur(image),
+                              blur_and_outliers.gaussian_blur_reference(image)), shape
     image = rng.normal(size=(50, 21, 3))
-    whole = bilateral.gaussian_blur_reference(image)
+    whole = blur_and_outliers.gaussian_blur_reference(image)
     for r0, r1 in [(0, 1), (0, 10), (3, 30), (20, 21), (40, 50), (46, 50)]:
         v0, v1 = max(0, r0 - 4), min(50, r1 + 4)
-        tile = bilateral.gaussian_blur(image[v0:v1], rows=(r0, r1), first_row=v0, height=50)
+        tile = blur_and_outliers.gaussian_blur(image[v0:v1], rows=(r0, r1), first_row=v0, height=50)
         assert np.array_equal(tile, whole[r0:r1]), (r0, r1)
     with pytest.raises(ValueError, match="outside the tile"):
-        bilateral.gaussian_blur(image[10:20], rows=(10, 20), first_row=10, height=50)
+        blur_and_outliers.gaussian_blur(image[10:20], rows=(10, 20), first_row=10, height=50)
 
 
 def test_filter_rows_of_a_tile_equal_the_whole_filter():
@@ -755,7 +756,7 @@ def test_banded_combine_equals_the_whole_image_pass(passes, solver, monkeypatch,
                                                     make_render_buffers):
     """combine's one pass in bands (filter bands of 4 rows, solve blocks of 3, so both cut the
     37 x 23 image everywhere and a band's halo of 14 rows spans several of them) against one
-    band and one block for the whole image (what combine did before the bands): raw weights
+    band and one block for the whole image (one tile, no halo): raw weights
     equal bit for bit; with the paper's filter alone the filtered weights and blends too; with
     the default passes the outlier pass's float64 running sums start at each tile, so within
     rounding (max |dw| 1e-6, blend relMSE 1e-12)."""
@@ -790,8 +791,8 @@ def test_banded_combine_equals_the_whole_image_pass(passes, solver, monkeypatch,
 
 def test_combine_reads_layers_by_rows(tmp_path, monkeypatch, make_render_buffers):
     """The render's layers and the inputs as mcbench.io.exr.LayerRows (read from their files by
-    rows, E.READS_ROWS) give the same output, bit for bit, as the same files read whole; a NaN
-    in a file is refused with the whole image's count, as for arrays."""
+    rows, as the declaration's reads_rows allows) give the same output, bit for bit, as the same
+    files read whole; a NaN in a file is refused with the whole image's count, as for arrays."""
     from mcbench.io.buffers import RenderBuffers
     from mcbench.io.exr import layer_rows, write_layers
 
@@ -806,11 +807,11 @@ def test_combine_reads_layers_by_rows(tmp_path, monkeypatch, make_render_buffers
 
     def lazy():
         render = RenderBuffers(layers=layer_rows(tmp_path / "render.exr",
-                                                 ["color", *E.RENDER_LAYERS]), spp=8)
+                                                 ["color", *E.METHOD.render_layers]), spp=8)
         return render, [Denoised(full=L["color"], a=L["color_a"], b=L["color_b"])
                         for L in (layer_rows(p) for p in paths)]
 
-    eager = E.combine(RenderBuffers.load(tmp_path / "render.exr", layers=E.RENDER_LAYERS),
+    eager = E.combine(RenderBuffers.load(tmp_path / "render.exr", layers=E.METHOD.render_layers),
                       [Denoised.load(p) for p in paths])
     by_rows = E.combine(*lazy())
     for name, layer in eager.layers().items():

@@ -16,7 +16,7 @@ import qpsolvers
 
 from mcbench.combine.blending import blend, combine_with
 from mcbench.combine.ensemble_weights import CHANNELS, WEIGHTS, solve_weights
-from mcbench.combine.simplex_solvers import SOLVERS, objective
+from mcbench.combine.simplex_solvers.problem import SOLVERS, objective
 from mcbench.combine.weight_filter import PAPER_FILTER, PUBLIC_CODE_FILTER, filter_weights
 from mcbench.io.buffers import Denoised
 from methods import ensemble as E

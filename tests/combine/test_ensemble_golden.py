@@ -31,7 +31,7 @@ import pytest
 import methods.ensemble as E
 from mcbench.combine.blending import combine_with
 from mcbench.combine.weight_filter import PUBLIC_CODE_FILTER, public_code_sigmas
-from mcbench.filters.bilateral import gaussian_blur
+from mcbench.filters.blur_and_outliers import gaussian_blur
 from mcbench.io.buffers import Denoised, RenderBuffers
 from mcbench.io.exchange import RENDER_FILES, denoiser_files, read_image
 

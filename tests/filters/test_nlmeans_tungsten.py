@@ -84,7 +84,7 @@ def test_truncate_differs_only_near_borders():
 
 def test_default_options_keep_the_default_kernel():
     """channels="mean", replicate borders and an infinite clamp through the optional kernel equal
-    the default kernel (today's numbers) to rounding."""
+    the default kernel to rounding."""
     rng = np.random.default_rng(9)
     guide, variance = rng.random((12, 11, 3)), rng.random((12, 11, 3)) * 0.05
     values = rng.random((12, 11, 2))

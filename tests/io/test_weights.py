@@ -15,13 +15,14 @@ import pytest
 
 from mcbench import BenchError
 from mcbench.io import weights
+from mcbench.io.method_spec import MethodSpec
 ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_importing_learned_methods_does_not_import_torch():
-    code = ("import sys, methods.kpcn, methods.wskpn, methods.mcgan, methods.optix_ae, mcbench.io.weights, mcbench.nn\n"
-            "import methods\n"
-            "assert all(methods.load_method(n).NETWORK for n in ('kpcn', 'wskpn', 'mcgan', 'optix_ae'))\n"
+    code = ("import sys, methods, mcbench.io.weights, mcbench.nn\n"
+            "learned = [n for n in methods.available_methods() if mcbench.io.weights.is_learned_method(methods.load_method(n))]\n"
+            "assert {'kpcn', 'wskpn', 'mcgan', 'optix_ae', 'deep_combiner', 'progressive'} <= set(learned), learned\n"
             "print(sorted(m for m in sys.modules if m == 'torch' or m.startswith('torch.')))\n")
     result = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert result.returncode == 0, result.stderr
@@ -36,13 +37,19 @@ def test_location_follows_the_environment(monkeypatch, tmp_path):
     assert weights.record_path("kpcn") == tmp_path / "kpcn.json"
 
 
-def test_learned_method_is_an_attribute_check():
-    learned = SimpleNamespace(__name__="methods.toy", NETWORK={}, TRAINING={}, build_network=lambda: None)
-    plain = SimpleNamespace(__name__="methods.toy", NETWORK={}, denoise=lambda buffers: None)
+def test_learned_method_is_read_from_the_declaration():
+    def run(buffers):
+        return None
+
+    learned = SimpleNamespace(__name__="methods.toy", METHOD=MethodSpec(
+        kind="denoiser", label="Toy", run=run, network={}, training={}, build_network=lambda: None))
+    plain = SimpleNamespace(__name__="methods.toy", METHOD=MethodSpec(kind="denoiser", label="Toy", run=run))
     assert weights.is_learned_method(learned) and not weights.is_learned_method(plain)
     assert weights.check_learned_method(learned) is learned
-    with pytest.raises(BenchError, match=r"methods/toy\.py is not a learned method: it lacks TRAINING"):
+    with pytest.raises(BenchError, match=r"methods/toy\.py is not a learned method: its METHOD declares no network"):
         weights.check_learned_method(plain)
+    with pytest.raises(BenchError, match=r"methods/toy\.py: METHOD must be a mcbench\.io\.method_spec\.MethodSpec"):
+        weights.is_learned_method(SimpleNamespace(__name__="methods.toy", NETWORK={}, TRAINING={}))
     assert weights.method_name(plain) == "toy"
 
 

@@ -1,8 +1,14 @@
 """The contract every module in ``methods/`` must keep, so a new method is tested the moment its
-file exists: it loads through the registry, returns a :class:`mcbench.io.buffers.Denoised` whose
+file exists: it loads through the registry with a well-formed declaration
+(:class:`mcbench.io.method_spec.MethodSpec`), returns a :class:`mcbench.io.buffers.Denoised` whose
 full, A and B images are finite float (H, W, 3) arrays, and the same input gives the same output.
 Hard cases: fireflies, black regions, a 1x1 image, and for combiners identical inputs and an
 input equal to the noisy image.
+
+The declaration itself: every field of :class:`MethodSpec` is documented (its docstring and
+``docs/methods.md``) and type-checked, and the registry refuses scratch plugins that break each
+rule (no declaration, a misspelt field, a wrong type, fields that go together, a top-level hook the
+declaration does not carry), naming the plugin's file.
 
 A method that fails a hard case is listed in ``KNOWN_FAILURES`` (strict xfail, so fixing it
 makes the test fail until the entry is removed).
@@ -12,11 +18,19 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import dataclasses
+import sys
+import textwrap
+
 import numpy as np
 import pytest
 
+import methods
 from mcbench.io.buffers import SUB_OUTPUTS, Denoised, RenderBuffers
-from methods import available_methods, load_method
+from mcbench.io.method_spec import MethodSpec, MethodSpecError, check_fields, field_names
+from methods import UnknownMethodError, available_methods, load_method, method_spec
+
+ROOT = Path(__file__).resolve().parents[2]
 
 HEIGHT, WIDTH = 12, 10
 DENOISER_CASES = ("fireflies", "black_region", "one_pixel")
@@ -28,10 +42,10 @@ KNOWN_FAILURES: dict[tuple[str, str], str] = {
 
 
 def method_kind(name: str) -> str:
-    """KIND of methods/<name>.py, or "unknown" if it does not load (the basic test then fails
-    with the loader's error)."""
+    """The declared kind of methods/<name>.py, or "unknown" if it does not load (the basic test
+    then fails with the loader's error)."""
     try:
-        return load_method(name).KIND
+        return method_spec(load_method(name)).kind
     except Exception:  # noqa: BLE001 -- reported by test_loads_and_keeps_the_contract
         return "unknown"
 
@@ -141,11 +155,12 @@ REQUIRED_PARAMS = {"external": {"command": ["{python}", str(Path(__file__).resol
 
 
 def run(module, buffers, inputs) -> Denoised:
-    """A denoiser on ``buffers``; a combiner on ``buffers`` and ``inputs`` (its first ``INPUTS``
+    """A denoiser on ``buffers``; a combiner on ``buffers`` and ``inputs`` (its first ``inputs``
     when it declares how many it takes, e.g. the deep combiner's one)."""
-    if module.KIND == "combiner":
-        return module.combine(buffers, inputs[:getattr(module, "INPUTS", len(inputs))])
-    return module.denoise(buffers, **REQUIRED_PARAMS.get(module.__name__.split(".")[-1], {}))
+    spec = method_spec(module)
+    if spec.kind == "combiner":
+        return spec.run(buffers, inputs[:spec.inputs or len(inputs)])
+    return spec.run(buffers, **REQUIRED_PARAMS.get(module.__name__.split(".")[-1], {}))
 
 
 def assert_valid_output(result, shape):
@@ -160,7 +175,9 @@ def assert_valid_output(result, shape):
 @pytest.mark.parametrize("name", available_methods())
 def test_loads_and_keeps_the_contract(name, make_render_buffers):
     module = load_method(name)
-    assert isinstance(getattr(module, "LABEL", None), str) and module.LABEL
+    spec = method_spec(module)
+    check_fields(spec)
+    assert spec.label and spec.run is getattr(module, methods.KINDS[spec.kind])   # denoise/combine by name
     if name in READERS:
         return
     buffers = make_render_buffers(height=HEIGHT, width=WIDTH, seed=1, bins=True)
@@ -176,14 +193,14 @@ def test_loads_and_keeps_the_contract(name, make_render_buffers):
     assert not np.array_equal(run(module, other, synthetic_inputs(other)).full, first.full)
 
 
-@pytest.mark.parametrize("name", [n for n in computing_methods() if hasattr(load_method(n), "RENDER_LAYERS")])
+@pytest.mark.parametrize("name", [n for n in computing_methods() if method_spec(load_method(n)).render_layers])
 def test_declared_render_layers_are_all_the_method_reads(name, make_render_buffers):
-    """A method declaring RENDER_LAYERS gets only those (and colour) from a job
+    """A method declaring render_layers gets only those (and colour) from a job
     (mcbench.pipeline.methods.render_layers): on such a render it must give exactly its full-render result."""
     module = load_method(name)
     buffers = make_render_buffers(height=HEIGHT, width=WIDTH, seed=1, bins=True)
     inputs = synthetic_inputs(buffers)
-    kept = {key: buffers.layers[key] for key in ("color", *module.RENDER_LAYERS)}
+    kept = {key: buffers.layers[key] for key in ("color", *method_spec(module).render_layers)}
     assert len(kept) < len(buffers.layers)
     narrowed = RenderBuffers(layers=kept, spp=buffers.spp, source=buffers.source)
     full, narrow = run(module, buffers, inputs), run(module, narrowed, inputs)
@@ -220,9 +237,155 @@ def default_config_variants():
 
 @pytest.mark.parametrize(("name", "options", "case"), default_config_variants())
 def test_default_config_variants_give_finite_output(name, options, case, make_render_buffers):
-    module = load_method(name)
+    combine = method_spec(load_method(name)).run
     buffers, inputs = hard_case(case, make_render_buffers)
-    result = module.combine(buffers, inputs, **options)
+    result = combine(buffers, inputs, **options)
     assert_valid_output(result, buffers.shape)
-    again = module.combine(buffers, inputs, **options)
+    again = combine(buffers, inputs, **options)
     assert np.array_equal(result.full, again.full), f"{name} {options}: not deterministic"
+
+
+# ---------------------------------------------------------------------------------------------
+# The declaration: documented, type-checked, and refused by the registry when it is broken
+
+
+def test_every_field_is_documented():
+    """The contract is read from the type: each field of MethodSpec is described in its docstring
+    and in docs/methods.md (a new field without documentation fails here)."""
+    docs = (ROOT / "docs" / "methods.md").read_text()
+    for name in field_names():
+        assert f"``{name}``" in MethodSpec.__doc__, f"MethodSpec's docstring does not describe {name}"
+        assert f"\n| `{name}` |" in docs, f"docs/methods.md: no row of the contract's table for field {name}"
+
+
+def _valid_fields() -> dict:
+    return {"kind": "denoiser", "label": "Scratch", "run": lambda buffers: None}
+
+
+@pytest.mark.parametrize("field", field_names())
+def test_each_field_refuses_a_value_of_another_type(field):
+    """Every field's annotation is checked: an object of no declared type is refused, naming the field."""
+    with pytest.raises(MethodSpecError, match=rf"field '{field}' must be"):
+        MethodSpec(**{**_valid_fields(), field: object()})
+
+
+def test_fields_that_go_together_and_misplaced_fields_are_refused():
+    MethodSpec(**_valid_fields())                         # the minimal declaration is valid
+    learned = dict(network={}, training={}, build_network=lambda **arch: None)
+    MethodSpec(**_valid_fields(), **learned)
+    with pytest.raises(MethodSpecError, match="network, training, build_network go together: network, "
+                                              "build_network set, training not"):
+        MethodSpec(**_valid_fields(), network={}, build_network=lambda **arch: None)
+    with pytest.raises(MethodSpecError, match="correlated_bases, training_keys go together"):
+        MethodSpec(**{**_valid_fields(), "kind": "combiner"}, **learned)
+    with pytest.raises(MethodSpecError, match="critic, build_critic go together"):
+        MethodSpec(**_valid_fields(), **learned, critic={})
+    with pytest.raises(MethodSpecError, match="'inputs' is for a combiner"):
+        MethodSpec(**_valid_fields(), inputs=1)
+    with pytest.raises(MethodSpecError, match="'label' must not be empty"):
+        MethodSpec(**{**_valid_fields(), "label": ""})
+    with pytest.raises(MethodSpecError, match="field 'warm_up' must be bool"):
+        MethodSpec(**_valid_fields(), warm_up=0)
+    with pytest.raises(MethodSpecError, match="field 'inputs' must be Optional\\[int\\], got True"):
+        MethodSpec(**{**_valid_fields(), "kind": "combiner"}, inputs=True)
+    with pytest.raises(MethodSpecError, match="field 'training_keys' must be .*got \\{'color': 3.0\\}"):
+        MethodSpec(**_valid_fields(), training_keys={"color": 3.0})
+    spec = MethodSpec(**_valid_fields())
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        spec.label = "other"
+
+
+@pytest.fixture
+def scratch_plugin(tmp_path, monkeypatch):
+    """A function writing ``methods/<name>.py`` into a scratch folder on the registry's search path
+    (``methods.__path__``) and loading it with :func:`methods.load_method`."""
+    folder = tmp_path / "plugins"
+    folder.mkdir()
+    monkeypatch.setattr(methods, "__path__", [*methods.__path__, str(folder)])
+    written = []
+
+    def load(name: str, body: str, kind: str | None = None):
+        (folder / f"{name}.py").write_text("from mcbench.io.method_spec import MethodSpec\n\n\n"
+                                           "def denoise(buffers, *, radius: int = 1):\n    return buffers\n\n"
+                                           + textwrap.dedent(body))
+        written.append(f"methods.{name}")
+        return load_method(name, kind=kind, config_key="denoisers[0]")
+
+    yield load
+    for module in written:
+        sys.modules.pop(module, None)
+
+
+def test_a_valid_scratch_plugin_loads(scratch_plugin):
+    module = scratch_plugin("scratch_ok", """
+        RENDER_LAYERS = ("color",)        # a leftover the declaration carries: allowed
+        METHOD = MethodSpec(kind="denoiser", label="Scratch", run=denoise, render_layers=("color",))
+        """)
+    assert method_spec(module).render_layers == ("color",)
+    assert list(methods.method_parameters(module)) == ["radius"]
+
+
+@pytest.mark.parametrize(("name", "body", "message"), [
+    ("scratch_none", "", r"methods/scratch_none\.py: METHOD must be a mcbench\.io\.method_spec\.MethodSpec.*found none"),
+    ("scratch_dict", "METHOD = {'kind': 'denoiser', 'label': 'Scratch', 'run': denoise}\n",
+     r"methods/scratch_dict\.py: METHOD must be .*found a dict"),
+    ("scratch_misspelt", "METHOD = MethodSpec(kind='denoiser', label='Scratch', run=denoise, rendr_layers=('color',))\n",
+     r"denoisers\[0\]: methods/scratch_misspelt\.py: MethodSpec has no field 'rendr_layers' "
+     r"\(did you mean 'render_layers'\?\)"),
+    ("scratch_case", "METHOD = MethodSpec(kind='denoiser', label='Scratch', run=denoise, Warm_Up=False)\n",
+     r"methods/scratch_case\.py: MethodSpec has no field 'Warm_Up' \(did you mean 'warm_up'\?\)"),
+    ("scratch_type", "METHOD = MethodSpec(kind='denoiser', label='Scratch', run=denoise, render_layers=['color'])\n",
+     r"methods/scratch_type\.py: MethodSpec field 'render_layers' must be Optional\[tuple\[str, \.\.\.\]\], "
+     r"got \['color'\]"),
+    ("scratch_kind", "METHOD = MethodSpec(kind='denoser', label='Scratch', run=denoise)\n",
+     r"methods/scratch_kind\.py: MethodSpec field 'kind' must be Literal\['denoiser', 'combiner'\]"),
+    ("scratch_hook", "def check_config(params, *, config_key):\n    pass\n\n"
+                     "METHOD = MethodSpec(kind='denoiser', label='Scratch', run=denoise)\n",
+     r"methods/scratch_hook\.py defines hook\(s\) of the method contract that its METHOD does not carry: "
+     r"check_config \(set check_config= in METHOD\)"),
+    ("scratch_legacy", "KIND = 'combiner'\nRENDER_LAYERS = ('color',)\nTIMES_ITSELF = True\n"
+                       "METHOD = MethodSpec(kind='denoiser', label='Scratch', run=denoise, render_layers=('albedo',))\n",
+     r"methods/scratch_legacy\.py defines .*: KIND \(set kind= in METHOD\), RENDER_LAYERS \(set render_layers= "
+     r"in METHOD\), TIMES_ITSELF \(set program_seconds= in METHOD\)"),
+    ("scratch_run", "METHOD = MethodSpec(kind='denoiser', label='Scratch', run=lambda buffers: buffers)\n",
+     r"methods/scratch_run\.py defines .*: denoise \(set run= in METHOD\)"),
+])
+def test_the_registry_refuses_a_broken_declaration_naming_the_file(scratch_plugin, name, body, message):
+    with pytest.raises(UnknownMethodError, match=message):
+        scratch_plugin(name, body)
+
+
+def test_the_registry_refuses_the_wrong_kind(scratch_plugin):
+    with pytest.raises(UnknownMethodError, match=r"'scratch_kinds' is a denoiser, not a combiner"):
+        scratch_plugin("scratch_kinds", "METHOD = MethodSpec(kind='denoiser', label='Scratch', run=denoise)\n",
+                       kind="combiner")
+
+
+def legacy_reads(text: str) -> list[str]:
+    """Reads of a contract hook off a module instead of its declaration in ``text``: ``x.RENDER_LAYERS``
+    (a field's name in upper case) or ``getattr(x, "check_config", ...)``/``hasattr`` of such a
+    name or of a function field's own name (``check_config``, ``build_network``, ...)."""
+    import re
+    import typing
+
+    names = [n.upper() for n in field_names()] + ["TIMES_ITSELF"]
+    functions = [name for name, hint in typing.get_type_hints(MethodSpec).items() if "Callable" in str(hint)]
+    attribute = re.compile(rf"\.({'|'.join(names)})\b")
+    by_name = re.compile(rf"\b(?:getattr|hasattr)\([^,()]+,\s*[\"']({'|'.join(names + functions)})[\"']")
+    return [m.group(0) for pattern in (attribute, by_name) for m in pattern.finditer(text)]
+
+
+def test_no_consumer_reads_a_hook_off_the_module():
+    """The core, the workflow, the benchmarks, the tools and the tests read a method's hooks from its
+    declaration (``method_spec(module).render_layers``), never off the module."""
+    assert legacy_reads('layers = getattr(module, "RENDER_LAYERS", None)\nif hasattr(m, "check_config"):\n'
+                        'x = module.TRAINING_KEYS\n') == \
+        ['.TRAINING_KEYS', 'getattr(module, "RENDER_LAYERS"', 'hasattr(m, "check_config"']
+    found = {}
+    for folder in ("mcbench", "methods", "workflow", "benchmarks", "tools", "tests", "examples"):
+        for path in sorted((ROOT / folder).rglob("*")):
+            if path.suffix in (".py", ".smk") and path != Path(__file__).resolve() and path.is_file():
+                reads = legacy_reads(path.read_text(errors="replace"))
+                if reads:
+                    found[str(path.relative_to(ROOT))] = reads
+    assert not found, found

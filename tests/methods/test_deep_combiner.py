@@ -243,7 +243,7 @@ def base_result(buffers: RenderBuffers, *, sub_outputs: bool = True) -> Denoised
 
 def random_network(module, seed=0):
     torch.manual_seed(seed)
-    return module.build_network(**module.NETWORK).eval()
+    return module.build_network(**module.METHOD.network).eval()
 
 
 def hard_case(kind, make_render_buffers, rng):
@@ -309,8 +309,8 @@ def test_combiner_tensors_follow_the_training_keys(make_render_buffers):
     rng = np.random.default_rng(11)
     buffers = with_bins_and_feature_variances(make_render_buffers(height=5, width=6, seed=4), rng)
     base = base_result(buffers)
-    tensors = combiner_image_tensors(buffers, [base], "a", multi_module.TRAINING_KEYS)
-    for key, channels in multi_module.TRAINING_KEYS.items():
+    tensors = combiner_image_tensors(buffers, [base], "a", multi_module.METHOD.training_keys)
+    for key, channels in multi_module.METHOD.training_keys.items():
         assert tensors[key].shape == (1, channels, 5, 6) and tensors[key].dtype == torch.float32
     np.testing.assert_array_equal(tensors["color_sub"][0, 3:].permute(1, 2, 0).numpy(), buffers.color_bin1)
     np.testing.assert_array_equal(tensors["correlated_sub"][0, :3].permute(1, 2, 0).numpy(),
@@ -357,15 +357,15 @@ def test_missing_weights_are_a_clear_error(module, make_render_buffers, tmp_path
 
 
 def test_module_declarations_and_parameter_counts():
-    assert single_module.KIND == multi_module.KIND == "combiner"
-    assert single_module.INPUTS == multi_module.INPUTS == 1
-    assert set(single_module.TRAINING_KEYS) < set(multi_module.TRAINING_KEYS)
+    assert single_module.METHOD.kind == multi_module.METHOD.kind == "combiner"
+    assert single_module.METHOD.inputs == multi_module.METHOD.inputs == 1
+    assert set(single_module.METHOD.training_keys) < set(multi_module.METHOD.training_keys)
     from mcbench.nn.train import DEFAULT_SETTINGS, count_parameters
     for module in MODULES:
-        assert set(module.TRAINING) <= set(DEFAULT_SETTINGS) and module.TRAINING["loss"] == "relmse"
-        network = module.build_network(**module.NETWORK)
+        assert set(module.METHOD.training) <= set(DEFAULT_SETTINGS) and module.METHOD.training["loss"] == "relmse"
+        network = module.build_network(**module.METHOD.network)
         assert 100_000 <= count_parameters(network) <= 250_000
-        assert network.body[-1].out_channels % (module.NETWORK["window"] ** 2) == 0
+        assert network.body[-1].out_channels % (module.METHOD.network["window"] ** 2) == 0
 
 
 def test_importing_the_modules_does_not_import_torch():

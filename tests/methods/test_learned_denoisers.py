@@ -17,9 +17,12 @@ from mcbench.nn.data import CropSet, is_validation_seed
 from mcbench.nn.inference import image_tensors, load_network, run_network
 from mcbench.nn.train import evaluate
 from mcbench.io.weights import COMMITTED_WEIGHTS, is_learned_method, load_weights, record_path, weights_path
-from methods import available_methods, load_method
+from methods import available_methods, load_method, method_spec
 
-LEARNED = ["kpcn", "mcgan", "optix_ae", "wskpn"]   # learned denoisers (the learned combiners: test_deep_combiner.py)
+#: every learned method, found through its declaration
+LEARNED_METHODS = [n for n in available_methods() if is_learned_method(load_method(n))]
+#: the learned denoisers (the learned combiners: test_deep_combiner.py, test_progressive.py)
+LEARNED = [n for n in LEARNED_METHODS if method_spec(load_method(n)).kind == "denoiser"]
 # Kernel predictors output convex combinations of input pixels, so black in gives exactly black
 # out; direct predictors (residual in log space) only approximately: a small bias is allowed.
 BLACK_TOLERANCE = {"kpcn": 1e-7, "wskpn": 1e-7, "mcgan": 0.05, "optix_ae": 0.05}
@@ -37,12 +40,11 @@ def noisy_buffers(make_render_buffers):
 
 
 def test_registry_lists_the_learned_methods_and_labels_stand_ins():
-    learned = sorted(n for n in available_methods() if is_learned_method(load_method(n))
-                     and load_method(n).KIND == "denoiser")
-    assert learned == LEARNED
-    assert load_method("optix_ae").LABEL == "#7 OptiX† (our autoencoder, a stand-in)"
+    assert {"kpcn", "mcgan", "optix_ae", "wskpn"} <= set(LEARNED)
+    assert {"deep_combiner", "deep_combiner_mb", "progressive"} <= set(LEARNED_METHODS) - set(LEARNED)
+    assert load_method("optix_ae").METHOD.label == "#7 OptiX† (our autoencoder, a stand-in)"
     for name in LEARNED:
-        assert "†" in load_method(name).LABEL      # every one is our own training, and says so
+        assert "†" in load_method(name).METHOD.label      # every one is our own training, and says so
 
 
 def _randomise_batch_norms(network):
@@ -60,7 +62,7 @@ def _randomise_batch_norms(network):
 def test_repvgg_reparameterisation_is_exact(noisy_buffers):
     module = importlib.import_module("methods.wskpn")
     torch.manual_seed(0)
-    network = module.build_network(**module.NETWORK).eval()
+    network = module.build_network(**module.METHOD.network).eval()
     _randomise_batch_norms(network)
     buffers = image_tensors(noisy_buffers().image("full"))
     with torch.no_grad():
@@ -85,7 +87,7 @@ def test_untrained_networks_start_unsaturated(name, noisy_buffers):
     stalled a first WSKPN without batch norms)."""
     module = importlib.import_module(f"methods.{name}")
     torch.manual_seed(0)
-    network = module.build_network(**module.NETWORK).train()
+    network = module.build_network(**module.METHOD.network).train()
     buffers = image_tensors(noisy_buffers(32, 32, seed=4).image("full"))
     network(buffers).mean().backward()
     gradients = [p.grad for p in network.parameters() if p.grad is not None]
@@ -103,7 +105,7 @@ def test_untrained_networks_start_unsaturated(name, noisy_buffers):
 def test_untrained_networks_handle_any_size(name, noisy_buffers):
     module = importlib.import_module(f"methods.{name}")
     torch.manual_seed(0)
-    network = module.build_network(**module.NETWORK).eval()
+    network = module.build_network(**module.METHOD.network).eval()
     for height, width in ((13, 17), (4, 4), (33, 20)):
         image = noisy_buffers(height, width).image("a")
         output = run_network(network, image)
@@ -118,9 +120,9 @@ def test_committed_weights_load_safely_and_match_their_record(name):
     assert path.stat().st_size < 5 * 2 ** 20
     blob = load_weights(path)
     module = load_method(name)
-    assert blob["arch"] == module.NETWORK
+    assert blob["arch"] == module.METHOD.network
     record = read_json(record_path(name))
-    assert record["network"] == name and record["arch"] == module.NETWORK
+    assert record["network"] == name and record["arch"] == module.METHOD.network
     network = module.build_network(**blob["arch"])
     network.load_state_dict(blob["state_dict"])
     assert record["parameters"] == sum(p.numel() for p in network.parameters())
@@ -188,11 +190,11 @@ def test_no_test_scene_is_a_training_scene():
     from scenes import available_scenes, load_scene
 
     seeds = set()
-    for name in LEARNED + ["deep_combiner", "deep_combiner_mb"]:      # the learned combiners too
+    for name in LEARNED_METHODS:      # the learned combiners too
         data = read_json(record_path(name))["data"]
         used = data["training_scenes"] + data["validation_scenes"]
         assert len(used) == len(set(used)) and not any(is_validation_seed(s) for s in data["training_scenes"])
-        assert "mcbench.training" in data["source"]
+        assert data["source"] == "procedural training scenes of mcbench.training_data (no test scene)"
         seeds.update(used)
     pick_variant("auto")
     tests = {scene_fingerprint(load_scene(scene).build(16, 12)) for scene in available_scenes()}

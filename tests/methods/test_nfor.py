@@ -35,7 +35,7 @@ def mse(x, y):
 
 def test_registry_interface():
     module = load_method("nfor", kind="denoiser")
-    assert module.KIND == "denoiser" and module.LABEL == "#4 NFOR"
+    assert module.METHOD.kind == "denoiser" and module.METHOD.label == "#4 NFOR"
 
 
 def planes(array):

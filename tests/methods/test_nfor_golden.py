@@ -134,7 +134,7 @@ def test_each_switch_off_fails(switch):
 
 
 def test_defaults_are_not_tungsten():
-    """The defaults keep today's NFOR: every TUNGSTEN entry is a switch whose default differs."""
+    """Every TUNGSTEN entry is a switch whose default (our NFOR) differs."""
     defaults = _defaults()
     assert set(defaults) == set(nfor.TUNGSTEN)
     assert all(defaults[k] != v for k, v in nfor.TUNGSTEN.items())

@@ -237,7 +237,7 @@ def random_network(**arch):
     import methods.progressive as progressive
 
     torch.manual_seed(0)
-    net = progressive.build_network(**{**progressive.NETWORK, **arch})
+    net = progressive.build_network(**{**progressive.METHOD.network, **arch})
     with torch.no_grad():                       # a network whose α varies over [0, 1]
         net.conv_out.weight.mul_(30.0)
     return net.eval()
@@ -309,7 +309,7 @@ def test_torch_f_act_matches_numpy_and_alpha_is_clipped():
 def test_initial_network_starts_near_alpha_one_half():
     import methods.progressive as progressive
 
-    net = progressive.build_network(**progressive.NETWORK).eval()
+    net = progressive.build_network(**progressive.METHOD.network).eval()
     import torch
     with torch.no_grad():
         alpha = net.alpha(random_batch(np.random.default_rng(4)))
@@ -407,10 +407,11 @@ def test_ablation_variants_are_other_networks_with_their_own_weights():
     from mcbench import BenchError
 
     module = progressive.variant_module("no_sure")
-    assert module.__name__ == "methods.progressive_no_sure" and module.NETWORK["sure_input"] is False
-    assert module.build_network(**module.NETWORK).sure_input is False
-    assert progressive.variant_module("no_fact").build_network(**progressive.variant_module("no_fact").NETWORK
-                                                               ).conv_out.out_channels == 3
+    assert module.__name__ == "methods.progressive_no_sure" and module.METHOD.network["sure_input"] is False
+    assert module.METHOD.build_network(**module.METHOD.network).sure_input is False
+    no_fact = progressive.variant_module("no_fact").METHOD
+    assert no_fact.build_network(**no_fact.network).conv_out.out_channels == 3
+    assert no_fact.label == f"{progressive.METHOD.label}, ablation no_fact" and no_fact.run is progressive.combine
     assert progressive.ablation_weights_path(sure_input=True, f_act=True).name == "progressive.pt"
     assert progressive.ablation_weights_path(sure_input=False, f_act=True).name == "progressive_no_sure.pt"
     assert progressive.ablation_weights_path(sure_input=True, f_act=False).name == "progressive_no_fact.pt"

@@ -32,7 +32,7 @@ def flat_features(h, w):
 
 def test_registered_and_interface():
     module = load_method("rdfc", "denoiser")
-    assert module.LABEL == "#8 RDFC"
+    assert module.METHOD.label == "#8 RDFC"
 
 
 def test_denoises_synthetic_image_5x(make_render_buffers):

@@ -7,7 +7,7 @@ from methods import UnknownMethodError, available_methods, load_method
 
 def test_registry_finds_methods_and_names_bad_keys():
     assert {"oidn", "jbf", "ensemble"} <= set(available_methods())
-    assert load_method("oidn", kind="denoiser").KIND == "denoiser"
+    assert load_method("oidn", kind="denoiser").METHOD.kind == "denoiser"
     with pytest.raises(UnknownMethodError, match=r"denoisers\[3\].*'oidm'"):
         load_method("oidm", config_key="denoisers[3]")
     with pytest.raises(UnknownMethodError, match="combiners.*not a combiner"):

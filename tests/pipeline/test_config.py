@@ -157,8 +157,7 @@ def test_every_method_param_annotation_is_checkable():
     simple = (bool, int, float, str)
     for name in methods.available_methods():
         module = methods.load_method(name)
-        function = getattr(module, methods.KINDS[module.KIND])
-        hints = typing.get_type_hints(function)
+        hints = typing.get_type_hints(methods.method_spec(module).run)
         for parameter in methods.method_parameters(module):
             hint = hints.get(parameter)
             assert hint is not None, f"methods/{name}.py: parameter '{parameter}' has no annotation"

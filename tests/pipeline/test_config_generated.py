@@ -66,9 +66,9 @@ def _catalogue() -> dict[str, dict]:
     out = {}
     for name in methods.available_methods():
         module = methods.load_method(name)
-        function = getattr(module, methods.KINDS[module.KIND])
-        hints = typing.get_type_hints(function)
-        out[name] = {"kind": module.KIND, "label": module.LABEL, "inputs": getattr(module, "INPUTS", None),
+        spec = methods.method_spec(module)
+        hints = typing.get_type_hints(spec.run)
+        out[name] = {"kind": spec.kind, "label": spec.label, "inputs": spec.inputs,
                      "learned": is_learned_method(module),
                      "params": {key: (hints.get(key), p.default) for key, p in methods.method_parameters(module).items()}}
     return out
@@ -720,9 +720,9 @@ def test_snakemake_dry_run_of_generated_configs_plans_what_the_planner_says(tmp_
 
 
 # --------------------------------------------------------------------------- the defects, one by one
-# Each config below is the minimal example of a defect (found by the generator, or on the way to
-# it); before the fix each one planned a study that failed in a job, stopped with a bare
-# traceback, hung, or named the wrong key.
+# Each config below is the minimal example of a defect class (found by the generator, or on the
+# way to it): planned without its check, each would fail in a job, stop with a bare traceback,
+# hang, or name the wrong key.
 
 def _refusal(config) -> str:
     """The message of the BenchError that resolving and planning ``config`` stops with."""

@@ -23,7 +23,7 @@ damaged input, or a changed number fails. Every example is reproducible from its
 (``<seed>``): the damage is drawn by ``numpy.random.default_rng(seed)``.
 
 The default suite draws :data:`DEFAULT_DAMAGES`; the fuzz tier (``python -m pytest -q -m fuzz``)
-draws :data:`FUZZ_DAMAGES` more (issue 29: at least 300).
+draws :data:`FUZZ_DAMAGES` more.
 """
 
 from __future__ import annotations

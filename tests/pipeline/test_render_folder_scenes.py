@@ -5,6 +5,8 @@ lacks. Synthetic images with known pixels; the metric is recomputed from them.""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -195,7 +197,8 @@ def test_a_combiner_is_refused_without_halves_even_if_it_reads_no_render_layer_o
     cannot give, whatever render layers it declares."""
     import methods.naive_average
 
-    monkeypatch.setattr(methods.naive_average, "RENDER_LAYERS", ("color",), raising=False)
+    monkeypatch.setattr(methods.naive_average, "METHOD",
+                        dataclasses.replace(methods.naive_average.METHOD, render_layers=("color",)))
     combiners = [{"name": "avg", "method": "naive_average", "inputs": ["oidn", "oidn_fast"]}]
     denoisers = ["oidn", {"name": "oidn_fast", "method": "oidn", "params": {"quality": "fast"}}]
     with pytest.raises(BenchError, match=r"method 'avg' \(naive_average\) reads render layer\(s\) \['color_a', 'color_b'\]"):

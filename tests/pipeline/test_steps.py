@@ -235,7 +235,7 @@ def test_merge_reference_is_the_spp_weighted_mean(tmp_path):
 
 
 def test_a_job_of_row_reading_methods_never_reads_an_input_whole(case_files, tmp_path, monkeypatch):
-    """A job whose methods all declare READS_ROWS (the ensemble) reads the render and its inputs
+    """A job whose methods all declare reads_rows (the ensemble) reads the render and its inputs
     by rows (no read_layers of those files) and writes what the whole-file path writes."""
     render, _ = case_files
     inputs = [run(name, render, tmp_path, module_name=name)[0] for name in ("jbf", "oidn")]

@@ -11,7 +11,7 @@ from mcbench.io.buffers import ALL_LAYERS, BIN_LAYERS, SUB_OUTPUTS, Denoised, Re
 from mcbench.io.exr import read_layers, write_layers
 from mcbench.nn.data import BUFFER_KEYS, crop_render_layers, load_combiner_crops
 from mcbench.pipeline.training import write_correlated_training_inputs
-from methods import load_method
+from methods import available_methods, load_method, method_spec
 
 LEVELS = (4, 8)
 MULTI_KEYS = {"correlated": 3, "albedo_variance": 3, "color_sub": 6, "variance_sub": 6, "correlated_sub": 6}
@@ -113,7 +113,10 @@ def test_denoised_load_reads_extras_only_when_asked(tmp_path):
 
 # --------------------------------------------------------------------------- committed weights
 
-COMBINERS = ["deep_combiner", "deep_combiner_mb"]
+#: the learned combiners trained on other methods' plain results (found through their declarations;
+#: progressive denoising's base "oidn+sure" also carries a divergence term: tests/methods/test_progressive.py)
+COMBINERS = [n for n in available_methods() if (spec := method_spec(load_method(n))).learned
+             and spec.kind == "combiner" and set(spec.correlated_bases) <= set(available_methods())]
 
 
 @pytest.mark.parametrize("name", COMBINERS)
@@ -126,11 +129,11 @@ def test_committed_combiner_weights_load_safely_and_match_their_record(name):
     blob = load_weights(path)                       # torch.load(weights_only=True) underneath
     module = load_method(name)
     record = read_json(record_path(name))
-    assert blob["arch"] == module.NETWORK == record["arch"] and record["network"] == name
+    assert blob["arch"] == module.METHOD.network == record["arch"] and record["network"] == name
     network = module.build_network(**blob["arch"])
     network.load_state_dict(blob["state_dict"])
     assert record["parameters"] == sum(p.numel() for p in network.parameters())
-    assert record["data"]["bases"] == list(module.CORRELATED_BASES)
+    assert record["data"]["bases"] == list(module.METHOD.correlated_bases)
     assert record["settings"]["steps"] == record["history"][-1]["step"]
     per_spp = record["validation"]["per_spp"]
     assert all(np.isfinite(v["loss"]) and v["loss"] < v["noisy_loss"] for v in per_spp.values())
@@ -158,7 +161,7 @@ def combiner_validation_scene(tmp_path_factory):
     for layers, meta in crops:
         paths.append(str(folder / f"example_{seed}_{meta['crop']}.exr"))
         write_layers(paths[-1], layers, metadata=meta)
-    bases = sorted({b for name in COMBINERS for b in load_method(name).CORRELATED_BASES})
+    bases = sorted({b for name in COMBINERS for b in load_method(name).METHOD.correlated_bases})
     correlated = {}
     for base in bases:
         correlated[base] = [str(folder / "correlated" / base / f"example_{seed}_{k}.exr") for k in range(len(paths))]

@@ -1,4 +1,4 @@
-"""Random kills, two runs at once, a full disk and a read-only results folder (issue 29, items 3-4).
+"""Random kills, two runs at once, a full disk and a read-only results folder.
 
 * **Random kills** (fuzz tier): a run of a config smaller than the smoke one is killed (SIGKILL to
   Snakemake's whole process group, as a power loss or an out-of-memory kill would) at

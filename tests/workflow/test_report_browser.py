@@ -26,7 +26,7 @@ pytestmark = pytest.mark.slow
 
 REPO = Path(__file__).resolve().parents[2]
 CHROMIUM_NAMES = ("chromium", "chromium-browser")
-# the viewer's DOM contract (issue 17): controls and displays the test relies on
+# the viewer's DOM contract: controls and displays the test relies on
 VIEWER_CONTROLS = ("scene", "spp", "image-a", "image-b", "mode", "exposure", "flip")
 VIEWER_DISPLAYS = ("view-a", "view-b", "numbers", "maps")
 

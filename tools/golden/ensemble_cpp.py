@@ -1,6 +1,6 @@
 """Golden outputs of the ensemble paper's public C++ program on small inputs made by this project.
 
-    python tools/golden/ensemble_cpp.py --program /work/ext/ensemble/build/EnsembleDenoising \
+    python tools/golden/ensemble_cpp.py --program <build>/EnsembleDenoising \
         [--out tests/data/golden/ensemble_cpp]
 
 For each case (scene x spp of :data:`CASES`, at :data:`RESOLUTION`): renders the scene with the

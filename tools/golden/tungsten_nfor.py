@@ -16,7 +16,7 @@ image (the ``color`` of a high-spp render with another seed). Writes, under ``--
 Run (after building the denoiser, see :data:`BUILD_RECIPE`)::
 
     . .venv/bin/activate
-    python tools/golden/tungsten_nfor.py --denoiser /work/ext/tungsten/build/denoiser
+    python tools/golden/tungsten_nfor.py --denoiser <build>/denoiser
 
 The renders use one thread and fixed seeds; Mitsuba's output can still differ across Mitsuba
 versions and CPUs, which is why the inputs are stored with the outputs (the tests read the stored
@@ -110,7 +110,7 @@ def readme(manifest: dict) -> str:
 
 Made by `tools/golden/tungsten_nfor.py` on {manifest['date']} ({manifest['machine']}), Python
 {manifest['python']}, Mitsuba {manifest['mitsuba']} (variant `{manifest['variant']}`).
-Command: `{manifest['command']}`.
+Command: `python tools/golden/tungsten_nfor.py --denoiser <build>/denoiser` (the build's path as run: `manifest.json`).
 Used by `tests/methods/test_nfor_golden.py`; `tools/golden/tungsten_nfor_departures.py` measures our
 NFOR's departures against these files and `tools/golden/tungsten_nfor_float32.py` the float32
 rounding noise that bounds the agreement (`docs/fidelity_nfor.md`, section "Golden comparison").

@@ -2,7 +2,7 @@
 
 For every case in ``tests/data/golden/tungsten_nfor/`` (made by ``tools/golden/tungsten_nfor.py``)
 our NFOR runs with every switch at Tungsten's behaviour (``methods.nfor.TUNGSTEN``), then with
-each switch back at our default in turn, then with all defaults (today's method). Per variant it
+each switch back at our default in turn, then with all defaults (our method). Per variant it
 reports the relMSE (:func:`mcbench.analysis.metrics.relmse`) of our output against Tungsten's
 output (the golden) and against the scene's reference render, averaged over the cases, per spp
 level. Prints a Markdown table (``--out`` also writes it)::
@@ -66,7 +66,7 @@ def variants() -> list[tuple[str, dict]]:
     rows = [("all switches at Tungsten's behaviour", dict(nfor.TUNGSTEN))]
     for switch, label in SWITCHES.items():
         rows.append((f"`{switch}={defaults[switch]!r}`: {label}", dict(nfor.TUNGSTEN, **{switch: defaults[switch]})))
-    rows.append(("all switches at our defaults (today's NFOR)", {}))
+    rows.append(("all switches at our defaults (our NFOR)", {}))
     return rows
 
 

@@ -56,7 +56,9 @@ VARIANTS = {
     "authors_pass2": dict(second_pass="authors"),
     "ours_pass2": dict(second_pass="ours"),
     "authors_pass2_clamp": dict(second_pass="authors", clamp_derivative=True),
-    "before": dict(second_pass="ours", clamp_derivative=False, variance="raw", radius=10),
+    "ours_noclamp": dict(second_pass="ours", clamp_derivative=False, variance="raw", radius=10),
+    "ours_noclamp_rescaled": dict(second_pass="ours", clamp_derivative=False, variance="rescaled", radius=10),
+    "ours_noclamp_r20": dict(second_pass="ours", clamp_derivative=False, variance="raw", radius=20),
     "authors_all": dict(second_pass="authors", clamp_derivative=True, variance="rescaled"),
     "authors_all_r20": dict(second_pass="authors", clamp_derivative=True, variance="rescaled", radius=20),
 }

@@ -1,4 +1,4 @@
-"""How much does the image size move the ranking? (issue 27, item 7.)
+"""How much does the image size move the ranking?
 
 A slice of the study -- the candidates of the paper's Table 3 (bases #1 KPCN, #3 MCGAN, #4 NFOR,
 #6 OIDN, #7 OptiX, #8 RDFC and ensembles #16, #24, #30, #33, #35) and the noisy input, on three
@@ -9,7 +9,7 @@ pixels cut away (adobe/sbmc's evaluation crop). Reported: Kendall tau-b between 
 orderings of every pair of settings, and of each setting against the paper's Table 3 (all 11
 rows, and the six bases alone).
 
-    python tools/resolution/study.py run  --work /tmp/resolution      # the three runs (about 35 min on 2 cores)
+    python tools/resolution/study.py run  --work /tmp/resolution      # the three runs (their time: docs/resolution_study.md)
     python tools/resolution/study.py table --work /tmp/resolution     # the Markdown of docs/resolution_study.md
 
 The three scenes are the ones of the default eight with the cheapest references
@@ -78,7 +78,7 @@ def table(work: Path) -> str:
 
     from mcbench.analysis import pool
     from mcbench.analysis.ranking import ranking_table
-    from mcbench.analysis.study import PAPER_TABLE3_BASES, paper_kendall
+    from mcbench.analysis.study.paper import PAPER_TABLE3_BASES, paper_kendall
 
     rankings = {}
     for size in SIZES:

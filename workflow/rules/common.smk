@@ -17,8 +17,9 @@ from mcbench.pipeline.plan import plan_study  # noqa: E402
 from mcbench.pipeline.render import folder_case_files, folder_reference_files  # noqa: E402
 from mcbench.analysis.metrics import ALL_METRICS  # noqa: E402
 from mcbench.analysis.pool import POOL  # noqa: E402
-from mcbench.analysis.study_figures import STUDY_FIGURES as STUDY_FIGURE_KEYS, curve_candidates, paper_recommended  # noqa: E402
+from mcbench.analysis.study.figures import STUDY_FIGURES as STUDY_FIGURE_KEYS, curve_candidates, paper_recommended  # noqa: E402
 from mcbench.pipeline.resources import JobCost, estimate_job, job_request, load_job_costs  # noqa: E402
+from mcbench.io.method_spec import method_spec  # noqa: E402
 from mcbench.io.weights import COMMITTED_WEIGHTS, is_learned_method  # noqa: E402
 from mcbench.pipeline.registry import available_scenes, config_method_table, load_method, load_scene  # noqa: E402
 
@@ -202,8 +203,8 @@ def train_network_inputs(wildcards):
 
 
 def combiner_bases(network):
-    """The base denoisers a learned combiner is trained on (its CORRELATED_BASES); () for a denoiser."""
-    return tuple(getattr(load_method(network), "CORRELATED_BASES", ())) if network in NETWORKS else ()
+    """The base denoisers a learned combiner is trained on (its declared ``correlated_bases``); () for a denoiser."""
+    return (method_spec(load_method(network)).correlated_bases or ()) if network in NETWORKS else ()
 
 
 def combiner_crop_files():

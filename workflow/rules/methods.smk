@@ -5,8 +5,8 @@
 # Jobs (config batch_methods, default true): all methods of a case share one job (rule
 # run_case_methods), run in dependency order (denoisers, then combiners in config order), so the
 # process starts, imports (torch once) and reads the render and each output once: at 128x128 a
-# job's start, imports and reads cost more than most methods' compute (the default run had 432
-# method jobs with a job per base denoiser and per batch; it now has 72). batch_methods false: a
+# job's start, imports and reads cost more than most methods' compute, and the default study
+# has one job per (scene, spp) case instead of one per method and case. batch_methods false: a
 # job per method (rule run_method, e.g. to spread methods over a cluster). `snakemake -f <output
 # EXR>` reruns the job that makes it.
 

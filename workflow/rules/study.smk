@@ -1,4 +1,4 @@
-# The 39-candidate study of Zheng et al. 2021 Sec. 5.3 (mcbench.analysis.study, mcbench.analysis.study_figures):
+# The 39-candidate study of Zheng et al. 2021 Sec. 5.3 (mcbench.analysis.study):
 # the pool's scores beside the paper's Table 3, recommendations derived from the data with their
 # stability under scene resampling (among all 31 ensembles and among the 12 the paper names; relMSE
 # and DSSIM side by side with a combined rule of ours), the paper's findings with verdicts (finding

@@ -1,4 +1,4 @@
-# The static image viewer (issue 17): one job per test case writes its images (tone-mapped at
+# The static image viewer: one job per test case writes its images (tone-mapped at
 # each exposure, relMSE and FLIP error maps, ensemble weight maps) into a case folder, so the
 # cases run in parallel and a new case or method redoes only its own folder; `viewer` copies
 # the page (workflow/report/viewer/) and every case folder into results/viewer with data.js,
