@@ -5,8 +5,7 @@ import numpy as np
 import pytest
 
 from mcbench.filters import nlmeans
-from mcbench.filters.nlmeans import (nl_means_filter, nl_means_filter_reference, nl_means_weight_maps,
-                                     nl_means_window_weights)
+from mcbench.filters.nlmeans import nl_means_filter, nl_means_filter_reference
 
 
 def brute_force(values, guide, variance, radius, patch_radius, k, alpha, epsilon=1e-10):
@@ -104,9 +103,9 @@ def test_window_weights_match_weight_maps():
     block gives the rows of the whole image."""
     rng = np.random.default_rng(1)
     guide, variance = rng.random((10, 12, 3)), rng.random((10, 12, 3)) * 0.05
-    weights = nl_means_window_weights(planes(guide), planes(variance), 0, 10, 3, 2, 0.7, 1.0, 1e-10, 1e4)
-    for dy, dx, expected, _ in nl_means_weight_maps(guide, variance, 3, 2, 0.7):
+    weights = nlmeans.nl_means_window_weights(planes(guide), planes(variance), 0, 10, 3, 2, 0.7, 1.0, 1e-10, 1e4)
+    for dy, dx, expected, _ in nlmeans.nl_means_weight_maps(guide, variance, 3, 2, 0.7):
         np.testing.assert_allclose(weights[..., (dy + 3) * 7 + dx + 3], expected, atol=1e-12)
     # a row block gives the same weights as the whole image
-    np.testing.assert_array_equal(nl_means_window_weights(planes(guide), planes(variance), 3, 7, 3, 2, 0.7, 1.0,
-                                                          1e-10, 1e4), weights[3:7])
+    np.testing.assert_array_equal(nlmeans.nl_means_window_weights(planes(guide), planes(variance), 3, 7, 3, 2, 0.7,
+                                                                  1.0, 1e-10, 1e4), weights[3:7])
