@@ -53,10 +53,10 @@ Constants we had to choose (one-line reasons):
 * ``FEATURE_RESOLUTION = 1e-9``: a feature difference f(q) - f(p) within 1e-9 of max(|f(q)|,
   |f(p)|) counts as 0. The prefiltered features are float64 means of float32 data, so real
   differences are >= ~6e-8 relative and rounding noise is ~1e-16; without it a feature that is
-  constant up to rounding (a flat albedo region after NL-means) became a unit-scaled regressor
-  of pure noise, so rounding-level perturbations of the input changed the output. This rule is
-  the compiled implementation's one behaviour change against the one before it
-  (``benchmarks/bench_nfor.py`` compares the two, with and without the rule).
+  constant up to rounding (a flat albedo region after NL-means) becomes a unit-scaled regressor
+  of pure noise, so rounding-level perturbations of the input change the output
+  (``benchmarks/bench_nfor.py`` compares the output with a reference implementation with and
+  without the rule).
 * Feature variance of a half buffer: the raw per-pixel (f_A - f_B)^2 / 2, not smoothed, because
   the paper derives it from the half-buffer difference and NL-means averages it over 7x7 patches.
 * Distances are averaged over colour channels (Rousselle et al. 2012 Eq. 5, as
@@ -70,7 +70,7 @@ Tungsten's ``denoiser`` on stored renders (``tests/data/golden/tungsten_nfor/``,
 
 Implementation and speed. NL-means filters are :func:`mcbench.filters.nlmeans.nl_means_filter`
 (compiled). The regression computes, per chunk of rows, the NL-means weights of every window
-offset (:func:`mcbench.filters.nlmeans.nl_means_distance_rows`), stores them pixel-major, then per pixel
+offset, pixel-major (:func:`mcbench.filters.nlmeans.nl_means_window_weights`), then per pixel
 gathers the neighbours with w > 0 into columns (design row and colour), forms the normal
 equations as dot products over the neighbours (float64, reassociated so they vectorise; the
 normal equations and the Cholesky solve stay float64 because the pivot test at 1e-9 needs
@@ -95,8 +95,8 @@ from numba import prange
 
 from mcbench.io.buffers import Denoised, RenderBuffers
 from mcbench.jit import cached_njit
-from mcbench.filters.nlmeans import (BORDER_MODES, CHANNEL_MODES, nl_means_distance_rows, nl_means_filter,
-                                     nl_means_offset_weights)
+from mcbench.filters.nlmeans import (BORDER_MODES, CHANNEL_MODES, guide_planes, nl_means_filter,
+                                     nl_means_window_weights)
 from mcbench.progress import StageLog
 from mcbench.io.method_spec import MethodSpec
 
@@ -125,63 +125,6 @@ TUNGSTEN = dict(second_pass_variance_scale=2.0, regression_channels="min", filte
 # ---------------------------------------------------------------------------------------------
 # Numba kernels
 # ---------------------------------------------------------------------------------------------
-
-@cached_njit(error_model="numpy")
-def _weights_into(guide, variance, y0, rows, radius, patch, k, alpha, eps, clamp_d, dmap, hsum, dist, out,
-                  truncate, mode):
-    """NL-means weights w(p, p + o) of the pixels p in rows [y0, y0 + rows), written to
-    ``out[:rows, :, :]`` with shape (rows, W, n_offsets), pixel-major: offset index
-    (dy + R) (2R + 1) + (dx + R). guide, variance: (C, H, W) float64 planes. Distances follow
-    Rousselle et al. 2012 Eq. 5-6 (:func:`mcbench.filters.nlmeans.nl_means_distance_rows`, per-pixel
-    distances clipped at ``clamp_d``); weight exp(-d) (1 for d <= 0), 0 where p + o leaves the
-    image. dmap, hsum: scratch (rows + 2 patch, W); dist: scratch (rows, W).
-
-    ``truncate`` (truncated patch means) or ``mode`` 1 (minimum per-channel weight) take
-    Tungsten's path, :func:`mcbench.filters.nlmeans.nl_means_offset_weights` (distances clipped per
-    channel); otherwise the default kernel runs (today's numbers).
-    """
-    c, h, w = guide.shape
-    side = 2 * radius + 1
-    if truncate or mode != 0:
-        dist_c = np.empty((c, rows, w))
-        wmap = np.empty((rows, w))
-        for dy in range(-radius, radius + 1):
-            for dx in range(-radius, radius + 1):
-                o = (dy + radius) * side + (dx + radius)
-                nl_means_offset_weights(guide, variance, y0, rows, dy, dx, patch, k, alpha, eps, clamp_d,
-                                        truncate, mode, dmap, hsum, dist_c, wmap)
-                for r in range(rows):
-                    for x in range(w):
-                        out[r, x, o] = wmap[r, x]
-        return
-    for dy in range(-radius, radius + 1):
-        for dx in range(-radius, radius + 1):
-            o = (dy + radius) * side + (dx + radius)
-            nl_means_distance_rows(guide, variance, y0, rows, dy, dx, patch, k, alpha, eps, clamp_d,
-                                   dmap, hsum, dist)
-            for r in range(rows):
-                inside_y = 0 <= y0 + r + dy < h
-                for x in range(w):
-                    if inside_y and 0 <= x + dx < w:
-                        d = dist[r, x]
-                        out[r, x, o] = np.exp(-d) if d > 0.0 else 1.0
-                    else:
-                        out[r, x, o] = 0.0
-
-
-@cached_njit(error_model="numpy")
-def regression_weights(guide, variance, y0, y1, radius, patch, k, alpha, eps, clamp_d, truncate=False, mode=0):
-    """(y1 - y0, W, (2R + 1)^2) NL-means weights of the regression for rows [y0, y1); guide,
-    variance (C, H, W) float64 planes (see :func:`_weights_into`)."""
-    c, h, w = guide.shape
-    rows = y1 - y0
-    side = 2 * radius + 1
-    out = np.empty((rows, w, side * side))
-    _weights_into(guide, variance, y0, rows, radius, patch, k, alpha, eps, clamp_d,
-                  np.empty((rows + 2 * patch, w)), np.empty((rows + 2 * patch, w)), np.empty((rows, w)), out,
-                  truncate, mode)
-    return out
-
 
 @cached_njit(fastmath={"reassoc", "contract"}, error_model="numpy")
 def _dot(a, b, n):
@@ -269,7 +212,8 @@ def _collaborative_regression(color, guide, guide_variance, features, radius, pa
     products over q (float64), the pivot-dropping Cholesky solve, and the fit evaluated at
     every q and accumulated. Feature differences within ``feature_resolution`` (relative) of
     zero are rounding noise of the prefilter and count as 0. ``truncate``, ``mode``: see
-    :func:`_weights_into`; ``rank_tol2``: :func:`_solve_normal_equations`.
+    :func:`mcbench.filters.nlmeans.nl_means_window_weights`; ``rank_tol2``:
+    :func:`_solve_normal_equations`.
     """
     h, w, nch = color.shape
     nf = features.shape[2]
@@ -284,10 +228,8 @@ def _collaborative_regression(color, guide, guide_variance, features, radius, pa
         y1 = min(h, y0 + chunk)
         rows = y1 - y0
         base = y0 - radius
-        weights = np.empty((rows, w, nwin))
-        _weights_into(guide, guide_variance, y0, rows, radius, patch, k, alpha, eps, clamp_d,
-                      np.empty((rows + 2 * patch, w)), np.empty((rows + 2 * patch, w)),
-                      np.empty((rows, w)), weights, truncate, mode)
+        weights = nl_means_window_weights(guide, guide_variance, y0, y1, radius, patch, k, alpha, eps, clamp_d,
+                                          truncate, mode)
         a = np.zeros((d, d))
         b = np.zeros((d, nch))
         beta = np.zeros((d, nch))
@@ -396,17 +338,11 @@ def collaborative_regression(color, guide, guide_variance, features, radius=REGR
     def as64(x):
         return np.ascontiguousarray(x, dtype=np.float64)
 
-    guide = np.asarray(guide, dtype=np.float64)
-    guide_variance = np.maximum(np.asarray(guide_variance, dtype=np.float64), 0.0)
-    if guide.ndim == 2:
-        guide, guide_variance = guide[..., None], guide_variance[..., None]
-    def planes(x):
-        return np.ascontiguousarray(np.moveaxis(x, 2, 0))
-
+    guide, guide_variance = guide_planes(guide, guide_variance)
     features = as64(features)
     if features.ndim == 2:
         features = features[..., None]
-    return _collaborative_regression(as64(color), planes(guide), planes(guide_variance), features, int(radius),
+    return _collaborative_regression(as64(color), guide, guide_variance, features, int(radius),
                                      int(patch_radius), float(k), NLM_ALPHA, float(epsilon),
                                      DISTANCE_CLAMP, float(pivot_tolerance), float(feature_resolution), CHUNK_ROWS,
                                      borders == "truncate", CHANNEL_MODES[channels], float(rank_threshold) ** 2)

@@ -32,7 +32,7 @@ descriptions; the paper text was not available, so "Sec." references are to its 
 6. **Second pass** (default ``second_pass="authors"``, fbksd multifilm.cpp:409-423): the two
    pass-1 buffers are filtered once more with shared colour weights from their mean (variance
    (A~ - B~)^2 / 4, pyramid-smoothed), f = 3, k_c = 0.45, window r // 2, tau = 1e-4, no selection
-   (:func:`authors_second_pass`). ``"ours"`` (the earlier default): the noisy half is filtered
+   (:func:`authors_second_pass`). ``"ours"``: the noisy half is filtered
    again, three candidates guided by the *other* half's pass-1 output, SURE and selection as in 5.
 
 Half buffers A and B are each denoised this way (they are the internal buffers RDFC needs
@@ -54,9 +54,10 @@ Constants (published ones first, then ours with the reason):
   (pass 1) or the other buffer's first-pass output (pass 2): small window keeps selection
   local, k = 1 is the usual NL-means strength.
 * Kernel bands of ``BAND_ROWS = 8`` rows: per band, one window offset at a time, the patch
-  colour distances (direct sums over the in-image patch pairs) and every per-pixel term as
+  colour distances (direct sums over the in-image patch pairs,
+  :func:`mcbench.filters.nlmeans.nl_means_patch_distance_maps`) and every per-pixel term as
   loops over x that vectorise, into the band's sums; affects speed only. ``tile`` (default
-  None) still splits the image into tiles with a halo, with identical interiors (tested).
+  None) splits the image into tiles with a halo, with identical interiors (tested).
 * Speed: ``benchmarks/bench_rdfc.py`` measures it
   (``NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/bench_rdfc.py --sizes 128 512``).
   All arithmetic is float64 (the SURE derivative subtracts terms of similar size).
@@ -79,7 +80,7 @@ from scipy.ndimage import uniform_filter
 
 from mcbench.io.buffers import Denoised, RenderBuffers
 from mcbench.jit import cached_njit
-from mcbench.filters.nlmeans import nl_means_filter
+from mcbench.filters.nlmeans import nl_means_filter, nl_means_patch_distance_maps
 from mcbench.filters.smoothing import box_mean, pyramid_smooth
 from mcbench.progress import StageLog
 from mcbench.io.method_spec import MethodSpec
@@ -107,74 +108,6 @@ TAU_SECOND = 1e-4           # authors' pass-2 feature threshold (multifilm.cpp:4
 
 # ----------------------------------------------------------------------------- kernels
 
-@cached_njit(error_model="numpy")
-def _colour_distance_maps(g, gv, y0, rows, dy, dx, kc, alpha, eps, patch_radii, m, hs, out, o):
-    """Patch colour distances d_c^2(p, p + o) of the rows [y0, y0 + rows) for o = (dy, dx),
-    one map per patch radius in ``patch_radii``: out[j, o, r, x] = mean over the in-image patch
-    pixels n (with n + o in the image) of mean_i Delta_i(n, n + o) (module docstring, RKZ12).
-
-    g, gv: (C, H, W) planes. m: scratch (rows + 2 max f, W); hs: scratch (rows + 2 max f, W).
-    Entries whose p + o leaves the image are left unset (callers skip them).
-    """
-    nc, h, w = g.shape
-    fmax = 0
-    for j in range(patch_radii.shape[0]):
-        fmax = max(fmax, patch_radii[j])
-    ra = max(y0 - fmax, 0)
-    rb = min(y0 + rows + fmax, h)
-    k2 = kc * kc
-    x0 = max(0, -dx)
-    x1 = min(w, w - dx)
-    inv_nc = 1.0 / nc
-    for yy in range(ra, rb):
-        mrow = m[yy - ra]
-        mrow[:] = 0.0
-        yq = yy + dy
-        if yq < 0 or yq >= h or x0 >= x1:
-            continue
-        # views over x in [x0, x1) and x + dx, indexed from 0 (so the loop vectorises)
-        mv = mrow[x0:x1]
-        for c in range(nc):
-            gp, gq = g[c, yy, x0:x1], g[c, yq, x0 + dx:x1 + dx]
-            vp_row, vq_row = gv[c, yy, x0:x1], gv[c, yq, x0 + dx:x1 + dx]
-            for i in range(x1 - x0):
-                vp = vp_row[i]
-                vq = vq_row[i]
-                diff = gp[i] - gq[i]
-                mv[i] += (diff * diff - alpha * (vp + min(vp, vq))) / (eps + k2 * (vp + vq))
-        for i in range(x1 - x0):
-            mv[i] *= inv_nc
-    for j in range(patch_radii.shape[0]):
-        f = patch_radii[j]
-        for yy in range(ra, rb):
-            mrow = m[yy - ra]
-            hrow = hs[yy - ra]
-            hrow[:] = 0.0
-            for n in range(-f, f + 1):          # in-image horizontal patch sums, n ascending
-                lo = min(max(0, -n), w)
-                hi = max(min(w, w - n), lo)
-                hv, mv = hrow[lo:hi], mrow[lo + n:hi + n]
-                for i in range(hi - lo):
-                    hv[i] += mv[i]
-        for r in range(rows):
-            y = y0 + r
-            if y + dy < 0 or y + dy >= h:
-                continue
-            ya = max(y - f, 0)
-            yb = min(y + f, h - 1)
-            # in-image patch rows whose shifted row is inside too (the valid pairs), per axis
-            cy = min(yb, h - 1 - dy) - max(ya, -dy) + 1
-            orow = out[j, o, r]
-            orow[:] = 0.0
-            for yy in range(ya, yb + 1):
-                hrow = hs[yy - ra]
-                for x in range(w):
-                    orow[x] += hrow[x]
-            for x in range(x0, x1):
-                cx = min(min(x + f, w - 1), w - 1 - dx) - max(max(x - f, 0), -dx) + 1
-                orow[x] /= cy * cx
-
-
 @cached_njit(parallel=True, error_model="numpy")
 def _candidates_kernel(y_img, v_img, g, gv, feat, fvar, inv_norm, fstart, radius, patch_radii,
                        k_colors, self_guided, alpha, eps, band):
@@ -183,9 +116,10 @@ def _candidates_kernel(y_img, v_img, g, gv, feat, fvar, inv_norm, fstart, radius
     Every image argument is a (channels, H, W) float64 plane stack: y_img, v_img, g, gv (3),
     feat (sum C_j), fvar and inv_norm = 1 / (k_f^2 max(tau, Var_j, |Grad_j|^2)) (J). Per band
     of ``band`` rows, one window offset at a time: the patch colour distances of the band (one
-    map per distinct finite-k_c patch radius), then per band row the feature distances, weights,
-    sums and derivative terms of all pixels as loops over x (they vectorise), accumulated in
-    the band's (K, 3, rows, W) sums. Returns (filtered, derivative, output variance), each
+    map per distinct finite-k_c patch radius,
+    :func:`mcbench.filters.nlmeans.nl_means_patch_distance_maps`), then per band row the
+    feature distances, weights, sums and derivative terms of all pixels as loops over x (they
+    vectorise), accumulated in the band's (K, 3, rows, W) sums. Returns (filtered, derivative, output variance), each
     (K, H, W, 3).
     """
     nc, h, w = y_img.shape
@@ -222,7 +156,7 @@ def _candidates_kernel(y_img, v_img, g, gv, feat, fvar, inv_norm, fstart, radius
     for bi in prange(nbands):
         y0 = bi * band
         rows = min(h, y0 + band) - y0
-        dmaps = np.zeros((max(nmaps, 1), 1, rows, w))
+        dmaps = np.zeros((max(nmaps, 1), rows, w))
         m = np.zeros((rows + 2 * fmax, w))
         hs = np.zeros((rows + 2 * fmax, w))
         wsum = np.zeros((ncand, rows, w))
@@ -247,7 +181,7 @@ def _candidates_kernel(y_img, v_img, g, gv, feat, fvar, inv_norm, fstart, radius
                 if n <= 0:
                     continue
                 if nmaps > 0:
-                    _colour_distance_maps(g, gv, y0, rows, dy, dx, kc0, alpha, eps, radii, m, hs, dmaps, 0)
+                    nl_means_patch_distance_maps(g, gv, y0, rows, dy, dx, kc0, alpha, eps, radii, m, hs, dmaps)
                 for r in range(rows):
                     y = y0 + r
                     yq = y + dy
@@ -299,7 +233,7 @@ def _candidates_kernel(y_img, v_img, g, gv, feat, fvar, inv_norm, fstart, radius
                         wv = wins[:n]
                         if cmap[k] >= 0:
                             # w = min(w_c, w_f) = exp(-max(d_c^2, d_f)); the colour term wins where d_c^2 > d_f
-                            d2v = dmaps[cmap[k], 0, r, x0:x1]
+                            d2v = dmaps[cmap[k], r, x0:x1]
                             for i in range(n):
                                 wv[i] = 1.0 if d2v[i] > dfv[i] else 0.0
                                 wtv[i] = np.exp(-max(d2v[i], dfv[i]))

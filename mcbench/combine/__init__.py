@@ -7,6 +7,8 @@
 * :mod:`mcbench.combine.weight_filter` -- the cross-bilateral filter of weight maps (Sec. 4.2) and
   the public code's passes around it;
 * :mod:`mcbench.combine.blending` -- weighted sums of the images (Eq. 3 / 35);
+* :mod:`mcbench.combine.ensemble_driver` -- the ensemble of a render in one pass of bands of rows
+  (solve, filter, blend), the driver of the ``ensemble`` combiner;
 * :mod:`mcbench.combine.selection` -- dual-buffer MSE estimates, their prefilters and one-hot
   selection (Sec. 5.2.6);
 * :mod:`mcbench.combine.oracle` -- weights from ground-truth statistics (Sec. 5.2.7).

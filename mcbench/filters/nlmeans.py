@@ -24,8 +24,11 @@ Two implementations with the same result (tested to 1e-10 relative):
   a time, patch sums by ``scipy.ndimage.uniform_filter`` in edge mode "nearest"), kept as the
   tests' truth; :func:`nl_means_weight_maps` yields its per-offset weight maps.
 
-:func:`nl_means_distance_rows` is the compiled per-offset patch distance of a band of rows,
-shared with the regression kernel of ``methods/nfor.py``. All arithmetic is float64 (the
+Compiled building blocks of the denoisers' own kernels, over a band of rows and one window
+offset at a time: :func:`nl_means_distance_rows` (edge-replicated patch distances, channel mean
+first), :func:`nl_means_patch_distance_maps` (truncated patches, several patch radii from one
+per-pixel map; RDFC's colour weights) and :func:`nl_means_window_weights` (the weights of every
+window offset of a band, pixel-major; NFOR's regression). All arithmetic is float64 (the
 distances subtract variance terms of similar size, and the weights feed float64 sums).
 
 Options that reproduce Tungsten's NL-means (``src/denoiser/NlMeans.hpp`` of tunabrain/tungsten at
@@ -43,7 +46,7 @@ Options that reproduce Tungsten's NL-means (``src/denoiser/NlMeans.hpp`` of tuna
 
 These run in :func:`nl_means_channel_distance_rows` (direct, per channel, simpler and slower
 than the default kernel); with ``channels="mean"``, ``borders="replicate"`` and no clamp the
-default kernel runs and the numbers are today's.
+default kernel runs.
 
 ``benchmarks/bench_nlmeans.py`` measures the compiled filter against the NumPy path
 (``NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/bench_nlmeans.py --sizes 128 512``).
@@ -58,7 +61,8 @@ from scipy.ndimage import uniform_filter
 from mcbench.jit import cached_njit
 
 __all__ = ["nl_means_filter", "nl_means_filter_reference", "nl_means_weight_maps",
-           "nl_means_distance_rows", "nl_means_channel_distance_rows", "nl_means_offset_weights",
+           "nl_means_distance_rows", "nl_means_patch_distance_maps", "nl_means_channel_distance_rows",
+           "nl_means_offset_weights", "nl_means_window_weights", "guide_planes",
            "BAND_ROWS", "CHANNEL_MODES", "BORDER_MODES"]
 
 BAND_ROWS = 16   # rows per band of the compiled filter; affects speed only
@@ -142,6 +146,22 @@ def _clamp(i, n):
 
 
 @cached_njit(error_model="numpy")
+def _add_pixel_distances(guide, variance, yp, yq, x0, x1, dx, k2, alpha, epsilon, out):
+    """out[i] += sum over the C channels of the per-pixel distance term (module docstring, RKZ12
+    Eq. 5-6) of p = (yp, x0 + i) and p + o = (yq, x0 + i + dx), for i < x1 - x0, channels in
+    order. guide, variance: (C, H, W) float64 planes; both column ranges must lie inside the
+    image. The loop runs over views indexed from 0, so that it vectorises."""
+    for ch in range(guide.shape[0]):
+        gp, gq = guide[ch, yp, x0:x1], guide[ch, yq, x0 + dx:x1 + dx]
+        vp_row, vq_row = variance[ch, yp, x0:x1], variance[ch, yq, x0 + dx:x1 + dx]
+        for i in range(x1 - x0):
+            vp = vp_row[i]
+            vq = vq_row[i]
+            diff = gp[i] - gq[i]
+            out[i] += (diff * diff - alpha * (vp + min(vp, vq))) / (epsilon + k2 * (vp + vq))
+
+
+@cached_njit(error_model="numpy")
 def nl_means_distance_rows(guide, variance, y0, rows, dy, dx, patch, k, alpha, epsilon, clamp,
                            dmap, hsum, out):
     """Patch distance d²(p, p + o) (module docstring, RKZ12 Eq. 5-6) for o = (dy, dx) and the
@@ -165,15 +185,8 @@ def nl_means_distance_rows(guide, variance, y0, rows, dy, dx, patch, k, alpha, e
         yq = _clamp(yp + dy, h)
         drow = dmap[r]
         drow[:] = 0.0
-        dv = drow[x0:x1]                  # views indexed from 0, so that the loops vectorise
+        _add_pixel_distances(guide, variance, yp, yq, x0, x1, dx, k2, alpha, epsilon, drow[x0:x1])
         for ch in range(c):
-            gp, gq = guide[ch, yp, x0:x1], guide[ch, yq, x0 + dx:x1 + dx]
-            vp_row, vq_row = variance[ch, yp, x0:x1], variance[ch, yq, x0 + dx:x1 + dx]
-            for i in range(x1 - x0):
-                vp = vp_row[i]
-                vq = vq_row[i]
-                diff = gp[i] - gq[i]
-                dv[i] += (diff * diff - alpha * (vp + min(vp, vq))) / (epsilon + k2 * (vp + vq))
             gp, gq = guide[ch, yp], guide[ch, yq]
             vp_row, vq_row = variance[ch, yp], variance[ch, yq]
             for x in range(w):
@@ -220,6 +233,71 @@ def nl_means_distance_rows(guide, variance, y0, rows, dy, dx, patch, k, alpha, e
                 orow[x] += hrow[x]
         for x in range(w):
             orow[x] *= norm
+
+
+@cached_njit(error_model="numpy")
+def nl_means_patch_distance_maps(guide, variance, y0, rows, dy, dx, k, alpha, epsilon, patch_radii, m, hs,
+                                 out):
+    """Patch distances d²(p, p + o) of the rows [y0, y0 + rows) for o = (dy, dx), one map per
+    patch radius in ``patch_radii``, with truncated patches and no clamp: out[j, r, x] = the mean,
+    over the patch offsets n whose pixels p + n and p + n + o both lie inside the image, of the
+    channel mean of the per-pixel distance term (module docstring, RKZ12 Eq. 5-6). The
+    per-pixel map is computed once and shared by the radii (RDFC's candidate filters).
+
+    guide, variance: (C, H, W) float64 planes. m, hs: scratch of at least (rows + 2 max f, W).
+    Horizontal patch sums run over n ascending, vertical ones over the rows ascending, then one
+    division by the pair count. Entries whose p + o leaves the image are left unset (callers
+    skip them).
+    """
+    nc, h, w = guide.shape
+    fmax = 0
+    for j in range(patch_radii.shape[0]):
+        fmax = max(fmax, patch_radii[j])
+    ra = max(y0 - fmax, 0)
+    rb = min(y0 + rows + fmax, h)
+    k2 = k * k
+    x0 = max(0, -dx)
+    x1 = min(w, w - dx)
+    inv_nc = 1.0 / nc
+    for yy in range(ra, rb):
+        mrow = m[yy - ra]
+        mrow[:] = 0.0
+        yq = yy + dy
+        if yq < 0 or yq >= h or x0 >= x1:
+            continue
+        mv = mrow[x0:x1]
+        _add_pixel_distances(guide, variance, yy, yq, x0, x1, dx, k2, alpha, epsilon, mv)
+        for i in range(x1 - x0):
+            mv[i] *= inv_nc
+    for j in range(patch_radii.shape[0]):
+        f = patch_radii[j]
+        for yy in range(ra, rb):
+            mrow = m[yy - ra]
+            hrow = hs[yy - ra]
+            hrow[:] = 0.0
+            for n in range(-f, f + 1):          # in-image horizontal patch sums, n ascending
+                lo = min(max(0, -n), w)
+                hi = max(min(w, w - n), lo)
+                hv, mv = hrow[lo:hi], mrow[lo + n:hi + n]
+                for i in range(hi - lo):
+                    hv[i] += mv[i]
+        for r in range(rows):
+            y = y0 + r
+            if y + dy < 0 or y + dy >= h:
+                continue
+            ya = max(y - f, 0)
+            yb = min(y + f, h - 1)
+            # in-image patch rows whose shifted row is inside too (the valid pairs), per axis
+            cy = min(yb, h - 1 - dy) - max(ya, -dy) + 1
+            orow = out[j, r]
+            orow[:] = 0.0
+            for yy in range(ya, yb + 1):
+                hrow = hs[yy - ra]
+                for x in range(w):
+                    orow[x] += hrow[x]
+            for x in range(x0, x1):
+                cx = min(min(x + f, w - 1), w - 1 - dx) - max(max(x - f, 0), -dx) + 1
+                orow[x] /= cy * cx
 
 
 @cached_njit(parallel=True, error_model="numpy")
@@ -364,6 +442,53 @@ def nl_means_offset_weights(guide, variance, y0, rows, dy, dx, patch, k, alpha, 
             out[r, x] = np.exp(-d) if d > 0.0 else 1.0
 
 
+@cached_njit(error_model="numpy")
+def nl_means_window_weights(guide, variance, y0, y1, radius, patch, k, alpha, epsilon, clamp, truncate=False,
+                            mode=0):
+    """NL-means weights w(p, p + o) of every window offset o for the pixels p of rows [y0, y1):
+    (y1 - y0, W, (2R + 1)^2), pixel-major, offset index (dy + R) (2R + 1) + (dx + R); 0 where
+    p + o leaves the image. guide, variance: (C, H, W) float64 planes (NFOR's regression weights).
+
+    Default (``truncate`` False, ``mode`` 0): distances of :func:`nl_means_distance_rows`
+    (channel mean clipped at ``clamp``, edge-replicated patches), weight exp(-d) (1 for d <= 0).
+    ``truncate`` (truncated patch means) or ``mode`` 1 (minimum per-channel weight) take
+    Tungsten's path, :func:`nl_means_offset_weights` (distances clipped per channel).
+    """
+    c, h, w = guide.shape
+    rows = y1 - y0
+    side = 2 * radius + 1
+    out = np.empty((rows, w, side * side))
+    dmap = np.empty((rows + 2 * patch, w))
+    hsum = np.empty((rows + 2 * patch, w))
+    dist = np.empty((rows, w))
+    if truncate or mode != 0:
+        dist_c = np.empty((c, rows, w))
+        wmap = np.empty((rows, w))
+        for dy in range(-radius, radius + 1):
+            for dx in range(-radius, radius + 1):
+                o = (dy + radius) * side + (dx + radius)
+                nl_means_offset_weights(guide, variance, y0, rows, dy, dx, patch, k, alpha, epsilon, clamp,
+                                        truncate, mode, dmap, hsum, dist_c, wmap)
+                for r in range(rows):
+                    for x in range(w):
+                        out[r, x, o] = wmap[r, x]
+        return out
+    for dy in range(-radius, radius + 1):
+        for dx in range(-radius, radius + 1):
+            o = (dy + radius) * side + (dx + radius)
+            nl_means_distance_rows(guide, variance, y0, rows, dy, dx, patch, k, alpha, epsilon, clamp,
+                                   dmap, hsum, dist)
+            for r in range(rows):
+                inside_y = 0 <= y0 + r + dy < h
+                for x in range(w):
+                    if inside_y and 0 <= x + dx < w:
+                        d = dist[r, x]
+                        out[r, x, o] = np.exp(-d) if d > 0.0 else 1.0
+                    else:
+                        out[r, x, o] = 0.0
+    return out
+
+
 @cached_njit(parallel=True, error_model="numpy")
 def _nl_means_channels_kernel(values, guide, variance, radius, patch, k, alpha, epsilon, clamp, truncate,
                               mode, band):
@@ -415,6 +540,14 @@ def _nl_means_channels_kernel(values, guide, variance, radius, patch, k, alpha, 
 def _planes(array: np.ndarray) -> np.ndarray:
     """(H, W, C) -> contiguous (C, H, W) float64."""
     return np.ascontiguousarray(np.moveaxis(np.asarray(array, dtype=np.float64), 2, 0))
+
+
+def guide_planes(guide, guide_variance) -> tuple[np.ndarray, np.ndarray]:
+    """The guide and its variance (clamped at 0) as contiguous (C, H, W) float64 planes, the
+    input of the compiled kernels; a (H, W) guide gets one channel. ValueError when their
+    shapes differ."""
+    guide, variance = _guide_and_variance(guide, guide_variance)
+    return _planes(guide), _planes(variance)
 
 
 def nl_means_filter(values: np.ndarray, guide: np.ndarray, guide_variance: np.ndarray, radius: int = 5,

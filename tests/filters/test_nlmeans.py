@@ -1,5 +1,5 @@
-"""NL-means (Rousselle et al. 2012) against a brute-force per-pixel loop, and the compiled filter
-against the NumPy reference path."""
+"""NL-means (Rousselle et al. 2012) against a brute-force per-pixel loop, the compiled filter
+against the NumPy reference path, and NFOR's window weights against the weight maps."""
 
 import numpy as np
 import pytest
@@ -92,3 +92,20 @@ def test_shape_errors_name_the_arrays():
         nl_means_filter(np.zeros((4, 4)), np.zeros((4, 4, 3)), np.zeros((4, 4, 2)))
     with pytest.raises(ValueError, match="values .* and guide"):
         nl_means_filter(np.zeros((4, 5)), np.zeros((4, 4)), np.zeros((4, 4)))
+
+
+def planes(array):
+    return np.ascontiguousarray(np.moveaxis(array, 2, 0))
+
+
+def test_window_weights_match_weight_maps():
+    """The compiled pixel-major weights of every offset equal the NumPy weight maps, and a row
+    block gives the rows of the whole image."""
+    rng = np.random.default_rng(1)
+    guide, variance = rng.random((10, 12, 3)), rng.random((10, 12, 3)) * 0.05
+    weights = nlmeans.nl_means_window_weights(planes(guide), planes(variance), 0, 10, 3, 2, 0.7, 1.0, 1e-10, 1e4)
+    for dy, dx, expected, _ in nlmeans.nl_means_weight_maps(guide, variance, 3, 2, 0.7):
+        np.testing.assert_allclose(weights[..., (dy + 3) * 7 + dx + 3], expected, atol=1e-12)
+    # a row block gives the same weights as the whole image
+    np.testing.assert_array_equal(nlmeans.nl_means_window_weights(planes(guide), planes(variance), 3, 7, 3, 2, 0.7,
+                                                                  1.0, 1e-10, 1e4), weights[3:7])

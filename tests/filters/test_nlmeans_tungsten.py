@@ -1,11 +1,14 @@
 """The Tungsten options of :func:`mcbench.filters.nlmeans.nl_means_filter` (per-channel weights,
 truncated patch borders, per-channel distance clamp) against a brute-force loop written from the
-definitions in the module docstring, and the default options unchanged."""
+definitions in the module docstring, the default options unchanged, the window weights (NFOR's
+regression) with Tungsten's options and the truncated patch distance maps (RDFC's colour
+distances) against a brute-force loop."""
 
 import numpy as np
 import pytest
 
-from mcbench.filters.nlmeans import nl_means_filter, nl_means_filter_reference
+from mcbench.filters.nlmeans import (nl_means_filter, nl_means_filter_reference, nl_means_patch_distance_maps,
+                                     nl_means_window_weights)
 
 
 def clampi(i, n):
@@ -97,3 +100,70 @@ def test_rejects_unknown_options():
         nl_means_filter(x, x, x, channels="max")
     with pytest.raises(ValueError, match="borders"):
         nl_means_filter(x, x, x, borders="wrap")
+
+
+def planes(array):
+    return np.ascontiguousarray(np.moveaxis(array, 2, 0))
+
+
+def truncated_distances(guide, variance, y, x, dy, dx, patch, k, eps, clamp=np.inf):
+    """(C,): per channel, the mean over the in-image patch pairs (p + n, p + n + o) of the per-pixel
+    distance (alpha = 1) clipped at ``clamp``."""
+    h, w, c = guide.shape
+    total, count = np.zeros(c), 0
+    for ny in range(-patch, patch + 1):
+        for nx in range(-patch, patch + 1):
+            py, px, qy, qx = y + ny, x + nx, y + ny + dy, x + nx + dx
+            if not (0 <= py < h and 0 <= px < w and 0 <= qy < h and 0 <= qx < w):
+                continue
+            vp, vq = variance[py, px], variance[qy, qx]
+            d = ((guide[py, px] - guide[qy, qx]) ** 2 - (vp + np.minimum(vp, vq))) / (eps + k * k * (vp + vq))
+            total += np.minimum(d, clamp)
+            count += 1
+    return total / count
+
+
+def brute_weights(guide, variance, y, x, dy, dx, patch, k, eps, clamp):
+    """min over channels of exp(-max(D_c, 0)), D_c the truncated patch mean of the clipped distance."""
+    return np.exp(-np.maximum(truncated_distances(guide, variance, y, x, dy, dx, patch, k, eps, clamp), 0.0)).min()
+
+
+def test_window_weights_truncated_min_match_brute_force():
+    """NFOR's regression weights with Tungsten's options (truncated patches, minimum
+    per-channel weight, per-channel clamp) against the definition."""
+    rng = np.random.default_rng(4)
+    h, w, r, f = 8, 9, 2, 2
+    guide, variance = rng.random((h, w, 3)), rng.random((h, w, 3)) * 0.03
+    got = nl_means_window_weights(planes(guide), planes(variance), 0, h, r, f, 0.8, 1.0, 1e-7, 1e4, True, 1)
+    side = 2 * r + 1
+    for y in range(h):
+        for x in range(w):
+            for dy in range(-r, r + 1):
+                for dx in range(-r, r + 1):
+                    o = (dy + r) * side + dx + r
+                    if 0 <= y + dy < h and 0 <= x + dx < w:
+                        want = brute_weights(guide, variance, y, x, dy, dx, f, 0.8, 1e-7, 1e4)
+                        assert got[y, x, o] == pytest.approx(want, rel=1e-10, abs=1e-300)
+                    else:
+                        assert got[y, x, o] == 0.0
+
+
+@pytest.mark.parametrize("y0, rows", [(0, 9), (3, 4)])
+def test_patch_distance_maps_match_brute_force(y0, rows):
+    """Truncated patch distances of several radii from one per-pixel map (RDFC's colour
+    distances), for a band of rows, against the definition."""
+    rng = np.random.default_rng(7)
+    h, w = 9, 11
+    guide, variance = rng.random((h, w, 3)), rng.random((h, w, 3)) * 0.05
+    radii = np.array([1, 3, 0], dtype=np.int64)
+    scratch = (rows + 2 * 3, w)
+    for dy, dx in [(0, 0), (2, -3), (-4, 1), (0, 5)]:
+        out = np.full((len(radii), rows, w), np.nan)
+        nl_means_patch_distance_maps(planes(guide), planes(variance), y0, rows, dy, dx, 0.45, 1.0, 1e-10,
+                                     radii, np.empty(scratch), np.empty(scratch), out)
+        for j, f in enumerate(radii):
+            for r in range(rows):
+                for x in range(w):
+                    if 0 <= y0 + r + dy < h and 0 <= x + dx < w:
+                        want = truncated_distances(guide, variance, y0 + r, x, dy, dx, f, 0.45, 1e-10).mean()
+                        assert out[j, r, x] == pytest.approx(want, rel=1e-12, abs=1e-12)

@@ -6,7 +6,7 @@ import pytest
 
 from mcbench.io.buffers import RenderBuffers
 from mcbench.analysis.metrics import relmse
-from mcbench.filters.nlmeans import nl_means_weight_maps
+from mcbench.filters.nlmeans import nl_means_window_weights
 from methods import load_method, nfor
 
 
@@ -42,17 +42,6 @@ def planes(array):
     return np.ascontiguousarray(np.moveaxis(array, 2, 0))
 
 
-def test_weights_match_mcbench_nlmeans():
-    rng = np.random.default_rng(1)
-    guide, variance = rng.random((10, 12, 3)), rng.random((10, 12, 3)) * 0.05
-    weights = nfor.regression_weights(planes(guide), planes(variance), 0, 10, 3, 2, 0.7, 1.0, 1e-10, 1e4)
-    for dy, dx, expected, _ in nl_means_weight_maps(guide, variance, 3, 2, 0.7):
-        np.testing.assert_allclose(weights[..., (dy + 3) * 7 + dx + 3], expected, atol=1e-12)
-    # a row block gives the same weights as the whole image
-    np.testing.assert_allclose(nfor.regression_weights(planes(guide), planes(variance), 3, 7, 3, 2, 0.7, 1.0,
-                                                       1e-10, 1e4), weights[3:7], atol=0)
-
-
 def test_regression_matches_brute_force_lstsq():
     rng = np.random.default_rng(2)
     h, w, r = 9, 11, 2
@@ -60,7 +49,7 @@ def test_regression_matches_brute_force_lstsq():
     color, feat = rng.random((h, w, 3)), rng.random((h, w, 2))
     feat[..., 1] = 0.25  # a constant feature: rank-deficient normal equations
     got = nfor.collaborative_regression(color, guide, variance, feat, radius=r, patch_radius=1, k=0.7)
-    weights = nfor.regression_weights(planes(guide), planes(variance), 0, h, r, 1, 0.7, 1.0, 1e-10, 1e4)
+    weights = nl_means_window_weights(planes(guide), planes(variance), 0, h, r, 1, 0.7, 1.0, 1e-10, 1e4)
     num, den = np.zeros((h, w, 3)), np.zeros((h, w))
     for y in range(h):
         for x in range(w):

@@ -1,50 +1,12 @@
-"""The Tungsten switches of methods/nfor.py on small synthetic inputs: the regression's weights
-with truncated patches and minimum per-channel weights against a brute-force loop, the rank rule,
-and the errors of missing layers (the golden comparison is tests/methods/test_nfor_golden.py)."""
+"""The Tungsten switches of methods/nfor.py on small synthetic inputs: the rank rule and the
+errors of missing layers (the golden comparison is tests/methods/test_nfor_golden.py; the
+regression's Tungsten weights are tested in tests/filters/test_nlmeans_tungsten.py)."""
 
 import numpy as np
 import pytest
 
 from mcbench.io.buffers import RenderBuffers
 from methods import nfor
-
-
-def planes(array):
-    return np.ascontiguousarray(np.moveaxis(array, 2, 0))
-
-
-def brute_weights(guide, variance, y, x, dy, dx, patch, k, eps, clamp):
-    """min over channels of exp(-max(D_c, 0)), D_c the truncated patch mean of the clipped distance."""
-    h, w, c = guide.shape
-    total, count = np.zeros(c), 0
-    for ny in range(-patch, patch + 1):
-        for nx in range(-patch, patch + 1):
-            py, px, qy, qx = y + ny, x + nx, y + ny + dy, x + nx + dx
-            if not (0 <= py < h and 0 <= px < w and 0 <= qy < h and 0 <= qx < w):
-                continue
-            vp, vq = variance[py, px], variance[qy, qx]
-            d = ((guide[py, px] - guide[qy, qx]) ** 2 - (vp + np.minimum(vp, vq))) / (eps + k * k * (vp + vq))
-            total += np.minimum(d, clamp)
-            count += 1
-    return np.exp(-np.maximum(total / count, 0.0)).min()
-
-
-def test_tungsten_regression_weights_match_brute_force():
-    rng = np.random.default_rng(4)
-    h, w, r, f = 8, 9, 2, 2
-    guide, variance = rng.random((h, w, 3)), rng.random((h, w, 3)) * 0.03
-    got = nfor.regression_weights(planes(guide), planes(variance), 0, h, r, f, 0.8, 1.0, 1e-7, 1e4, True, 1)
-    side = 2 * r + 1
-    for y in range(h):
-        for x in range(w):
-            for dy in range(-r, r + 1):
-                for dx in range(-r, r + 1):
-                    o = (dy + r) * side + dx + r
-                    if 0 <= y + dy < h and 0 <= x + dx < w:
-                        want = brute_weights(guide, variance, y, x, dy, dx, f, 0.8, 1e-7, 1e4)
-                        assert got[y, x, o] == pytest.approx(want, rel=1e-10, abs=1e-300)
-                    else:
-                        assert got[y, x, o] == 0.0
 
 
 def test_rank_threshold_drops_a_rounding_noise_column():

@@ -33,6 +33,7 @@ import scipy.linalg
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
+from mcbench.filters.nlmeans import nl_means_window_weights  # noqa: E402
 from mcbench.io.buffers import RenderBuffers  # noqa: E402
 from mcbench.io.tungsten_buffers import read_case  # noqa: E402
 from methods import nfor  # noqa: E402
@@ -48,7 +49,7 @@ def regression_float32(color, guide, guide_variance, features, k, radius=9, patc
     """The collaborative regression with Tungsten's weights, solved per pixel in float32."""
     h, w, _ = color.shape
     t = nfor.TUNGSTEN
-    weights = nfor.regression_weights(planes(guide), planes(guide_variance), 0, h, radius, patch, k, 1.0,
+    weights = nl_means_window_weights(planes(guide), planes(guide_variance), 0, h, radius, patch, k, 1.0,
                                       t["nlm_epsilon"], nfor.DISTANCE_CLAMP, True, 1)
     eps = np.finfo(np.float32).eps
     acc = np.zeros((h, w, 3), np.float32)
