@@ -11,7 +11,7 @@ import pytest
 
 from mcbench import NOISY, BenchError
 
-from mcbench.pipeline import methods, metrics, render, report, viewer
+from mcbench.pipeline import methods, metrics, rankings, render, viewer
 from mcbench.io.buffers import Denoised, RenderBuffers
 from mcbench.io.exr import read_layers, read_metadata, write_layers
 from mcbench.analysis.metrics import METRICS
@@ -174,7 +174,7 @@ def test_gather_tables_concatenates_the_cases(case_files, tmp_path):
 def test_write_rankings_scores_the_lower_error_higher(case_files, tmp_path):
     render, reference = case_files
     frame, csv, _ = case_metrics(render, reference, tmp_path)
-    table = report.write_rankings(str(csv), "relmse", str(tmp_path / "r.csv"), str(tmp_path / "r.md"),
+    table = rankings.write_rankings(str(csv), "relmse", str(tmp_path / "r.csv"), str(tmp_path / "r.md"),
                                  candidates=[NOISY, "jbf"], labels={"jbf": "JBF"})
     # two entries: the lower relMSE scores 2, the other 1 (Sec. 5.3.3)
     assert table.loc["jbf", "Avg."] == 2.0 and table.loc[NOISY, "Avg."] == 1.0
