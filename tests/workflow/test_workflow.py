@@ -209,8 +209,12 @@ def test_extras_table_scores_each_extra_added_alone_to_the_pool(results, metrics
 # --- the study's tables (results/tables/study) ------------------------------------------------
 
 def test_study_writes_every_table_with_its_columns(results):
-    from mcbench.analysis.study import (BOTH_COLUMNS, FINDING_COLUMNS, PAIR_COLUMNS, REC_COLUMNS,
-                                        REFERENCE_NOISE_COLUMNS, SCORE_CI_COLUMNS, STUDY_FILES)
+    from mcbench.analysis.study.findings import FINDING_COLUMNS
+    from mcbench.analysis.study.pair_members import PAIR_COLUMNS
+    from mcbench.analysis.study.recommendations import BOTH_COLUMNS, REC_COLUMNS
+    from mcbench.analysis.study.reference_noise import REFERENCE_NOISE_COLUMNS
+    from mcbench.analysis.study.statistics import SCORE_CI_COLUMNS
+    from mcbench.analysis.study.writers import STUDY_FILES
 
     from mcbench.io.checksums import check_bytes
 
