@@ -9,6 +9,7 @@ Scores are averaged across scenes per spp, then across spp for the overall colum
 from __future__ import annotations
 
 import re
+from collections.abc import Iterable
 
 import numpy as np
 import pandas as pd
@@ -139,14 +140,24 @@ def _best_per_column(table: pd.DataFrame) -> pd.DataFrame:
                         index=table.index, columns=table.columns)
 
 
-def format_markdown(table: pd.DataFrame, labels: dict[str, str] | None = None, digits: int = 1) -> str:
-    """Markdown rendering of a ranking table; the best score of each column is bold."""
+def _marked(column, marked) -> str:
+    """A column's header, followed by `` ‡`` when its spp is in ``marked``."""
+    return f"{column} ‡" if str(column).isdigit() and int(column) in marked else str(column)
+
+
+def format_markdown(table: pd.DataFrame, labels: dict[str, str] | None = None, digits: int = 1, *,
+                    marked: Iterable[int] = ()) -> str:
+    """Markdown rendering of a ranking table; the best score of each column is bold; the spp
+    columns in ``marked`` (those the references cannot rank,
+    :func:`mcbench.analysis.scene_summary.unrankable_columns`) carry ``‡`` in their header."""
     labels = labels or {}
+    marked = {int(m) for m in marked}
     shown = table.copy()
     best = _best_per_column(table)
     for column in table.columns:
         shown[column] = [f"**{v:.{digits}f}**" if is_best else f"{v:.{digits}f}"
                          for v, is_best in zip(table[column], best[column])]
+    shown.columns = [_marked(c, marked) for c in table.columns]
     shown.index = [labels.get(c, c) for c in table.index]
     shown.index.name = "candidate"
     return shown.to_markdown()
@@ -154,7 +165,8 @@ def format_markdown(table: pd.DataFrame, labels: dict[str, str] | None = None, d
 
 # Characters with a meaning in LaTeX text mode, and the dagger of our stand-in labels.
 _LATEX_ESCAPES = {"\\": r"\textbackslash{}", "&": r"\&", "%": r"\%", "$": r"\$", "#": r"\#", "_": r"\_",
-                  "{": r"\{", "}": r"\}", "~": r"\textasciitilde{}", "^": r"\textasciicircum{}", "†": r"\dag{}"}
+                  "{": r"\{", "}": r"\}", "~": r"\textasciitilde{}", "^": r"\textasciicircum{}", "†": r"\dag{}",
+                  "‡": r"\ddag{}"}
 _LATEX_LABEL = re.compile(r"[A-Za-z0-9:._-]+")
 
 
@@ -164,20 +176,22 @@ def latex_escape(text: str) -> str:
 
 
 def format_latex(table: pd.DataFrame, labels: dict[str, str] | None = None, *, caption: str, label: str,
-                 digits: int = 1) -> str:
+                 digits: int = 1, marked: Iterable[int] = ()) -> str:
     """A ranking table as a LaTeX ``table`` with booktabs rules (``\\usepackage{booktabs}``).
 
     One row per candidate (``labels`` maps names to shown labels, escaped with
     :func:`latex_escape`), one column per spp (header ``<N> spp``) and ``Avg.``; scores with
     ``digits`` decimals, the best of each column in ``\\textbf{}`` (ties all bold, as in
-    :func:`format_markdown`). ``caption`` is plain text (escaped); ``label`` is the
-    ``\\label`` key (letters, digits, ``:._-``).
+    :func:`format_markdown`); the spp columns in ``marked`` carry ``\\ddag{}`` in their header.
+    ``caption`` is plain text (escaped); ``label`` is the ``\\label`` key (letters, digits, ``:._-``).
     """
     if not _LATEX_LABEL.fullmatch(label):
         raise ValueError(f"LaTeX label {label!r} may hold only letters, digits and ':._-'")
     labels = labels or {}
     best = _best_per_column(table)
-    header = ["Candidate"] + [f"{c} spp" if str(c).isdigit() else str(c) for c in table.columns]
+    marked = {int(m) for m in marked}
+    header = ["Candidate"] + [(f"{c} spp" + (" ‡" if int(c) in marked else "")) if str(c).isdigit() else str(c)
+                              for c in table.columns]
     rows = []
     for candidate in table.index:
         cells = [latex_escape(labels.get(candidate, candidate))]

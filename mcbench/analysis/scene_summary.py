@@ -76,6 +76,66 @@ def scene_rows(metrics: pd.DataFrame, floors: dict[str, float], scenes_info: dic
     return table
 
 
+def column_floor_ratios(metrics: pd.DataFrame, floors: dict[str, float | None], *,
+                        candidates: list[str]) -> pd.DataFrame:
+    """Per test case (scene, spp): the best of ``candidates``' relMSE over the scene's reference
+    floor (:func:`reference_relmse_floor`), the ratio :func:`scene_rows` gives for the highest spp
+    only.
+
+    ``metrics``: tidy table (scene, spp, candidate, metric, value); only ``relmse`` rows of
+    ``candidates`` are read (pass the ranking pool without the noisy input). ``floors`` maps each
+    scene to its floor, None where unknown (a reference imported without variance). Returns columns
+    scene, spp, best_candidate, best_relmse, reference_relmse, floor_ratio (NaN where the floor is
+    unknown, inf where it is 0), sorted by scene and spp. A scene of ``metrics`` without a floor
+    raises ``ValueError`` naming it.
+    """
+    relmse = metrics[(metrics["metric"] == "relmse") & metrics["candidate"].isin(list(candidates))]
+    rows = []
+    for (scene, spp), case in relmse.groupby(["scene", "spp"], sort=True):
+        if scene not in floors:
+            raise ValueError(f"no reference floor for scene '{scene}': pass every scene of the metrics in floors")
+        values = case.set_index("candidate")["value"].astype(np.float64)
+        floor = floors[scene]
+        best = float(values.min())
+        if floor is None:
+            ratio, floor = math.nan, math.nan
+        else:
+            ratio = best / floor if floor > 0 else math.inf
+        rows.append({"scene": str(scene), "spp": int(spp), "best_candidate": str(values.idxmin()),
+                     "best_relmse": best, "reference_relmse": floor, "floor_ratio": ratio})
+    return pd.DataFrame(rows, columns=["scene", "spp", "best_candidate", "best_relmse", "reference_relmse",
+                                       "floor_ratio"])
+
+
+def unrankable_columns(ratios: pd.DataFrame, *, required: float = FLOOR_RATIO_REQUIRED
+                       ) -> dict[int, list[tuple[str, float]]]:
+    """The spp columns of a ranking table that the references cannot rank: each spp at which some
+    scene's floor ratio (:func:`column_floor_ratios`) is below ``required``, mapped to those
+    (scene, ratio) pairs, lowest ratio first. Unknown floors (NaN) mark nothing."""
+    marked: dict[int, list[tuple[str, float]]] = {}
+    low = ratios[ratios["floor_ratio"] < required]
+    for spp, rows in low.groupby("spp", sort=True):
+        rows = rows.sort_values("floor_ratio", kind="stable")
+        marked[int(spp)] = [(str(s), float(r)) for s, r in zip(rows["scene"], rows["floor_ratio"])]
+    return marked
+
+
+#: The mark of a ranking column that the references cannot rank (:func:`unrankable_columns`).
+UNRANKABLE_MARK = "‡"
+
+
+def unrankable_note(marked: dict[int, list[tuple[str, float]]], *, required: float = FLOOR_RATIO_REQUIRED) -> str:
+    """One Markdown paragraph explaining the ``‡`` columns of a ranking table ('' when none)."""
+    if not marked:
+        return ""
+    parts = [f"{spp} spp ({', '.join(f'{scene} {ratio:.1f}×' for scene, ratio in scenes)})"
+             for spp, scenes in marked.items()]
+    return (f"{UNRANKABLE_MARK} Columns the references cannot rank: in each, some scene's reference noise floor "
+            f"(its own estimated relMSE, `tables/scenes.md`) is less than {required:g}× below the best ranked "
+            f"candidate's relMSE, so the reference's noise can reorder the column (docs/measurements.md: ranks "
+            f"moved by a 4× cleaner reference): " + "; ".join(parts) + ".")
+
+
 def scene_markdown(table: pd.DataFrame) -> str:
     """The scene table as Markdown, saying plainly which references are too noisy."""
     shown = table[["scene", "category", "reference_spp", "reference_relmse", "noisy_relmse", "best_candidate",

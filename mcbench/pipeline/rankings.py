@@ -18,9 +18,28 @@ if TYPE_CHECKING:  # pandas is imported inside the steps that build tables
     import pandas as pd
 
 
+def unrankable_from_scene_table(metrics: pd.DataFrame, scenes_csv: str | None, *, pool: list[str]
+                                ) -> dict[int, list[tuple[str, float]]]:
+    """The spp columns the references cannot rank
+    (:func:`mcbench.analysis.scene_summary.unrankable_columns`), from the scene table's floors
+    (``reference_relmse``, empty where unknown) and the relMSE of ``pool`` (the ranked candidates
+    without the noisy input). No scene table: nothing marked."""
+    import pandas as pd
+
+    from mcbench.analysis.scene_summary import column_floor_ratios, unrankable_columns
+
+    if scenes_csv is None:
+        return {}
+    scenes = read_table(scenes_csv, columns=["scene", "reference_relmse"])
+    floors = {str(scene): (None if pd.isna(floor) else float(floor))
+              for scene, floor in zip(scenes["scene"], scenes["reference_relmse"])}
+    return unrankable_columns(column_floor_ratios(metrics, floors, candidates=pool))
+
+
 def write_rankings(metrics_csv: str, metric: str, csv_path: str, md_path: str, *,
                    candidates: list[str], labels: dict[str, str], tex_path: str | None = None,
-                   order: list[str] | None = None, note: str = "") -> pd.DataFrame:
+                   order: list[str] | None = None, note: str = "", scenes_csv: str | None = None,
+                   noisy: str = "noisy") -> pd.DataFrame:
     """Score-and-rank table (Zheng et al. Table 3 layout) for one metric, as CSV and Markdown,
     and as a LaTeX booktabs table at ``tex_path`` when given (label ``tab:ranking-<metric>``).
 
@@ -28,9 +47,12 @@ def write_rankings(metrics_csv: str, metric: str, csv_path: str, md_path: str, *
     extra methods, ranked in their own tables) are left out; a metrics table missing a pool
     candidate, or any incomplete case, stops here instead of being ranked. ``order``: the rows'
     order (the pool's ID order; default best Avg. first). ``note``: a sentence for the Markdown
-    (e.g. that the pool is partial, so the scores are on another scale than the paper's)."""
+    (e.g. that the pool is partial, so the scores are on another scale than the paper's).
+    ``scenes_csv``: the scene table, whose reference floors mark with ``‡`` the spp columns the
+    references cannot rank (:func:`unrankable_from_scene_table`; the CSV is not marked)."""
     from mcbench.analysis.metrics import METRIC_LABELS
     from mcbench.analysis.ranking import check_complete, format_latex, format_markdown, ranking_table
+    from mcbench.analysis.scene_summary import unrankable_note
 
     metrics = read_table(metrics_csv, columns=("scene", "spp", "candidate", "metric", "value"))
     # the ranking pool: the comparison methods' rows are ranked in their own tables
@@ -45,23 +67,30 @@ def write_rankings(metrics_csv: str, metric: str, csv_path: str, md_path: str, *
                f"{n_cases} test cases the {n_entries} entries (candidates and the noisy input) get "
                f"linearly spaced scores from {n_entries} (lowest error) to 1; columns are the mean over "
                f"scenes per spp, `Avg.` the mean over spp. Higher is better.")
+    marked = unrankable_from_scene_table(metrics, scenes_csv, pool=[c for c in candidates if c != noisy])
     shown_note = f"\n\n{note}" if note else ""
-    write_text(md_path, f"# Ranking by {metric}\n\n{scoring}{shown_note}\n\n" + format_markdown(table, labels) + "\n")
+    floor_note = f"\n\n{unrankable_note(marked)}" if marked else ""
+    write_text(md_path, f"# Ranking by {metric}\n\n{scoring}{shown_note}\n\n"
+               + format_markdown(table, labels, marked=marked) + floor_note + "\n")
     if tex_path is not None:
         caption = (f"Ranking by {METRIC_LABELS.get(metric, metric)}. " + scoring.replace("`", "")
-                   + " Best per column in bold.")
-        write_text(tex_path, format_latex(table, labels, caption=caption, label=f"tab:ranking-{metric}"))
+                   + " Best per column in bold." + (" " + unrankable_note(marked).replace("`", "") if marked else ""))
+        write_text(tex_path, format_latex(table, labels, caption=caption, label=f"tab:ranking-{metric}",
+                                          marked=marked))
     return table
 
 
 def write_extras_rankings(metrics_csv: str, metric: str, csv_path: str, md_path: str, *, pool: list[str],
-                          extras: list[str], labels: dict[str, str], tex_path: str | None = None) -> pd.DataFrame:
+                          extras: list[str], labels: dict[str, str], tex_path: str | None = None,
+                          scenes_csv: str | None = None, noisy: str = "noisy") -> pd.DataFrame:
     """The extra methods' scores (:func:`mcbench.analysis.ranking.extras_table`): each method outside the
     ranking pool scored in a pool that adds it alone to ``pool`` (the candidates and the noisy
     input), as CSV, Markdown and LaTeX (label ``tab:extras-<metric>``). No extras: a table with a
-    sentence saying so."""
+    sentence saying so. ``scenes_csv`` marks the columns as :func:`write_rankings` does (by the
+    pool's best relMSE)."""
     from mcbench.analysis.metrics import METRIC_LABELS
     from mcbench.analysis.ranking import extras_table, format_latex, format_markdown
+    from mcbench.analysis.scene_summary import unrankable_note
 
     metrics = read_table(metrics_csv, columns=("scene", "spp", "candidate", "metric", "value"))
     table = extras_table(metrics, metric, pool=list(pool), extras=list(extras))
@@ -71,11 +100,16 @@ def write_extras_rankings(metrics_csv: str, metric: str, csv_path: str, md_path:
                f"{len(pool)} entries of the main table (candidates and the noisy input): in each test case the "
                f"{entries} entries get scores from {entries} (lowest error) to 1, and the row is the method's own "
                f"score (Zheng et al. 2021 Sec. 5.3.3), so the main table never depends on these methods.")
-    body = format_markdown(table, labels) if len(table) else "No method outside the ranking pool in this config."
+    marked = unrankable_from_scene_table(metrics, scenes_csv, pool=[c for c in pool if c != noisy]) if len(table) else {}
+    floor_note = f"\n\n{unrankable_note(marked)}" if marked else ""
+    body = (format_markdown(table, labels, marked=marked) + floor_note if len(table)
+            else "No method outside the ranking pool in this config.")
     write_text(md_path, f"# Extra methods by {METRIC_LABELS.get(metric, metric)}\n\n{scoring}\n\n{body}\n")
     if tex_path is not None:
         text = (format_latex(table, labels, caption=f"Extra methods by {METRIC_LABELS.get(metric, metric)}. "
-                             + scoring + " Best per column in bold.", label=f"tab:extras-{metric}")
+                             + scoring + " Best per column in bold."
+                             + (" " + unrankable_note(marked).replace("`", "") if marked else ""),
+                             label=f"tab:extras-{metric}", marked=marked)
                 if len(table) else "% No method outside the ranking pool in this config.\n")
         write_text(tex_path, text)
     return table

@@ -67,3 +67,54 @@ def test_scene_table_as_latex_escapes_text_and_bolds_too_noisy_references():
     assert body[1].rstrip().endswith(r"\textbf{4.0} \\") and r"media \& fog" in body[1]
     assert r"\caption{Scenes 100\% \& more}" in text and text.count("{") == text.count("}")
     assert text.index(r"\toprule") < text.index(r"\midrule") < text.index(r"\bottomrule")
+
+
+def _two_scene_metrics():
+    """Two scenes x two spp; pool candidates a, b and the noisy input n (never ranked 'best')."""
+    rows = []
+    values = {("s1", 512): (0.20, 0.40, 1.0), ("s1", 1024): (0.099, 0.30, 1.0),
+              ("s2", 512): (0.50, 0.60, 2.0), ("s2", 1024): (0.10, 0.25, 2.0)}
+    for (scene, spp), (a, b, n) in values.items():
+        rows += [(scene, spp, "a", "relmse", a), (scene, spp, "b", "relmse", b), (scene, spp, "n", "relmse", n),
+                 (scene, spp, "a", "smape", 9.0)]
+    return pd.DataFrame(rows, columns=["scene", "spp", "candidate", "metric", "value"])
+
+
+def test_column_floor_ratios_and_unrankable_columns_by_closed_form():
+    from mcbench.analysis.scene_summary import column_floor_ratios, unrankable_columns
+
+    ratios = column_floor_ratios(_two_scene_metrics(), {"s1": 0.01, "s2": 0.01}, candidates=["a", "b"])
+    by_case = ratios.set_index(["scene", "spp"])["floor_ratio"]
+    # best pool candidate over the floor: s1 1024 is 0.099 / 0.01 = 9.9, s2 1024 exactly 10
+    assert by_case[("s1", 512)] == pytest.approx(20.0) and by_case[("s1", 1024)] == pytest.approx(9.9)
+    assert by_case[("s2", 512)] == pytest.approx(50.0) and by_case[("s2", 1024)] == pytest.approx(10.0)
+    # 9.9 is below the 10x the scene table requires, 10.0 is not: only 1024 is marked, by s1 alone
+    assert unrankable_columns(ratios) == {1024: [("s1", pytest.approx(9.9))]}
+    # an unknown floor (imported reference without variance) marks nothing; a zero floor is infinite
+    unknown = column_floor_ratios(_two_scene_metrics(), {"s1": None, "s2": 0.0}, candidates=["a", "b"])
+    assert unknown["floor_ratio"].isna().sum() == 2 and np.isinf(unknown["floor_ratio"]).sum() == 2
+    assert unrankable_columns(unknown) == {}
+    with pytest.raises(ValueError, match="s2"):
+        column_floor_ratios(_two_scene_metrics(), {"s1": 0.01}, candidates=["a"])
+
+
+def test_ranking_markdown_marks_the_columns_the_references_cannot_rank(tmp_path):
+    from mcbench.pipeline.rankings import write_rankings
+
+    metrics = _two_scene_metrics()
+    metrics = metrics[metrics["metric"] == "relmse"]
+    path = tmp_path / "metrics.csv"
+    metrics.to_csv(path, index=False)
+    scenes = tmp_path / "scenes.csv"
+    pd.DataFrame({"scene": ["s1", "s2"], "reference_relmse": [0.01, 0.01]}).to_csv(scenes, index=False)
+    write_rankings(str(path), "relmse", str(tmp_path / "r.csv"), str(tmp_path / "r.md"), candidates=["n", "a", "b"],
+                   labels={}, tex_path=str(tmp_path / "r.tex"), scenes_csv=str(scenes), noisy="n")
+    text = (tmp_path / "r.md").read_text()
+    header = next(line for line in text.splitlines() if line.startswith("| candidate"))
+    assert "1024 ‡" in header and "512 ‡" not in header
+    assert "1024 spp (s1 9.9×)" in text
+    assert r"1024 spp \ddag{}" in (tmp_path / "r.tex").read_text()
+    assert list(pd.read_csv(tmp_path / "r.csv").columns) == ["candidate", "512", "1024", "Avg."]  # CSV unmarked
+    write_rankings(str(path), "relmse", str(tmp_path / "q.csv"), str(tmp_path / "q.md"), candidates=["n", "a", "b"],
+                   labels={}, noisy="n")
+    assert "‡" not in (tmp_path / "q.md").read_text()

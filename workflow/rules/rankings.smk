@@ -5,6 +5,7 @@ rule ranking_table:
     localrule: True
     input:
         rules.gather_metrics.output[0],
+        scenes=f"{RESULTS}/tables/scenes.csv",
     output:
         csv=report(
             f"{RESULTS}/tables/ranking_{{metric}}.csv",
@@ -36,6 +37,7 @@ rule extras_table:
     localrule: True
     input:
         rules.gather_metrics.output[0],
+        scenes=f"{RESULTS}/tables/scenes.csv",
     output:
         csv=report(
             f"{RESULTS}/tables/extras_{{metric}}.csv",

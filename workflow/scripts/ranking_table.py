@@ -9,9 +9,10 @@ if snakemake.rule == "extras_table":
     run_logged(snakemake.log[0], write_extras_rankings, snakemake.input[0], snakemake.wildcards.metric,
                snakemake.output.csv, snakemake.output.md, pool=list(snakemake.params.pool),
                extras=list(snakemake.params.extras), labels=dict(snakemake.params.labels),
-               tex_path=snakemake.output.tex)
+               tex_path=snakemake.output.tex, scenes_csv=snakemake.input.scenes)
 else:
     run_logged(snakemake.log[0], write_rankings, snakemake.input[0], snakemake.wildcards.metric,
                snakemake.output.csv, snakemake.output.md, candidates=list(snakemake.params.candidates),
                labels=dict(snakemake.params.labels), tex_path=snakemake.output.tex,
-               order=snakemake.params.order, note=snakemake.params.note)
+               order=snakemake.params.order, note=snakemake.params.note,
+               scenes_csv=snakemake.input.scenes)
