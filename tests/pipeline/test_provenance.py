@@ -165,3 +165,33 @@ def test_write_manifest_writes_json_and_markdown(tmp_path, smoke_config):
     assert md.startswith("# Provenance of this run\n")
     assert f"`{manifest['git']['commit']}`" in md and f"`{manifest['config_digest']}`" in md
     assert [p.name for p in json_path.parent.iterdir() if p.name.endswith(".tmp")] == []
+
+
+def test_the_study_step_ends_summary_md_with_the_manifests_block(tmp_path, smoke_config):
+    """mcbench.pipeline.study.write_study (rule study_tables) reads results/manifest.json and puts
+    its short block last in summary.md; the other study files are the same as without it."""
+    import numpy as np
+
+    from mcbench.analysis.study.markdown import PROVENANCE_HEADING
+    from mcbench.io.tables import write_csv
+    from mcbench.pipeline.study import write_study
+    from tests.analysis.study.synthetic import tidy
+
+    rng = np.random.default_rng(3)
+    names = ["kpcn", "nfor", "oidn", "rdfc", "ens10", "noisy"]
+    write_csv(tmp_path / "metrics.csv", tidy([(f"s{s}", spp, n, "relmse", float(rng.uniform(0.1, 1.0)))
+                                              for s in range(3) for spp in (4, 64) for n in names]))
+    manifest = write_manifest(str(tmp_path / "manifest.json"), str(tmp_path / "manifest.md"), repo_dir=REPO,
+                              config=smoke_config)
+    options = dict(metrics=["relmse"], labels={}, candidates=names, n_resamples=200, seed=1)
+    write_study(str(tmp_path / "metrics.csv"), str(tmp_path / "with"), manifest_json=str(tmp_path / "manifest.json"),
+                **options)
+    write_study(str(tmp_path / "metrics.csv"), str(tmp_path / "without"), **options)
+    summary = (tmp_path / "with/summary.md").read_text()
+    head, block = summary.split(f"\n{PROVENANCE_HEADING}\n\n")
+    assert head == (tmp_path / "without/summary.md").read_text()
+    assert block.startswith(f"- Commit: `{manifest['git']['commit']}`")
+    assert f"- Config digest: `{manifest['config_digest']}`" in block
+    for path in (tmp_path / "without").iterdir():
+        if "summary.md" not in path.name:           # and its checksum side file
+            assert (tmp_path / "with" / path.name).read_bytes() == path.read_bytes(), path.name
