@@ -34,8 +34,8 @@ rule provenance_manifest:
             labels={"file": "manifest.md"},
         ),
     params:
-        repo_dir=workflow.basedir,
-        # a params entry: a changed config reruns the rule (the script reads the config itself)
+        # a params entry: a changed config reruns the rule (the script reads the config itself,
+        # and the checkout from the script's own folder: a moved checkout reruns nothing)
         config_digest=config_digest(config),
     threads: 1
     resources:
