@@ -16,6 +16,10 @@ docs/architecture.md keeps Mitsuba and Dr.Jit out of this layer. For the same re
 LLVM target (which needs drjit imported) is not recorded; the AVX flags say which vector width
 its LLVM backend can use.
 
+The rule is local (``localrule: True``): on a cluster the CPU and cores are those of the host
+that ran the submitting Snakemake, not of the nodes that ran the methods (``timings.csv``'s
+``machine`` column names each method run's host).
+
 The keys are written in sorted order (:func:`mcbench.io.tables.write_json`), so two manifests of
 the same run compare byte for byte.
 """
