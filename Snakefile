@@ -27,6 +27,7 @@ include: "workflow/rules/render.smk"
 include: "workflow/rules/methods.smk"
 include: "workflow/rules/metrics.smk"
 include: "workflow/rules/rankings.smk"
+include: "workflow/rules/provenance.smk"
 include: "workflow/rules/training.smk"
 include: "workflow/rules/viewer.smk"
 include: "workflow/rules/figures.smk"
@@ -42,6 +43,7 @@ rule all:
     input:
         rules.gather_metrics.output,
         rules.gather_timings.output,
+        rules.provenance_manifest.output,
         expand(rules.ranking_table.output, metric=config["metrics"]),
         expand(rules.extras_table.output, metric=config["metrics"]),
         rules.scene_table.output,

@@ -7,18 +7,21 @@ from __future__ import annotations
 
 
 from mcbench import NOISY
-from mcbench.io.tables import read_table
+from mcbench.io.tables import read_json, read_table
 
 
 def write_study(metrics_csv: str, out_dir: str, *, metrics: list[str], labels: dict[str, str],
-                candidates: list[str], n_resamples: int, seed: int) -> dict:
+                candidates: list[str], n_resamples: int, seed: int, manifest_json: str | None = None) -> dict:
     """The 39-candidate study's tables (:func:`mcbench.analysis.study.writers.write_study_tables`) under ``out_dir``:
-    beside the paper's Table 3, recommendations, findings, bootstrap intervals, summary."""
+    beside the paper's Table 3, recommendations, findings, bootstrap intervals, summary;
+    ``summary.md`` ends with the provenance block of ``manifest_json`` (the run's
+    ``results/manifest.json``, :mod:`mcbench.pipeline.provenance`) when given."""
     from mcbench.analysis.study.writers import write_study_tables
 
+    provenance = None if manifest_json is None else read_json(manifest_json)
     return write_study_tables(metrics_csv, out_dir, metrics=list(metrics), labels=labels,
                               candidates=[c for c in candidates if c != NOISY], noisy=NOISY,
-                              n_resamples=n_resamples, seed=seed)
+                              n_resamples=n_resamples, seed=seed, provenance=provenance)
 
 
 def recommended_names(recommendations_csv: str, metric: str) -> list[str]:

@@ -120,6 +120,7 @@ def expected_items(config: dict) -> dict[str, dict]:
     items = {
         "results/metrics.csv": ("Data", "Errors", {"table": "metrics.csv"}),
         "results/timings.csv": ("Data", "Timings", {"table": "timings.csv"}),
+        "results/manifest.json": ("Data", "Provenance", {"file": "manifest.json"}),
         "results/tables/scenes.csv": ("Scenes", "Scene table", {"table": "scenes"}),
         "results/figures/gallery.png": ("Scenes", "Gallery", {"figure": "references"}),
         "results/figures/speed_error.png": ("Figures", "Speed against error", {"metric": "relmse"}),

@@ -532,6 +532,33 @@ def test_report_figures_decode_at_their_size(results):
     _assert_png(results / "figures/gallery.png")
 
 
+def test_manifest_describes_the_run_and_is_newer_than_its_tables(smoke_run, results):
+    from mcbench.analysis.study.markdown import PROVENANCE_HEADING
+    from mcbench.io.tables import read_json
+    from mcbench.pipeline.config import config_digest, resolve_config
+
+    _, config = smoke_run
+    manifest = read_json(results / "manifest.json")
+    assert list(manifest) == ["config_digest", "cpu", "git", "manifest_version", "platform", "versions"]
+    assert manifest["config_digest"] == config_digest(resolve_config(config))
+    assert set(manifest["versions"]) == {"mitsuba", "drjit", "oidn", "torch", "numpy", "flip_evaluator",
+                                         "snakemake", "python", "mcbench"}
+    assert manifest["cpu"]["logical_cores"] == os.cpu_count()
+    # this checkout's HEAD, or (a smoke folder reused through $MCBENCH_TEST_SMOKE_DIR: a new commit
+    # alone reruns nothing) one of its ancestors
+    commit = manifest["git"]["commit"]
+    if subprocess.run(["git", "-C", str(REPO), "rev-parse", "HEAD"], capture_output=True).returncode == 0:
+        assert subprocess.run(["git", "-C", str(REPO), "merge-base", "--is-ancestor", commit, "HEAD"]).returncode == 0
+    else:
+        assert commit == "unknown"
+    described = [results / "metrics.csv", results / "timings.csv",
+                 *(results / f"tables/{kind}_{m}.csv" for kind in ("ranking", "extras") for m in METRICS)]
+    assert all((results / "manifest.json").stat().st_mtime >= p.stat().st_mtime for p in described)
+    summary = (results / "tables/study/summary.md").read_text()
+    block = summary.split(f"\n{PROVENANCE_HEADING}\n\n")[1]
+    assert f"- Commit: `{manifest['git']['commit']}`" in block and manifest["config_digest"] in block
+
+
 def test_rerun_has_nothing_to_do(smoke_run):
     workdir, _ = smoke_run
     result = snakemake(workdir, "-n")
@@ -771,6 +798,21 @@ def _job_counts(result: subprocess.CompletedProcess) -> dict[str, int]:
     assert result.returncode == 0, text[-3000:]
     table = text.split("Job stats:")[1].split("total")[0]
     return {m.group(1): int(m.group(2)) for m in re.finditer(r"^(\w+)\s+(\d+)$", table, re.MULTILINE)}
+
+
+def test_the_manifest_is_planned_after_the_tables_and_read_by_the_summary_alone(tmp_path):
+    """results/manifest.json is written after the tables it describes (metrics, timings, ranking
+    and extras tables: its inputs) and only the study's tables and the `all` target take it, so
+    writing it again never reruns anything else."""
+    result = _dry_run(tmp_path, "--configfile", str(SMOKE))
+    text = result.stdout + result.stderr
+    assert result.returncode == 0, text[-3000:]
+    inputs = {m.group(1): m.group(2).split(", ")
+              for m in re.finditer(r"^(?:local)?rule (\w+):\n    input: (.*)$", text, re.MULTILINE)}
+    assert {rule for rule, paths in inputs.items() if "results/manifest.json" in paths} == {"study_tables", "all"}
+    assert {"results/metrics.csv", "results/timings.csv", "results/tables/ranking_relmse.csv",
+            "results/tables/extras_relmse.csv"} <= set(inputs["provenance_manifest"])
+    assert _job_counts(result)["provenance_manifest"] == 1
 
 
 @pytest.mark.parametrize("batch", [True, False])

@@ -14,6 +14,8 @@ rule study_tables:
     localrule: True
     input:
         metrics=rules.gather_metrics.output[0],
+        # summary.md ends with the run's provenance block (provenance.smk)
+        manifest=rules.provenance_manifest.output.json,
     output:
         paper=report(
             f"{STUDY_DIR}/paper_table3.md",

@@ -12,7 +12,7 @@ if snakemake.rule == "study_tables":
     run_logged(snakemake.log[0], write_study, snakemake.input.metrics, str(Path(snakemake.output.summary).parent),
                metrics=list(snakemake.params.metrics), labels=dict(snakemake.params.labels),
                candidates=list(snakemake.params.candidates), n_resamples=int(snakemake.params.n_resamples),
-               seed=int(snakemake.params.seed))
+               seed=int(snakemake.params.seed), manifest_json=snakemake.input.manifest)
 else:
     paths = {key: str(value) for key, value in snakemake.output.items()}
     run_logged(snakemake.log[0], write_study_figures_of, snakemake.input.metrics, snakemake.input.timings,

@@ -17,7 +17,8 @@ from mcbench.analysis.study.tables import StudyTables
 
 __all__ = ["NO_RELMSE_MARKDOWN", "paper_comparison_markdown", "recommendation_sentences", "recommendations_markdown",
            "recommendations_both_sentences", "recommendations_both_markdown", "pair_members_markdown",
-           "findings_markdown", "reference_noise_markdown", "summary_markdown"]
+           "findings_markdown", "reference_noise_markdown", "summary_markdown", "PROVENANCE_HEADING",
+           "provenance_markdown"]
 
 # paper_table3.md when the study has no relMSE values
 NO_RELMSE_MARKDOWN = ("# Beside the paper's Table 3 (relMSE scores)\n\nNo relMSE values in the metrics table "
@@ -321,11 +322,46 @@ def reference_noise_markdown(table: pd.DataFrame, *, labels: dict[str, str] | No
     return "\n".join(lines) + "\n"
 
 
-def summary_markdown(tables: StudyTables, *, source: str) -> str:
+#: summary.md's provenance section. Its heading names the machine, so that
+#: :func:`mcbench.analysis.run_comparison.table_without_timing` leaves the section out like the
+#: other machine-dependent text: two runs of one study on two commits or machines compare equal.
+PROVENANCE_HEADING = "## Provenance (commit, config, machine, versions)"
+
+# the versions the short block names, in this order (the manifest's keys -> the names shown)
+_KEY_VERSIONS = {"mcbench": "mcbench", "mitsuba": "Mitsuba", "drjit": "Dr.Jit", "oidn": "OIDN (pyoidn)",
+                 "torch": "torch", "numpy": "NumPy", "flip_evaluator": "flip-evaluator",
+                 "snakemake": "Snakemake", "python": "Python"}
+
+
+def _yes_no(value) -> str:
+    return {True: "yes", False: "no"}.get(value, str(value))
+
+
+def provenance_markdown(manifest: dict) -> list[str]:
+    """The short provenance block (Markdown list lines) of a run's manifest
+    (:func:`mcbench.pipeline.provenance.collect_provenance`, read from ``results/manifest.json``):
+    the commit and whether the tree was clean, the config digest, the CPU (model, vendor/family/
+    model numbers, AVX2/AVX-512F, logical cores) and the key library versions. A missing field
+    reads "unknown" (an older or partial manifest still renders)."""
+    git, cpu, versions = (manifest.get(k) or {} for k in ("git", "cpu", "versions"))
+    clean = git.get("clean", "unknown")
+    tree = {True: "clean tree", False: "uncommitted changes"}.get(clean, f"tree state {clean}")
+    shown = [f"{label} {versions[key]}" for key, label in _KEY_VERSIONS.items() if key in versions]
+    return [f"- Commit: `{git.get('commit', 'unknown')}` ({tree})",
+            f"- Config digest: `{manifest.get('config_digest', 'unknown')}`",
+            f"- CPU: {cpu.get('model', 'unknown')} (vendor {cpu.get('vendor', 'unknown')}, family "
+            f"{cpu.get('family', 'unknown')}, model {cpu.get('model_number', 'unknown')}); AVX2 "
+            f"{_yes_no(cpu.get('avx2', 'unknown'))}, AVX-512F {_yes_no(cpu.get('avx512f', 'unknown'))}; "
+            f"{cpu.get('logical_cores', 'unknown')} logical cores",
+            f"- Versions: {', '.join(shown) if shown else 'unknown'}"]
+
+
+def summary_markdown(tables: StudyTables, *, source: str, provenance: dict | None = None) -> str:
     """``summary.md``: per metric its grid, the metrics skipped (no values in ``source``, the
     metrics table's file name), the recommendation sentences of each metric and of both together,
     the Kendall taus beside the paper's Table 3, the reference-noise verdict and every finding's
-    verdict with its estimate and interval."""
+    verdict with its estimate and interval; last, when ``provenance`` (the run's manifest) is
+    given, its short block under :data:`PROVENANCE_HEADING` (:func:`provenance_markdown`)."""
     resampling, shown = tables.resampling, tables.labels
     lines = ["# The 39-candidate study: summary", "",
              f"Scene bootstrap: {resampling.n_resamples} paired resamples, seed {resampling.seed}, "
@@ -360,4 +396,6 @@ def summary_markdown(tables: StudyTables, *, source: str) -> str:
             f" ({_cell(r['estimate'], 3)}, {_ci_text(r['ci_low'], r['ci_high'], 3)})"
         lines.append(f"- {METRIC_LABELS.get(r['metric'], r['metric'])}, {r['finding']}: {r['quantity']}: "
                      f"**{r['verdict']}**{numbers}")
+    if provenance is not None:
+        lines += ["", PROVENANCE_HEADING, "", *provenance_markdown(provenance)]
     return "\n".join(lines) + "\n"

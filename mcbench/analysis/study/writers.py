@@ -31,10 +31,10 @@ def study_outputs(out_dir, metrics) -> list[str]:
     return [str(Path(out_dir) / f) for f in STUDY_FILES] + [str(Path(out_dir) / f"scores_ci_{m}.csv") for m in metrics]
 
 
-def write_study_files(tables: StudyTables, out_dir, *, source: str) -> None:
+def write_study_files(tables: StudyTables, out_dir, *, source: str, provenance: dict | None = None) -> None:
     """Write ``tables`` under ``out_dir`` (:func:`study_outputs`; CSV numbers with four decimals,
     an absent table as its header only); ``source``: the metrics table's file name, named in
-    ``summary.md``."""
+    ``summary.md``; ``provenance``: the run's manifest, whose short block ends ``summary.md``."""
     out_dir = Path(out_dir)
     shown, resampling = tables.labels, tables.resampling
     for metric in tables.metrics:
@@ -65,12 +65,12 @@ def write_study_files(tables: StudyTables, out_dir, *, source: str) -> None:
     write_csv(out_dir / "reference_noise.csv", tables.reference_noise, float_format="%.4f")
     write_text(out_dir / "reference_noise.md", reference_noise_markdown(tables.reference_noise, labels=shown,
                                                                         resampling=resampling))
-    write_text(out_dir / "summary.md", summary_markdown(tables, source=source))
+    write_text(out_dir / "summary.md", summary_markdown(tables, source=source, provenance=provenance))
 
 
 def write_study_tables(metrics_csv, out_dir, *, metrics=("relmse", "dssim"), labels: dict[str, str] | None = None,
                        candidates=None, noisy: str | None = NOISY, n_resamples: int = N_RESAMPLES, seed: int = SEED,
-                       confidence: float = CONFIDENCE) -> dict[str, pd.DataFrame]:
+                       confidence: float = CONFIDENCE, provenance: dict | None = None) -> dict[str, pd.DataFrame]:
     """The study's tables from ``metrics.csv``, written atomically under ``out_dir``
     (``results/tables/study/``). Files (:func:`study_outputs`):
 
@@ -85,7 +85,8 @@ def write_study_tables(metrics_csv, out_dir, *, metrics=("relmse", "dssim"), lab
       and ``.md``: finding (b), each size-2 ensemble against each member, per spp and overall;
     * ``scores_ci_<metric>.csv`` per metric of ``metrics`` (:func:`mcbench.analysis.study.statistics.score_cis`:
       :data:`~mcbench.analysis.study.statistics.SCORE_CI_COLUMNS`);
-    * ``summary.md``: the sentences, the Kendall tau, the verdicts, the metrics skipped.
+    * ``summary.md``: the sentences, the Kendall tau, the verdicts, the metrics skipped, and
+      the short block of ``provenance`` (the run's ``results/manifest.json``) when given.
 
     ``metrics`` absent from the data are skipped (their CSV holds the header only, summary.md
     says so); a pool candidate missing in a case stops with a :class:`mcbench.BenchError`
@@ -96,5 +97,5 @@ def write_study_tables(metrics_csv, out_dir, *, metrics=("relmse", "dssim"), lab
     resampling = Resampling(n_resamples=n_resamples, seed=seed, confidence=confidence)
     tables = study_tables(table, metrics=metrics, labels=labels, candidates=candidates, noisy=noisy,
                           resampling=resampling, source=str(metrics_csv))
-    write_study_files(tables, out_dir, source=Path(metrics_csv).name)
+    write_study_files(tables, out_dir, source=Path(metrics_csv).name, provenance=provenance)
     return tables.by_stem()

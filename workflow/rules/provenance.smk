@@ -1,0 +1,48 @@
+# The run's provenance manifest (mcbench.pipeline.provenance): git commit and clean tree, the
+# config digest, library versions, CPU and cores, as results/manifest.json and manifest.md.
+#
+# When it reruns: its inputs are the tables it describes (gathered metrics and timings, the
+# ranking and extras tables), so it runs again whenever they are regenerated and is always newer
+# than they are; its params hold the config digest, so a changed config rewrites it too. Nothing
+# depends on it but the `all` target, the report and the study's summary.md (study_tables): a
+# finished study plans nothing, and a new commit alone does not rerun it (the commit it names is
+# the one of the run that last wrote the tables).
+
+MANIFEST = f"{RESULTS}/manifest.json"
+
+
+rule provenance_manifest:
+    localrule: True
+    input:
+        metrics=rules.gather_metrics.output[0],
+        timings=rules.gather_timings.output[0],
+        rankings=expand(rules.ranking_table.output.csv, metric=METRIC_NAMES),
+        extras=expand(rules.extras_table.output.csv, metric=METRIC_NAMES),
+    output:
+        json=report(
+            MANIFEST,
+            caption="../report/provenance.rst",
+            category="Data",
+            subcategory="Provenance",
+            labels={"file": "manifest.json"},
+        ),
+        md=report(
+            f"{RESULTS}/manifest.md",
+            caption="../report/provenance.rst",
+            category="Data",
+            subcategory="Provenance",
+            labels={"file": "manifest.md"},
+        ),
+    params:
+        # a params entry: a changed config reruns the rule (the script reads the config itself,
+        # and the checkout from the script's own folder: a moved checkout reruns nothing)
+        config_digest=config_digest(config),
+    threads: 1
+    resources:
+        **job_resources("provenance_manifest"),
+    conda:
+        "../envs/mcbench.yaml"
+    log:
+        f"{RESULTS}/logs/provenance_manifest.log",
+    script:
+        "../scripts/provenance.py"
