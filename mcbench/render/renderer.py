@@ -47,6 +47,7 @@ from mcbench.io.buffers import ALL_LAYERS, BINS
 from mcbench.progress import eta_seconds, progress_line
 from mcbench.render.seeds import SCALAR_BLOCK_SIZE, mitsuba_seed, render_seed
 from mcbench.render.variants import pick_variant, set_threads
+from mcbench.render.visibility import register as register_visibility
 from mcbench.render.xml_scenes import XmlScene, load_xml_scene
 
 __all__ = ["RenderError", "MAX_WAVEFRONT", "passes_for", "load_scene_dict", "forget_scene",
@@ -56,7 +57,13 @@ __all__ = ["RenderError", "MAX_WAVEFRONT", "passes_for", "load_scene_dict", "for
            "film_size"]
 
 MAX_WAVEFRONT = 2 ** 22          # samples per mi.render call in vectorised variants (W*H*spp_pass)
-AOVS = "albedo:albedo,nn:sh_normal,dd:depth"
+#: Mitsuba AOVs of a noisy render (read by denoisers per case) and of a reference chunk (no position).
+AOVS = "albedo:albedo,nn:sh_normal,dd:depth,pp:position"
+REFERENCE_AOVS = "albedo:albedo,nn:sh_normal,dd:depth"
+#: Name of the visibility integrator (:mod:`mcbench.render.visibility`) inside the ``aov`` integrator of
+#: a noisy render; it sorts, and is inserted, after ``integrator`` (the scene's own), so that it runs after
+#: it and draws its random numbers after the colour's.
+VISIBILITY_CHILD = "visibility"
 SENSOR_TYPES = ("perspective", "thinlens", "orthographic")
 
 # Film channel names (Mitsuba 3.9 moment + aov integrators) of each quantity: m1 and m2.
@@ -68,8 +75,13 @@ CHANNELS = {
     "normal": (("nested.nn.X", "nested.nn.Y", "nested.nn.Z"),
                ("m2_nested.nn.X", "m2_nested.nn.Y", "m2_nested.nn.Z")),
     "depth": (("nested.dd.T",), ("m2_nested.dd.T",)),
+    "position": (("nested.pp.X", "nested.pp.Y", "nested.pp.Z"),
+                 ("m2_nested.pp.X", "m2_nested.pp.Y", "m2_nested.pp.Z")),
+    "visibility": ((f"nested.{VISIBILITY_CHILD}.v",), (f"m2_nested.{VISIBILITY_CHILD}.v",)),
 }
-FEATURES = ("albedo", "normal", "depth")
+FEATURES = ("albedo", "normal", "depth")          # the features of a reference chunk
+#: Quantities only noisy renders hold (RDFC's features, Rousselle et al. 2013); references have none.
+NOISY_FEATURES = ("position", "visibility")
 
 SeedOfPass = Callable[[int], int]            # pass index -> 32-bit seed
 SeedOfBinPass = Callable[[int, int, int], int]   # (half 0 = A / 1 = B, bin 0/1, pass index) -> seed
@@ -109,13 +121,18 @@ def _sensor_key(desc: dict, label: str) -> str:
         raise RenderError(f"scene '{label}': no {'/'.join(SENSOR_TYPES)} sensor in its dict") from None
 
 
-def _wrapped(desc: dict, label: str, width: int, height: int, variant: str) -> tuple[dict, dict]:
+def _wrapped(desc: dict, label: str, width: int, height: int, variant: str,
+             noisy: bool = True) -> tuple[dict, dict]:
     """A copy of ``desc`` with the moment/aov integrator wrapper, box filter and independent
-    sampler (``desc`` itself is not changed), and the scene's own integrator dict."""
+    sampler (``desc`` itself is not changed), and the scene's own integrator dict. ``noisy``: with
+    the position AOV and the visibility integrator (:data:`NOISY_FEATURES`), else a reference's
+    wrapper (:data:`REFERENCE_AOVS`)."""
     desc = dict(desc)
     integrator = desc["integrator"]
-    desc["integrator"] = {"type": "moment",
-                          "nested": {"type": "aov", "aovs": AOVS, "integrator": integrator}}
+    nested = {"type": "aov", "aovs": AOVS if noisy else REFERENCE_AOVS, "integrator": integrator}
+    if noisy:
+        nested[VISIBILITY_CHILD] = {"type": register_visibility()}
+    desc["integrator"] = {"type": "moment", "nested": nested}
     if variant.startswith("scalar"):
         desc["integrator"]["block_size"] = SCALAR_BLOCK_SIZE
     sensor_key = _sensor_key(desc, label)
@@ -133,20 +150,24 @@ def _wrapped(desc: dict, label: str, width: int, height: int, variant: str) -> t
     return desc, integrator
 
 
-def _loaded(key: str, build: Callable[[], dict], label: str, width: int, height: int, variant: str):
-    """Cached ``(Mitsuba scene, scene integrator dict)``; ``build()`` runs only on a miss."""
+def _loaded(key: str, build: Callable[[], dict], label: str, width: int, height: int, variant: str,
+            noisy: bool = True):
+    """Cached ``(Mitsuba scene, scene integrator dict)``; ``build()`` runs only on a miss.
+    ``noisy``: the wrapper of a noisy render (with :data:`NOISY_FEATURES`), else a reference's."""
     import mitsuba as mi
 
-    cache_key = (key, width, height, variant)
+    cache_key = (key, width, height, variant, noisy)
     if cache_key not in _scene_cache:
         desc = build()
         if isinstance(desc, XmlScene):        # a Mitsuba XML file (mcbench.render.xml_scenes)
             if (desc.width, desc.height) != (width, height):
                 raise RenderError(f"scene '{label}': build({width}, {height}) made a {desc.width}x{desc.height} film")
             _scene_cache[cache_key] = load_xml_scene(
-                desc, aovs=AOVS, block_size=SCALAR_BLOCK_SIZE if variant.startswith("scalar") else None)
+                desc, aovs=AOVS if noisy else REFERENCE_AOVS,
+                block_size=SCALAR_BLOCK_SIZE if variant.startswith("scalar") else None,
+                extra_integrators={VISIBILITY_CHILD: register_visibility()} if noisy else None)
             return _scene_cache[cache_key]
-        desc, integrator = _wrapped(desc, label, width, height, variant)
+        desc, integrator = _wrapped(desc, label, width, height, variant, noisy)
         try:
             _scene_cache[cache_key] = (mi.load_dict(desc), integrator)
         except Exception as exc:
@@ -181,13 +202,16 @@ def forget_scene(key: str) -> None:
 # --------------------------------------------------------------------------- moment sums
 
 def _channel_indices(scene_object) -> dict[str, tuple[list[int], list[int]]]:
-    """Indices of the m1 and m2 channels of each quantity in the developed film, by name."""
+    """Indices of the m1 and m2 channels of each quantity in the developed film, by name: every
+    quantity of :data:`CHANNELS` except :data:`NOISY_FEATURES` must be there (those only in a noisy
+    render's film, :func:`_wrapped`)."""
     names = [field.name for field in scene_object.sensors()[0].film().bitmap().struct_()]
-    if names[:3] != ["R", "G", "B"] or len(names) != 31:
+    if names[:3] != ["R", "G", "B"]:
         raise RenderError(f"unexpected film channels {names}")
+    present = [q for q in CHANNELS if q not in NOISY_FEATURES or CHANNELS[q][0][0] in names]
     try:
-        return {q: ([names.index(c) for c in m1], [names.index(c) for c in m2])
-                for q, (m1, m2) in CHANNELS.items()}
+        return {q: ([names.index(c) for c in CHANNELS[q][0]], [names.index(c) for c in CHANNELS[q][1]])
+                for q in present}
     except ValueError as exc:
         raise RenderError(f"film channel missing ({exc}); channels are {names}") from exc
 
@@ -327,9 +351,9 @@ def _size(module: ModuleType, resolution) -> tuple[int, int]:
     return int(width), int(height)
 
 
-def _loaded_module(module: ModuleType, width: int, height: int, variant: str):
+def _loaded_module(module: ModuleType, width: int, height: int, variant: str, noisy: bool = True):
     return _loaded(module.__name__, lambda: module.build(width, height), _scene_name(module),
-                   width, height, variant)
+                   width, height, variant, noisy)
 
 
 def render_buffers(scene_module: ModuleType, spp: int, *, resolution: tuple[int, int] | None = None,
@@ -393,7 +417,7 @@ def render_reference_chunk(scene_module: ModuleType, spp: int, chunk: int, *,
     variant = pick_variant(variant)
     set_threads(threads)
     start = time.perf_counter()
-    scene_object, integrator = _loaded_module(module, width, height, variant)
+    scene_object, integrator = _loaded_module(module, width, height, variant, noisy=False)
     sums, seeds = _moment_sums(
         name, scene_object, spp,
         lambda p: render_seed("reference", chunk=chunk, pass_index=p, base_seed=seed),
@@ -459,9 +483,10 @@ def buffers_from_moment_sums(sums_a: dict, sums_b: dict, half_spp: int, *,
     sums = {"_a": sums_a, "_b": sums_b}
     layers = {}
     pooled = _pooled(sums["_a"], sums["_b"])
+    quantities = [q for q in CHANNELS if q in sums_a]
     for suffix, n, moments in (("_a", half_spp, sums["_a"]), ("_b", half_spp, sums["_b"]),
                                ("", 2 * half_spp, pooled)):
-        for quantity in CHANNELS:
+        for quantity in quantities:
             if n >= 2:
                 mean, variance = moments_to_mean_variance(*moments[quantity], n)
             else:  # spp = 2: one sample per half buffer, no within-buffer variance exists.
@@ -477,14 +502,14 @@ def buffers_from_moment_sums(sums_a: dict, sums_b: dict, half_spp: int, *,
         layers["color" + suffix] = np.asarray(color, dtype=np.float32)
     # The full image is by definition (A + B) / 2, computed on the float32 halves so that the
     # identity holds exactly for consumers that recompute it.
-    for quantity in CHANNELS:
+    for quantity in quantities:
         layers[quantity] = (layers[quantity + "_a"] + layers[quantity + "_b"]) / np.float32(2)
     # Mitsuba's albedo AOV can exceed 1 on glossy conductors (it evaluates the BSDF near the
     # specular peak); denoisers expect reflectance in [0, 1], so the means are clipped (the
     # albedo variances stay those of the raw samples).
     for suffix in ("", "_a", "_b"):
         layers["albedo" + suffix] = np.clip(layers["albedo" + suffix], 0.0, 1.0)
-    return {name: np.ascontiguousarray(layers[name], dtype=np.float32) for name in ALL_LAYERS}
+    return {name: np.ascontiguousarray(layers[name], dtype=np.float32) for name in ALL_LAYERS if name in layers}
 
 
 def merge_reference_chunks(chunks: list[tuple[dict, dict]]) -> tuple[dict[str, np.ndarray], dict[str, str]]:
