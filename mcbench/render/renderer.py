@@ -47,6 +47,7 @@ from mcbench.io.buffers import ALL_LAYERS, BINS
 from mcbench.progress import eta_seconds, progress_line
 from mcbench.render.seeds import SCALAR_BLOCK_SIZE, mitsuba_seed, render_seed
 from mcbench.render.variants import pick_variant, set_threads
+from mcbench.render.visibility import AOV_NAME as VISIBILITY_AOV
 from mcbench.render.visibility import register as register_visibility
 from mcbench.render.xml_scenes import XmlScene, load_xml_scene
 
@@ -57,12 +58,10 @@ __all__ = ["RenderError", "MAX_WAVEFRONT", "passes_for", "load_scene_dict", "for
            "film_size"]
 
 MAX_WAVEFRONT = 2 ** 22          # samples per mi.render call in vectorised variants (W*H*spp_pass)
-#: Mitsuba AOVs of a noisy render (read by denoisers per case) and of a reference chunk (no position).
-AOVS = "albedo:albedo,nn:sh_normal,dd:depth,pp:position"
-REFERENCE_AOVS = "albedo:albedo,nn:sh_normal,dd:depth"
-#: Name of the visibility integrator (:mod:`mcbench.render.visibility`) inside the ``aov`` integrator of
-#: a noisy render; it sorts, and is inserted, after ``integrator`` (the scene's own), so that it runs after
-#: it and draws its random numbers after the colour's.
+AOVS = "albedo:albedo,nn:sh_normal,dd:depth"
+#: The feature pass of a noisy render (module docstring): Mitsuba's position AOV and, nested in the same
+#: ``aov`` integrator, the visibility integrator (:mod:`mcbench.render.visibility`) under this name.
+FEATURE_AOVS = "pp:position"
 VISIBILITY_CHILD = "visibility"
 SENSOR_TYPES = ("perspective", "thinlens", "orthographic")
 
@@ -75,13 +74,15 @@ CHANNELS = {
     "normal": (("nested.nn.X", "nested.nn.Y", "nested.nn.Z"),
                ("m2_nested.nn.X", "m2_nested.nn.Y", "m2_nested.nn.Z")),
     "depth": (("nested.dd.T",), ("m2_nested.dd.T",)),
+}
+# The same for the feature pass of a noisy render (RDFC's features, Rousselle et al. 2013).
+FEATURE_CHANNELS = {
     "position": (("nested.pp.X", "nested.pp.Y", "nested.pp.Z"),
                  ("m2_nested.pp.X", "m2_nested.pp.Y", "m2_nested.pp.Z")),
-    "visibility": ((f"nested.{VISIBILITY_CHILD}.v",), (f"m2_nested.{VISIBILITY_CHILD}.v",)),
+    "visibility": ((f"nested.{VISIBILITY_CHILD}.{VISIBILITY_AOV}",),
+                   (f"m2_nested.{VISIBILITY_CHILD}.{VISIBILITY_AOV}",)),
 }
 FEATURES = ("albedo", "normal", "depth")          # the features of a reference chunk
-#: Quantities only noisy renders hold (RDFC's features, Rousselle et al. 2013); references have none.
-NOISY_FEATURES = ("position", "visibility")
 
 SeedOfPass = Callable[[int], int]            # pass index -> 32-bit seed
 SeedOfBinPass = Callable[[int, int, int], int]   # (half 0 = A / 1 = B, bin 0/1, pass index) -> seed
@@ -121,18 +122,13 @@ def _sensor_key(desc: dict, label: str) -> str:
         raise RenderError(f"scene '{label}': no {'/'.join(SENSOR_TYPES)} sensor in its dict") from None
 
 
-def _wrapped(desc: dict, label: str, width: int, height: int, variant: str,
-             noisy: bool = True) -> tuple[dict, dict]:
+def _wrapped(desc: dict, label: str, width: int, height: int, variant: str) -> tuple[dict, dict]:
     """A copy of ``desc`` with the moment/aov integrator wrapper, box filter and independent
-    sampler (``desc`` itself is not changed), and the scene's own integrator dict. ``noisy``: with
-    the position AOV and the visibility integrator (:data:`NOISY_FEATURES`), else a reference's
-    wrapper (:data:`REFERENCE_AOVS`)."""
+    sampler (``desc`` itself is not changed), and the scene's own integrator dict."""
     desc = dict(desc)
     integrator = desc["integrator"]
-    nested = {"type": "aov", "aovs": AOVS if noisy else REFERENCE_AOVS, "integrator": integrator}
-    if noisy:
-        nested[VISIBILITY_CHILD] = {"type": register_visibility()}
-    desc["integrator"] = {"type": "moment", "nested": nested}
+    desc["integrator"] = {"type": "moment",
+                          "nested": {"type": "aov", "aovs": AOVS, "integrator": integrator}}
     if variant.startswith("scalar"):
         desc["integrator"]["block_size"] = SCALAR_BLOCK_SIZE
     sensor_key = _sensor_key(desc, label)
@@ -150,24 +146,20 @@ def _wrapped(desc: dict, label: str, width: int, height: int, variant: str,
     return desc, integrator
 
 
-def _loaded(key: str, build: Callable[[], dict], label: str, width: int, height: int, variant: str,
-            noisy: bool = True):
-    """Cached ``(Mitsuba scene, scene integrator dict)``; ``build()`` runs only on a miss.
-    ``noisy``: the wrapper of a noisy render (with :data:`NOISY_FEATURES`), else a reference's."""
+def _loaded(key: str, build: Callable[[], dict], label: str, width: int, height: int, variant: str):
+    """Cached ``(Mitsuba scene, scene integrator dict)``; ``build()`` runs only on a miss."""
     import mitsuba as mi
 
-    cache_key = (key, width, height, variant, noisy)
+    cache_key = (key, width, height, variant)
     if cache_key not in _scene_cache:
         desc = build()
         if isinstance(desc, XmlScene):        # a Mitsuba XML file (mcbench.render.xml_scenes)
             if (desc.width, desc.height) != (width, height):
                 raise RenderError(f"scene '{label}': build({width}, {height}) made a {desc.width}x{desc.height} film")
             _scene_cache[cache_key] = load_xml_scene(
-                desc, aovs=AOVS if noisy else REFERENCE_AOVS,
-                block_size=SCALAR_BLOCK_SIZE if variant.startswith("scalar") else None,
-                extra_integrators={VISIBILITY_CHILD: register_visibility()} if noisy else None)
+                desc, aovs=AOVS, block_size=SCALAR_BLOCK_SIZE if variant.startswith("scalar") else None)
             return _scene_cache[cache_key]
-        desc, integrator = _wrapped(desc, label, width, height, variant, noisy)
+        desc, integrator = _wrapped(desc, label, width, height, variant)
         try:
             _scene_cache[cache_key] = (mi.load_dict(desc), integrator)
         except Exception as exc:
@@ -201,33 +193,54 @@ def forget_scene(key: str) -> None:
 
 # --------------------------------------------------------------------------- moment sums
 
-def _channel_indices(scene_object) -> dict[str, tuple[list[int], list[int]]]:
-    """Indices of the m1 and m2 channels of each quantity in the developed film, by name: every
-    quantity of :data:`CHANNELS` except :data:`NOISY_FEATURES` must be there (those only in a noisy
-    render's film, :func:`_wrapped`)."""
+def _channel_indices(scene_object, channels: dict = CHANNELS,
+                     count: int = 31) -> dict[str, tuple[list[int], list[int]]]:
+    """Indices of the m1 and m2 channels of each quantity of ``channels`` in the film developed
+    last (the colour pass: :data:`CHANNELS`, 31 channels; the feature pass:
+    :data:`FEATURE_CHANNELS`, 25), by name."""
     names = [field.name for field in scene_object.sensors()[0].film().bitmap().struct_()]
-    if names[:3] != ["R", "G", "B"]:
+    if names[:3] != ["R", "G", "B"] or len(names) != count:
         raise RenderError(f"unexpected film channels {names}")
-    present = [q for q in CHANNELS if q not in NOISY_FEATURES or CHANNELS[q][0][0] in names]
     try:
-        return {q: ([names.index(c) for c in CHANNELS[q][0]], [names.index(c) for c in CHANNELS[q][1]])
-                for q in present}
+        return {q: ([names.index(c) for c in m1], [names.index(c) for c in m2])
+                for q, (m1, m2) in channels.items()}
     except ValueError as exc:
         raise RenderError(f"film channel missing ({exc}); channels are {names}") from exc
 
 
-def _render_pass(scene_object, spp: int, seed: int) -> np.ndarray:
-    """One ``mi.render`` call: the developed film as float64 (H, W, 31)."""
+def _render_pass(scene_object, spp: int, seed: int, integrator=None) -> np.ndarray:
+    """One ``mi.render`` call (with the scene's integrator, or ``integrator``): the developed film
+    as float64 (H, W, channels)."""
     import mitsuba as mi
 
-    return np.asarray(mi.render(scene_object, spp=spp, seed=seed), dtype=np.float64)
+    return np.asarray(mi.render(scene_object, spp=spp, seed=seed, integrator=integrator), dtype=np.float64)
+
+
+_feature_integrators: dict = {}
+
+
+def _feature_integrator(variant: str):
+    """The integrator of the feature pass (module docstring), one per variant:
+    ``moment(aov(position, visibility))``, with the colour pass's block size in scalar variants (the
+    same block size gives the same per-block seeds, hence the same camera rays)."""
+    import mitsuba as mi
+
+    if variant not in _feature_integrators:
+        desc = {"type": "moment", "nested": {"type": "aov", "aovs": FEATURE_AOVS,
+                                             VISIBILITY_CHILD: {"type": register_visibility()}}}
+        if variant.startswith("scalar"):
+            desc["block_size"] = SCALAR_BLOCK_SIZE
+        _feature_integrators[variant] = mi.load_dict(desc)
+    return _feature_integrators[variant]
 
 
 def _moment_sums(label: str, scene_object, spp: int, seed_of: SeedOfPass, variant: str,
                  width: int, height: int, label_spp: int,
-                 progress: str | None = None) -> tuple[dict[str, tuple], list[int]]:
+                 progress: str | None = None, features: bool = False) -> tuple[dict[str, tuple], list[int]]:
     """Render ``spp`` samples in the passes of :func:`passes_for`, pass ``p`` seeded with
     ``seed_of(p)``; per quantity float64 sums (S1, S2), each (H, W, C), and the seeds used.
+    ``features``: each pass is followed by its feature pass (same spp and seed, the quantities of
+    :data:`FEATURE_CHANNELS`).
     With ``progress`` (a label), prints a :func:`mcbench.progress.progress_line` after each pass
     (passes done, elapsed time, ETA from the samples done so far)."""
     pass_spp = passes_for(spp, width, height, variant)
@@ -242,12 +255,23 @@ def _moment_sums(label: str, scene_object, spp: int, seed_of: SeedOfPass, varian
             bad = int((~np.isfinite(image)).any(axis=2).sum())
             raise RenderError(f"scene '{label}' at {label_spp} spp: Mitsuba produced NaN/Inf in "
                               f"{bad} pixel(s) (pass seed {seed}, variant {variant})")
-        for quantity, (m1, m2) in index.items():
-            s1, s2 = image[..., m1] * spp, image[..., m2] * spp
-            if quantity in sums:
-                sums[quantity] = (sums[quantity][0] + s1, sums[quantity][1] + s2)
-            else:
-                sums[quantity] = (s1, s2)
+        quantities = [(image, index)]
+        if features:
+            feature_image = _render_pass(scene_object, spp, mitsuba_seed(seed, variant, width, height),
+                                         _feature_integrator(variant))
+            feature_index = _channel_indices(scene_object, FEATURE_CHANNELS, 25)
+            if not np.all(np.isfinite(feature_image)):
+                bad = int((~np.isfinite(feature_image)).any(axis=2).sum())
+                raise RenderError(f"scene '{label}' at {label_spp} spp: the feature pass produced NaN/Inf in "
+                                  f"{bad} pixel(s) (pass seed {seed}, variant {variant})")
+            quantities.append((feature_image, feature_index))
+        for pass_image, pass_index in quantities:
+            for quantity, (m1, m2) in pass_index.items():
+                s1, s2 = pass_image[..., m1] * spp, pass_image[..., m2] * spp
+                if quantity in sums:
+                    sums[quantity] = (sums[quantity][0] + s1, sums[quantity][1] + s2)
+                else:
+                    sums[quantity] = (s1, s2)
         if progress:
             elapsed = time.perf_counter() - started
             samples = sum(pass_spp[:done])
@@ -284,7 +308,7 @@ def _half_buffers(label: str, scene_object, spp: int, seed_of: SeedOfBinPass, va
         for j in ((0, 1) if binned else (0,)):
             sums[2 * half + j], bin_seeds = _moment_sums(
                 label, scene_object, half_spp // 2 if binned else half_spp,
-                lambda p, half=half, j=j: seed_of(half, j, p), variant, width, height, spp)
+                lambda p, half=half, j=j: seed_of(half, j, p), variant, width, height, spp, features=True)
             seeds[half] += bin_seeds
     if binned:
         return buffers_from_bin_sums([sums[k] for k in range(BINS)], half_spp // 2), seeds[0], seeds[1]
@@ -351,9 +375,9 @@ def _size(module: ModuleType, resolution) -> tuple[int, int]:
     return int(width), int(height)
 
 
-def _loaded_module(module: ModuleType, width: int, height: int, variant: str, noisy: bool = True):
+def _loaded_module(module: ModuleType, width: int, height: int, variant: str):
     return _loaded(module.__name__, lambda: module.build(width, height), _scene_name(module),
-                   width, height, variant, noisy)
+                   width, height, variant)
 
 
 def render_buffers(scene_module: ModuleType, spp: int, *, resolution: tuple[int, int] | None = None,
@@ -417,7 +441,7 @@ def render_reference_chunk(scene_module: ModuleType, spp: int, chunk: int, *,
     variant = pick_variant(variant)
     set_threads(threads)
     start = time.perf_counter()
-    scene_object, integrator = _loaded_module(module, width, height, variant, noisy=False)
+    scene_object, integrator = _loaded_module(module, width, height, variant)
     sums, seeds = _moment_sums(
         name, scene_object, spp,
         lambda p: render_seed("reference", chunk=chunk, pass_index=p, base_seed=seed),
@@ -483,7 +507,7 @@ def buffers_from_moment_sums(sums_a: dict, sums_b: dict, half_spp: int, *,
     sums = {"_a": sums_a, "_b": sums_b}
     layers = {}
     pooled = _pooled(sums["_a"], sums["_b"])
-    quantities = [q for q in CHANNELS if q in sums_a]
+    quantities = [q for q in (*CHANNELS, *FEATURE_CHANNELS) if q in sums_a]
     for suffix, n, moments in (("_a", half_spp, sums["_a"]), ("_b", half_spp, sums["_b"]),
                                ("", 2 * half_spp, pooled)):
         for quantity in quantities:

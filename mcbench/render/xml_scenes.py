@@ -7,8 +7,7 @@ contract -- ``DESCRIPTION`` (the file's first comment line, or its name), ``CATE
 ``RESOLUTION`` (its film's size) and ``build(width, height)``, which returns an :class:`XmlScene`
 instead of a dict. The renderer (:mod:`mcbench.render.renderer`) wraps an XML scene as it wraps
 a dict (:func:`wrapped_xml`): the scene's own ``<integrator>`` goes inside ``moment(aov(...))``
-(sample moments and the albedo, normal, depth -- and for noisy renders position and visibility --
-features), the film gets the requested size and
+(sample moments and the albedo, normal and depth features), the film gets the requested size and
 a box filter (crop windows removed), the sensor an ``independent`` sampler; then Mitsuba loads
 the text with the file's folder on its search path. The file must hold one ``<sensor>`` with a
 ``<film>`` and its own top-level ``<integrator>``; ``$name`` parameters keep their ``<default>``s.
@@ -97,12 +96,9 @@ def scene_module(path: str | Path) -> ModuleType:
     return module
 
 
-def wrapped_xml(scene: XmlScene, *, aovs: str, block_size: int | None = None,
-                extra_integrators: dict[str, str] | None = None) -> tuple[str, dict]:
+def wrapped_xml(scene: XmlScene, *, aovs: str, block_size: int | None = None) -> tuple[str, dict]:
     """The scene's XML text wrapped for rendering (the module docstring) and a description of its
-    own integrator (``{"type": ..., <name>: <value>}`` of its direct properties).
-    ``extra_integrators``: ``{name: plugin type}`` of integrators nested in the ``aov`` integrator
-    after the scene's own (e.g. the visibility feature, :mod:`mcbench.render.visibility`)."""
+    own integrator (``{"type": ..., <name>: <value>}`` of its direct properties)."""
     root = _parse(scene.path)
     integrators = root.findall("integrator")
     if len(integrators) != 1:
@@ -119,8 +115,6 @@ def wrapped_xml(scene: XmlScene, *, aovs: str, block_size: int | None = None,
     ET.SubElement(aov, "string", {"name": "aovs", "value": aovs})
     own.set("name", "integrator")
     aov.append(own)
-    for name, plugin in (extra_integrators or {}).items():
-        ET.SubElement(aov, "integrator", {"type": plugin, "name": name})
     root.insert(index, moment)
     film = _film(root, scene.path)
     sensor = root.find("sensor")
@@ -139,13 +133,12 @@ def wrapped_xml(scene: XmlScene, *, aovs: str, block_size: int | None = None,
     return ET.tostring(root, encoding="unicode"), description
 
 
-def load_xml_scene(scene: XmlScene, *, aovs: str, block_size: int | None = None,
-                   extra_integrators: dict[str, str] | None = None):
+def load_xml_scene(scene: XmlScene, *, aovs: str, block_size: int | None = None):
     """``(mi.Scene, integrator description)`` of the wrapped scene, loaded with the file's folder
     on Mitsuba's search path (relative asset paths resolve against it)."""
     import mitsuba as mi
 
-    text, description = wrapped_xml(scene, aovs=aovs, block_size=block_size, extra_integrators=extra_integrators)
+    text, description = wrapped_xml(scene, aovs=aovs, block_size=block_size)
     resolver = mi.file_resolver()
     folder = str(scene.path.parent)
     if folder not in [str(entry) for entry in resolver]:
