@@ -12,6 +12,16 @@ from pooled sums ``S1, S2`` over ``N`` samples
     mean = S1 / N,   variance of the mean = (S2 / N - mean^2) / (N - 1)
 
 (the unbiased sample variance divided by ``N``). Tiny negative values from rounding are set to 0.
+Noisy renders add RDFC's features (Rousselle et al. 2013): after each pass a *feature pass*
+renders the same scene with the integrator ``moment(aov(position, mcbench_visibility))``
+(:data:`FEATURE_AOVS`, :mod:`mcbench.render.visibility`) and the same spp and seed. The sensor
+draws the same samples first, so the feature pass traces the colour pass's camera rays (same
+pixel positions, lens and time samples); its moments give ``position`` and ``visibility`` and
+their variances exactly as above. The colour pass itself is the one of renders made before the
+features: adding channels to its film changes the order in which the film sums a pixel's samples
+(1-ulp differences at more than 2 spp per pass), a separate pass leaves it bit-identical.
+Reference chunks and :func:`render_scene_sums` have no feature pass.
+
 Each buffer or chunk is split into passes of at most :data:`MAX_WAVEFRONT` samples
 (:func:`passes_for`); every pass has its own 32-bit seed, laid out in :mod:`mcbench.render.seeds`
 (which also maps a seed to the one handed to Mitsuba in scalar variants).
@@ -393,7 +403,8 @@ def render_buffers(scene_module: ModuleType, spp: int, *, resolution: tuple[int,
     :data:`mcbench.io.buffers.BIN_LAYERS`; A = bins 0-1, B = bins 2-3). Returns float32 layers for
     every name in :data:`mcbench.io.buffers.ALL_LAYERS` (and the bins): ``color*``
     (H, W, 3) linear radiance, ``variance*`` (H, W, 3) variance of the mean, ``albedo*``,
-    ``normal*`` (H, W, 3), ``depth*`` (H, W) and their ``*_variance`` layers; the full-image
+    ``normal*``, ``position*`` (H, W, 3), ``depth*``, ``visibility*`` (H, W) and their
+    ``*_variance`` layers (position and visibility from the feature pass); the full-image
     versions are ``(A + B) / 2`` and the variances from the pooled moments of all spp samples.
     Metadata (strings): scene, spp, variant, seed, seeds_a, seeds_b, mitsuba, seconds,
     resolution (``WxH``), integrator, passes.
@@ -499,8 +510,9 @@ def buffers_from_moment_sums(sums_a: dict, sums_b: dict, half_spp: int, *,
     """Float32 layers of :data:`ALL_LAYERS` from the per-half moment sums.
 
     ``sums_a[q]``/``sums_b[q]`` = (sum of m1·n, sum of m2·n) over the passes of one half buffer
-    of ``half_spp`` samples, for every quantity q of :data:`CHANNELS`. Means and variances of the
-    mean for A, B and the pooled full image (``2 * half_spp`` samples). ``half_colors``
+    of ``half_spp`` samples, for every quantity q of :data:`CHANNELS` and those of
+    :data:`FEATURE_CHANNELS` the sums hold (layers of quantities they lack are left out). Means and
+    variances of the mean for A, B and the pooled full image (``2 * half_spp`` samples). ``half_colors``
     (``{"_a": ..., "_b": ...}``, float32 (H, W, 3)) replaces the colour means of the halves (the
     bins' average, :func:`buffers_from_bin_sums`).
     """

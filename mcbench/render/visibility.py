@@ -4,8 +4,9 @@ RDFC (Rousselle et al. 2013) guides its filters with a *visibility* feature: per
 the direct-light sample at the first hit contributes, else 0 (the authors' code,
 fbksd/fbksd-package ``denoisers/RDFC/src/multifilm.cpp`` F:123: ``R > 0`` for the sample's direct
 light ``R``), averaged over a pixel's samples. This module gives Mitsuba 3 that indicator as an
-AOV of a small sampling integrator that the renderer nests in its ``aov`` integrator *after* the
-scene's own integrator (:mod:`mcbench.render.renderer`), so it runs in the same pass.
+AOV of a small sampling integrator that the renderer nests, with Mitsuba's ``position`` AOV, in the
+``aov`` integrator of its *feature pass* (:mod:`mcbench.render.renderer`): a second ``mi.render``
+of the same scene with the colour pass's spp and seed, so it traces the same camera rays.
 
 Per camera ray (one sample) the indicator ``v`` in {0, 1} is
 
@@ -33,11 +34,12 @@ estimate ``R = f * W`` is positive in some channel, the authors' ``R > 0``. Case
   a 0/1 Bernoulli per sample.
 * depth of field: the camera ray is the thin-lens ray the sensor generated; nothing changes.
 
-Random numbers: the integrator draws one ``next_2d`` from the sampler it is handed. Nested after
-the scene's integrator, it draws after every number the colour used, so the colour, albedo,
-normal and depth of a render are bit-identical to a render without it (the renderer's tests check
-this). Deterministic for a seed like the rest of the render. Returns zero radiance (its RGBA
-channels are unused) and the indicator as its one AOV, :data:`AOV_NAME`.
+Random numbers: the integrator draws one ``next_2d`` (the emitter sample) after the sensor's
+samples; deterministic for a seed like the rest of the render. It runs in its own pass, so the
+colour pass -- colour, albedo, normal, depth -- is bit-identical to a render without it
+(``tests/render/test_features.py``). Returns zero radiance (its RGBA channels are unused) and the
+indicator as its one AOV, :data:`AOV_NAME`. In scalar variants Mitsuba calls it from Python once
+per sample (Mitsuba warns about the speed once); a miss returns early there (no BSDF to call).
 """
 
 from __future__ import annotations
@@ -78,6 +80,7 @@ def _integrator_class():
             super().__init__(props)
 
         def sample(self, scene, sampler, ray, medium=None, active=True):
+            """``(0, True, [v])`` for one camera ray (module docstring: v = 1 iff R = f W > 0)."""
             si = scene.ray_intersect(mi.Ray3f(ray), active)
             hit = mi.Bool(active) & si.is_valid()
             sample = sampler.next_2d(hit)
