@@ -7,6 +7,16 @@ Conventions (all arrays float32, linear HDR radiance, row-major (H, W[, 3])):
 * ``variance*`` is the per-pixel, per-channel variance *of the mean* (sample variance / n).
 * ``albedo`` (H, W, 3) in [0, 1], ``normal`` (H, W, 3) shading normal in [-1, 1] (zero where
   no surface was hit), ``depth`` (H, W) distance along the camera ray (zero where no hit).
+* ``position`` (H, W, 3) world-space position of the camera ray's first surface hit (Mitsuba's
+  ``position`` AOV; zero where no surface was hit) and ``visibility`` (H, W) in [0, 1], the
+  fraction of samples whose direct-light (emitter) sample at the first hit is unoccluded and
+  contributes (RDFC's features, Rousselle et al. 2013; the authors' fbksd-package
+  ``denoisers/RDFC/src/multifilm.cpp`` F:117-119 and F:123 ``R > 0``). The indicator is 0 on a
+  miss and on purely specular or ``null`` surfaces, and geometric in media
+  (:mod:`mcbench.render.visibility` says how each case is defined). Their ``*_variance`` layers
+  are variances of the mean like the others. *Optional* (:data:`OPTIONAL_FEATURES`, not in
+  :data:`REQUIRED_LAYERS`): every noisy Mitsuba render holds them; references, renders written
+  before they existed and imported renders do not, and :class:`ImageBuffers` then has ``None``.
 * Features come in full/A/B versions too, so a half-buffer denoise sees only its own samples
   (the dual-buffer estimate of the ensemble, Zheng et al. 2021 Eq. 10, assumes it).
 * Sample bins (sample binning of Back et al. 2020 Sec. 4.4): renders whose spp is a multiple of 4
@@ -42,7 +52,10 @@ BUFFER_SUFFIXES = {"full": "", "a": "_a", "b": "_b"}
 #: Index of each image of a case in seeds that run per image (e.g. SURE's perturbations).
 IMAGE_INDEX = {"full": 0, "a": 1, "b": 2}
 QUANTITIES = ("color", "variance", "albedo", "normal", "depth",
-              "albedo_variance", "normal_variance", "depth_variance")
+              "albedo_variance", "normal_variance", "depth_variance",
+              "position", "visibility", "position_variance", "visibility_variance")
+#: RDFC's features (module docstring): optional, renders made before them or elsewhere lack them.
+OPTIONAL_FEATURES = ("position", "visibility")
 # Layers every render must hold (full image, halves A and B, features); the rest are optional extras.
 REQUIRED_LAYERS = ("color", "color_a", "color_b", "variance", "variance_a", "variance_b",
                    "albedo", "normal", "depth")
@@ -67,6 +80,8 @@ class ImageBuffers:
     normal: np.ndarray | None     # (H, W, 3)
     depth: np.ndarray | None      # (H, W)
     spp: float             # samples behind this image
+    position: np.ndarray | None = None    # (H, W, 3) world-space first hit; None: the render has none
+    visibility: np.ndarray | None = None  # (H, W) in [0, 1]; None: the render has none
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -107,7 +122,8 @@ class RenderBuffers:
 
         return ImageBuffers(color=self.layers["color" + suffix], variance=self.layers.get("variance" + suffix),
                             albedo=feature("albedo"), normal=feature("normal"), depth=feature("depth"),
-                            spp=self.spp if which == "full" else self.spp / 2)
+                            spp=self.spp if which == "full" else self.spp / 2,
+                            position=feature("position"), visibility=feature("visibility"))
 
     def has_halves(self) -> bool:
         """Whether the render holds the half buffers A and B (every Mitsuba render does; an

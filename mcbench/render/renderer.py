@@ -12,6 +12,16 @@ from pooled sums ``S1, S2`` over ``N`` samples
     mean = S1 / N,   variance of the mean = (S2 / N - mean^2) / (N - 1)
 
 (the unbiased sample variance divided by ``N``). Tiny negative values from rounding are set to 0.
+Noisy renders add RDFC's features (Rousselle et al. 2013): after each pass a *feature pass*
+renders the same scene with the integrator ``moment(aov(position, mcbench_visibility))``
+(:data:`FEATURE_AOVS`, :mod:`mcbench.render.visibility`) and the same spp and seed. The sensor
+draws the same samples first, so the feature pass traces the colour pass's camera rays (same
+pixel positions, lens and time samples); its moments give ``position`` and ``visibility`` and
+their variances exactly as above. The colour pass itself is the one of renders made before the
+features: adding channels to its film changes the order in which the film sums a pixel's samples
+(1-ulp differences at more than 2 spp per pass), a separate pass leaves it bit-identical.
+Reference chunks and :func:`render_scene_sums` have no feature pass.
+
 Each buffer or chunk is split into passes of at most :data:`MAX_WAVEFRONT` samples
 (:func:`passes_for`); every pass has its own 32-bit seed, laid out in :mod:`mcbench.render.seeds`
 (which also maps a seed to the one handed to Mitsuba in scalar variants).
@@ -47,6 +57,8 @@ from mcbench.io.buffers import ALL_LAYERS, BINS
 from mcbench.progress import eta_seconds, progress_line
 from mcbench.render.seeds import SCALAR_BLOCK_SIZE, mitsuba_seed, render_seed
 from mcbench.render.variants import pick_variant, set_threads
+from mcbench.render.visibility import AOV_NAME as VISIBILITY_AOV
+from mcbench.render.visibility import register as register_visibility
 from mcbench.render.xml_scenes import XmlScene, load_xml_scene
 
 __all__ = ["RenderError", "MAX_WAVEFRONT", "passes_for", "load_scene_dict", "forget_scene",
@@ -57,6 +69,10 @@ __all__ = ["RenderError", "MAX_WAVEFRONT", "passes_for", "load_scene_dict", "for
 
 MAX_WAVEFRONT = 2 ** 22          # samples per mi.render call in vectorised variants (W*H*spp_pass)
 AOVS = "albedo:albedo,nn:sh_normal,dd:depth"
+#: The feature pass of a noisy render (module docstring): Mitsuba's position AOV and, nested in the same
+#: ``aov`` integrator, the visibility integrator (:mod:`mcbench.render.visibility`) under this name.
+FEATURE_AOVS = "pp:position"
+VISIBILITY_CHILD = "visibility"
 SENSOR_TYPES = ("perspective", "thinlens", "orthographic")
 
 # Film channel names (Mitsuba 3.9 moment + aov integrators) of each quantity: m1 and m2.
@@ -69,7 +85,14 @@ CHANNELS = {
                ("m2_nested.nn.X", "m2_nested.nn.Y", "m2_nested.nn.Z")),
     "depth": (("nested.dd.T",), ("m2_nested.dd.T",)),
 }
-FEATURES = ("albedo", "normal", "depth")
+# The same for the feature pass of a noisy render (RDFC's features, Rousselle et al. 2013).
+FEATURE_CHANNELS = {
+    "position": (("nested.pp.X", "nested.pp.Y", "nested.pp.Z"),
+                 ("m2_nested.pp.X", "m2_nested.pp.Y", "m2_nested.pp.Z")),
+    "visibility": ((f"nested.{VISIBILITY_CHILD}.{VISIBILITY_AOV}",),
+                   (f"m2_nested.{VISIBILITY_CHILD}.{VISIBILITY_AOV}",)),
+}
+FEATURES = ("albedo", "normal", "depth")          # the features of a reference chunk
 
 SeedOfPass = Callable[[int], int]            # pass index -> 32-bit seed
 SeedOfBinPass = Callable[[int, int, int], int]   # (half 0 = A / 1 = B, bin 0/1, pass index) -> seed
@@ -180,30 +203,54 @@ def forget_scene(key: str) -> None:
 
 # --------------------------------------------------------------------------- moment sums
 
-def _channel_indices(scene_object) -> dict[str, tuple[list[int], list[int]]]:
-    """Indices of the m1 and m2 channels of each quantity in the developed film, by name."""
+def _channel_indices(scene_object, channels: dict = CHANNELS,
+                     count: int = 31) -> dict[str, tuple[list[int], list[int]]]:
+    """Indices of the m1 and m2 channels of each quantity of ``channels`` in the film developed
+    last (the colour pass: :data:`CHANNELS`, 31 channels; the feature pass:
+    :data:`FEATURE_CHANNELS`, 25), by name."""
     names = [field.name for field in scene_object.sensors()[0].film().bitmap().struct_()]
-    if names[:3] != ["R", "G", "B"] or len(names) != 31:
+    if names[:3] != ["R", "G", "B"] or len(names) != count:
         raise RenderError(f"unexpected film channels {names}")
     try:
         return {q: ([names.index(c) for c in m1], [names.index(c) for c in m2])
-                for q, (m1, m2) in CHANNELS.items()}
+                for q, (m1, m2) in channels.items()}
     except ValueError as exc:
         raise RenderError(f"film channel missing ({exc}); channels are {names}") from exc
 
 
-def _render_pass(scene_object, spp: int, seed: int) -> np.ndarray:
-    """One ``mi.render`` call: the developed film as float64 (H, W, 31)."""
+def _render_pass(scene_object, spp: int, seed: int, integrator=None) -> np.ndarray:
+    """One ``mi.render`` call (with the scene's integrator, or ``integrator``): the developed film
+    as float64 (H, W, channels)."""
     import mitsuba as mi
 
-    return np.asarray(mi.render(scene_object, spp=spp, seed=seed), dtype=np.float64)
+    return np.asarray(mi.render(scene_object, spp=spp, seed=seed, integrator=integrator), dtype=np.float64)
+
+
+_feature_integrators: dict = {}
+
+
+def _feature_integrator(variant: str):
+    """The integrator of the feature pass (module docstring), one per variant:
+    ``moment(aov(position, visibility))``, with the colour pass's block size in scalar variants (the
+    same block size gives the same per-block seeds, hence the same camera rays)."""
+    import mitsuba as mi
+
+    if variant not in _feature_integrators:
+        desc = {"type": "moment", "nested": {"type": "aov", "aovs": FEATURE_AOVS,
+                                             VISIBILITY_CHILD: {"type": register_visibility()}}}
+        if variant.startswith("scalar"):
+            desc["block_size"] = SCALAR_BLOCK_SIZE
+        _feature_integrators[variant] = mi.load_dict(desc)
+    return _feature_integrators[variant]
 
 
 def _moment_sums(label: str, scene_object, spp: int, seed_of: SeedOfPass, variant: str,
                  width: int, height: int, label_spp: int,
-                 progress: str | None = None) -> tuple[dict[str, tuple], list[int]]:
+                 progress: str | None = None, features: bool = False) -> tuple[dict[str, tuple], list[int]]:
     """Render ``spp`` samples in the passes of :func:`passes_for`, pass ``p`` seeded with
     ``seed_of(p)``; per quantity float64 sums (S1, S2), each (H, W, C), and the seeds used.
+    ``features``: each pass is followed by its feature pass (same spp and seed, the quantities of
+    :data:`FEATURE_CHANNELS`).
     With ``progress`` (a label), prints a :func:`mcbench.progress.progress_line` after each pass
     (passes done, elapsed time, ETA from the samples done so far)."""
     pass_spp = passes_for(spp, width, height, variant)
@@ -218,12 +265,23 @@ def _moment_sums(label: str, scene_object, spp: int, seed_of: SeedOfPass, varian
             bad = int((~np.isfinite(image)).any(axis=2).sum())
             raise RenderError(f"scene '{label}' at {label_spp} spp: Mitsuba produced NaN/Inf in "
                               f"{bad} pixel(s) (pass seed {seed}, variant {variant})")
-        for quantity, (m1, m2) in index.items():
-            s1, s2 = image[..., m1] * spp, image[..., m2] * spp
-            if quantity in sums:
-                sums[quantity] = (sums[quantity][0] + s1, sums[quantity][1] + s2)
-            else:
-                sums[quantity] = (s1, s2)
+        quantities = [(image, index)]
+        if features:
+            feature_image = _render_pass(scene_object, spp, mitsuba_seed(seed, variant, width, height),
+                                         _feature_integrator(variant))
+            feature_index = _channel_indices(scene_object, FEATURE_CHANNELS, 25)
+            if not np.all(np.isfinite(feature_image)):
+                bad = int((~np.isfinite(feature_image)).any(axis=2).sum())
+                raise RenderError(f"scene '{label}' at {label_spp} spp: the feature pass produced NaN/Inf in "
+                                  f"{bad} pixel(s) (pass seed {seed}, variant {variant})")
+            quantities.append((feature_image, feature_index))
+        for pass_image, pass_index in quantities:
+            for quantity, (m1, m2) in pass_index.items():
+                s1, s2 = pass_image[..., m1] * spp, pass_image[..., m2] * spp
+                if quantity in sums:
+                    sums[quantity] = (sums[quantity][0] + s1, sums[quantity][1] + s2)
+                else:
+                    sums[quantity] = (s1, s2)
         if progress:
             elapsed = time.perf_counter() - started
             samples = sum(pass_spp[:done])
@@ -260,7 +318,7 @@ def _half_buffers(label: str, scene_object, spp: int, seed_of: SeedOfBinPass, va
         for j in ((0, 1) if binned else (0,)):
             sums[2 * half + j], bin_seeds = _moment_sums(
                 label, scene_object, half_spp // 2 if binned else half_spp,
-                lambda p, half=half, j=j: seed_of(half, j, p), variant, width, height, spp)
+                lambda p, half=half, j=j: seed_of(half, j, p), variant, width, height, spp, features=True)
             seeds[half] += bin_seeds
     if binned:
         return buffers_from_bin_sums([sums[k] for k in range(BINS)], half_spp // 2), seeds[0], seeds[1]
@@ -345,7 +403,8 @@ def render_buffers(scene_module: ModuleType, spp: int, *, resolution: tuple[int,
     :data:`mcbench.io.buffers.BIN_LAYERS`; A = bins 0-1, B = bins 2-3). Returns float32 layers for
     every name in :data:`mcbench.io.buffers.ALL_LAYERS` (and the bins): ``color*``
     (H, W, 3) linear radiance, ``variance*`` (H, W, 3) variance of the mean, ``albedo*``,
-    ``normal*`` (H, W, 3), ``depth*`` (H, W) and their ``*_variance`` layers; the full-image
+    ``normal*``, ``position*`` (H, W, 3), ``depth*``, ``visibility*`` (H, W) and their
+    ``*_variance`` layers (position and visibility from the feature pass); the full-image
     versions are ``(A + B) / 2`` and the variances from the pooled moments of all spp samples.
     Metadata (strings): scene, spp, variant, seed, seeds_a, seeds_b, mitsuba, seconds,
     resolution (``WxH``), integrator, passes.
@@ -451,17 +510,19 @@ def buffers_from_moment_sums(sums_a: dict, sums_b: dict, half_spp: int, *,
     """Float32 layers of :data:`ALL_LAYERS` from the per-half moment sums.
 
     ``sums_a[q]``/``sums_b[q]`` = (sum of m1·n, sum of m2·n) over the passes of one half buffer
-    of ``half_spp`` samples, for every quantity q of :data:`CHANNELS`. Means and variances of the
-    mean for A, B and the pooled full image (``2 * half_spp`` samples). ``half_colors``
+    of ``half_spp`` samples, for every quantity q of :data:`CHANNELS` and those of
+    :data:`FEATURE_CHANNELS` the sums hold (layers of quantities they lack are left out). Means and
+    variances of the mean for A, B and the pooled full image (``2 * half_spp`` samples). ``half_colors``
     (``{"_a": ..., "_b": ...}``, float32 (H, W, 3)) replaces the colour means of the halves (the
     bins' average, :func:`buffers_from_bin_sums`).
     """
     sums = {"_a": sums_a, "_b": sums_b}
     layers = {}
     pooled = _pooled(sums["_a"], sums["_b"])
+    quantities = [q for q in (*CHANNELS, *FEATURE_CHANNELS) if q in sums_a]
     for suffix, n, moments in (("_a", half_spp, sums["_a"]), ("_b", half_spp, sums["_b"]),
                                ("", 2 * half_spp, pooled)):
-        for quantity in CHANNELS:
+        for quantity in quantities:
             if n >= 2:
                 mean, variance = moments_to_mean_variance(*moments[quantity], n)
             else:  # spp = 2: one sample per half buffer, no within-buffer variance exists.
@@ -477,14 +538,14 @@ def buffers_from_moment_sums(sums_a: dict, sums_b: dict, half_spp: int, *,
         layers["color" + suffix] = np.asarray(color, dtype=np.float32)
     # The full image is by definition (A + B) / 2, computed on the float32 halves so that the
     # identity holds exactly for consumers that recompute it.
-    for quantity in CHANNELS:
+    for quantity in quantities:
         layers[quantity] = (layers[quantity + "_a"] + layers[quantity + "_b"]) / np.float32(2)
     # Mitsuba's albedo AOV can exceed 1 on glossy conductors (it evaluates the BSDF near the
     # specular peak); denoisers expect reflectance in [0, 1], so the means are clipped (the
     # albedo variances stay those of the raw samples).
     for suffix in ("", "_a", "_b"):
         layers["albedo" + suffix] = np.clip(layers["albedo" + suffix], 0.0, 1.0)
-    return {name: np.ascontiguousarray(layers[name], dtype=np.float32) for name in ALL_LAYERS}
+    return {name: np.ascontiguousarray(layers[name], dtype=np.float32) for name in ALL_LAYERS if name in layers}
 
 
 def merge_reference_chunks(chunks: list[tuple[dict, dict]]) -> tuple[dict[str, np.ndarray], dict[str, str]]:

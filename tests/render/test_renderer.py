@@ -51,8 +51,7 @@ def test_every_scene_renders_finite_buffers(scene, variant):
     assert set(layers) == set(ALL_LAYERS) | set(BIN_LAYERS)
     for name, array in layers.items():
         assert array.dtype == np.float32
-        assert array.shape == ((16, 24) if name.startswith("depth") and "variance" not in name
-                               or name.startswith("depth_variance") else (16, 24, 3)), name
+        assert array.shape == ((16, 24) if name.startswith(("depth", "visibility")) else (16, 24, 3)), name
         assert np.all(np.isfinite(array)), name
     assert layers["color"].mean() > 0
     for name in ALL_LAYERS:

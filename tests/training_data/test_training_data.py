@@ -49,8 +49,7 @@ def test_layers_names_shapes_finite_and_variances(example_3):
         for name, layer in layers.items():
             assert layer.dtype == np.float32
             assert layer.shape[:2] == (CROP, CROP), name
-            assert layer.ndim == (2 if name.startswith("depth") and "variance" not in name
-                                  or name.startswith("depth_variance") else 3), name
+            assert layer.ndim == (2 if name.startswith(("depth", "visibility")) else 3), name
             assert np.all(np.isfinite(layer)), name
         assert layers["target_variance"].min() >= 0
         assert layers["target"].min() >= 0
