@@ -1,0 +1,74 @@
+"""Per-scene reference spp from the measured noise floors: where to spend a reference budget.
+
+    python tools/reference_budget.py results/tables/scenes.csv --budget-core-minutes 30
+
+Reads the scene table of a finished run (``floor_ratio``: the best candidate's relMSE at the highest
+spp over the reference's own estimated relMSE; ``reference_spp``; ``reference_cpu_hours``: the
+measured CPU time of the scene's reference chunks). A reference's floor falls as 1/spp and its cost
+grows as spp, so doubling a scene's reference spp doubles its floor ratio and its reference cost.
+Greedy, lowest ratio first: double the spp of the scene whose ratio is lowest and below
+``--required`` (10, the scene table's rule), while the added CPU stays within the budget; a scene
+whose next doubling does not fit is left. Prints, per scene, the measured ratio, the spp and ratio
+after, the added core-minutes, and the ``reference: scene_spp:`` block for a config file.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+
+import pandas as pd
+
+
+def plan(scenes: pd.DataFrame, *, budget_core_seconds: float, required: float = 10.0) -> pd.DataFrame:
+    """Doublings of reference spp, lowest floor ratio first, within the budget (see the module)."""
+    table = scenes[["scene", "reference_spp", "floor_ratio", "reference_cpu_hours"]].copy()
+    table["spp_after"] = table["reference_spp"].astype(int)
+    table["ratio_after"] = table["floor_ratio"].astype(float)
+    table["added_core_seconds"] = 0.0
+    left = float(budget_core_seconds)
+    while True:
+        open_rows = table[(table["ratio_after"] < required) & table["ratio_after"].notna()]
+        if open_rows.empty:
+            break
+        index = open_rows["ratio_after"].idxmin()
+        row = table.loc[index]
+        cost_now = float(row["reference_cpu_hours"]) * 3600.0 * row["spp_after"] / row["reference_spp"]
+        if not math.isfinite(cost_now) or cost_now > left:
+            table.loc[index, "ratio_after"] = math.nan   # cannot afford: leave this scene
+            table.loc[index, "left_out"] = True
+            continue
+        left -= cost_now
+        table.loc[index, "spp_after"] = int(row["spp_after"]) * 2
+        table.loc[index, "ratio_after"] = float(row["ratio_after"]) * 2
+        table.loc[index, "added_core_seconds"] = float(row["added_core_seconds"]) + cost_now
+    # a scene left out shows the ratio its last affordable spp gives
+    stopped = table["ratio_after"].isna() & table["floor_ratio"].notna()
+    table.loc[stopped, "ratio_after"] = (table.loc[stopped, "floor_ratio"]
+                                         * table.loc[stopped, "spp_after"] / table.loc[stopped, "reference_spp"])
+    return table
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("scenes_csv")
+    parser.add_argument("--budget-core-minutes", type=float, required=True)
+    parser.add_argument("--required", type=float, default=10.0)
+    args = parser.parse_args(argv)
+    table = plan(pd.read_csv(args.scenes_csv), budget_core_seconds=60.0 * args.budget_core_minutes,
+                 required=args.required)
+    print("| scene | reference spp | floor ratio | spp after | ratio after | added core-min |")
+    print("|---|---|---|---|---|---|")
+    for row in table.itertuples():
+        print(f"| {row.scene} | {row.reference_spp} | {row.floor_ratio:.1f} | {row.spp_after} | "
+              f"{row.ratio_after:.1f} | {row.added_core_seconds / 60:.1f} |")
+    print(f"\nadded: {table['added_core_seconds'].sum() / 60:.1f} core-minutes of {args.budget_core_minutes:g}\n")
+    print("reference:\n  scene_spp:")
+    for row in table.itertuples():
+        if row.spp_after != row.reference_spp:
+            print(f"    {row.scene}: {row.spp_after}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
