@@ -21,9 +21,11 @@ Solvers (``solver``)
 between the current ensemble and one base denoiser, w <- (1 - alpha) w + alpha e_i (Eq. 31),
 cycling through the N denoisers in a freshly shuffled order per cycle, until no weight moves
 by more than ``tolerance`` over a cycle or after ``max_iterations`` iterations.
-**Departures:** alpha is clipped to the whole feasible segment [-w_i / (1 - w_i), 1] instead
-of [0, 1] ("away" steps that move weight off denoiser i; every step still minimises Eq. 13 on
-its line); the random numbers come from a counter-based splitmix64 generator keyed by
+Eq. 29's alpha is clipped to [0, 1] as in the text and the authors' code (src/solve.h:112);
+``away_steps=True`` (our option) clips it to the whole feasible segment [-w_i / (1 - w_i), 1]
+instead ("away" steps that move weight off denoiser i; every step still minimises Eq. 13 on its
+line). c1 is not floored (the text; the code's max(c1, 1e-6), src/solve.h:92, :110, is not in
+Eq. 29). **Departure:** the random numbers come from a counter-based splitmix64 generator keyed by
 (seed, pixel-channel index), so the result does not depend on threading or on how the image
 is cut into blocks. ``start="vertex"``/``"pair"`` replace the random start by the best single
 denoiser or the best two-denoiser ensemble (our option).
@@ -50,15 +52,16 @@ Raw combined images z, z^A, z^B, Var[z] ~ (z^A - z^B)^2 / 2 guide a cross-bilate
 (Eq. 32-34) of all N x C weight maps with one kernel per pixel (z / Var[z], albedo, normal);
 the filtered weights combine the inputs' full, A and B images (Eq. 35).
 **Departures (defaults):** where the text is silent the authors' public code decides (never the
-error on the test scenes): Var[z] blurred with a 9 x 9 Gaussian (``guide_variance_blur=
-"gaussian9"``), the code's outlier pass on each filtered weight map (a pixel with any channel
-2.5 or more standard deviations from its 48 neighbours' mean takes the map's 7 x 7 blur,
-``outlier_removal="public_code"``), then re-projected onto the simplex; windows reflected at
-the borders (``filter_border="reflect101"``); Eq. 33's denominator floored at 1e-6
+error on the test scenes): the normal standardised per channel over the image (mean, population
+std floored at 1e-3, z-score clipped to +-3; src/main.cpp:34-43; ``normal_features=
+"standardised"``, ``"raw"`` the normal as rendered), Var[z] blurred with a 9 x 9 Gaussian
+(``guide_variance_blur="gaussian9"``), the code's outlier pass on each filtered weight map (a
+pixel with any channel 2.5 or more standard deviations from its 48 neighbours' mean takes the
+map's 7 x 7 blur, ``outlier_removal="public_code"``), then re-projected onto the simplex; windows
+reflected at the borders (``filter_border="reflect101"``); Eq. 33's denominator floored at 1e-6
 (``variance_sum_floor``). Eq. 33 sums over the channels (``colour_distance="sum"``, the text and
-the code). Eq. 32 stays the text's: the normal as rendered (the code standardises it,
-``normal_features="standardised"``) and 2 sigma^2 in each feature term (the code divides by
-sigma, its slip: ``weight_filter.public_code_sigmas``). ``weight_filter.PAPER_FILTER`` is the
+the code). Eq. 32 stays the text's: 2 sigma^2 in each feature term (the code divides by sigma, its
+slip: ``weight_filter.public_code_sigmas``). ``weight_filter.PAPER_FILTER`` is the
 paper's filter alone, ``weight_filter.PUBLIC_CODE_FILTER`` the code's. Details:
 :mod:`mcbench.combine.weight_filter`; the comparison with the code's output:
 ``tests/combine/test_ensemble_golden.py``.
@@ -112,7 +115,8 @@ def combine(buffers: RenderBuffers, inputs: list[Denoised], *,
             filter_border: Literal[FILTER_BORDERS] = ENSEMBLE_DEFAULTS["filter_border"],
             normal_features: Literal[NORMAL_FEATURES] = ENSEMBLE_DEFAULTS["normal_features"],
             variance_sum_floor: float = ENSEMBLE_DEFAULTS["variance_sum_floor"],
-            start: Literal[STARTS] = ENSEMBLE_DEFAULTS["start"]) -> Denoised:
+            start: Literal[STARTS] = ENSEMBLE_DEFAULTS["start"],
+            away_steps: bool = ENSEMBLE_DEFAULTS["away_steps"]) -> Denoised:
     """Ensemble of the ``inputs`` (Sec. 4): solve raw weights from the half buffers, filter
     them (unless ``filter=False``, an ablation), and combine (Eq. 35).
 
@@ -127,7 +131,8 @@ def combine(buffers: RenderBuffers, inputs: list[Denoised], *,
     ``normal_features``, ``variance_sum_floor``; the defaults
     (:data:`mcbench.combine.ensemble_weights.ENSEMBLE_DEFAULTS`) follow the text, and the code
     where the text is silent (the module docstring). ``start``: the iterative solver's start
-    (the paper's random one by default).
+    (the paper's random one by default); ``away_steps``: its alpha in [-w_i / (1 - w_i), 1]
+    instead of the paper's [0, 1] (False by default).
 
     Memory: one pass down the image in bands of rows, solving blocks of :data:`BLOCK_PIXELS`
     pixels as far as each band's filter halo needs
@@ -149,7 +154,7 @@ def combine(buffers: RenderBuffers, inputs: list[Denoised], *,
         sigma_spatial=sigma_spatial, sigma_color=sigma_color, sigma_albedo=sigma_albedo,
         sigma_normal=sigma_normal, guide_variance_blur=guide_variance_blur, outlier_removal=outlier_removal,
         colour_distance=colour_distance, filter_border=filter_border, normal_features=normal_features,
-        variance_sum_floor=variance_sum_floor, start=start)
+        variance_sum_floor=variance_sum_floor, start=start, away_steps=away_steps)
     return Denoised(full=images["full"], a=images["a"], b=images["b"], extras=extras)
 
 

@@ -12,7 +12,7 @@ import numpy as np
 
 from mcbench.combine import weight_filter
 from mcbench.combine.blending import blend_band, combine_with
-from mcbench.combine.ensemble_weights import (check_choices, check_shapes, nonfinite_pixels, raise_nonfinite,
+from mcbench.combine.ensemble_weights import (check_away_steps, check_choices, check_shapes, nonfinite_pixels, raise_nonfinite,
                                               solve_block)
 from mcbench.combine.weight_filter import filter_band, planar64, tile_rows
 
@@ -99,7 +99,7 @@ def ensemble_in_bands(buffers, inputs, *, block_pixels: int, solver: str, seed: 
                       sigma_spatial: float, sigma_color: float, sigma_albedo: float, sigma_normal: float,
                       guide_variance_blur: str, outlier_removal: str, colour_distance: str,
                       filter_border: str, normal_features: str, variance_sum_floor: float,
-                      start: str) -> tuple[dict, dict]:
+                      start: str, away_steps: bool) -> tuple[dict, dict]:
     """Ensemble of the ``inputs`` of the render ``buffers`` (Sec. 4): raw weights from the half
     buffers, filtered (unless ``filter`` is False), combined (Eq. 35). ``buffers`` has the layers
     ``color_a``, ``color_b``, ``albedo``, ``normal`` as attributes and each input the images
@@ -133,6 +133,7 @@ def ensemble_in_bands(buffers, inputs, *, block_pixels: int, solver: str, seed: 
                   guide_variance_blur=guide_variance_blur, colour_distance=colour_distance,
                   outlier_removal=outlier_removal, filter_border=filter_border,
                   normal_features=normal_features)
+    check_away_steps(away_steps)
     if not (np.isfinite(variance_sum_floor) and variance_sum_floor >= 0):
         raise ValueError(f"ensemble variance_sum_floor must be finite and >= 0, got {variance_sum_floor!r}")
     xa, xb = buffers.color_a, buffers.color_b
@@ -152,7 +153,7 @@ def ensemble_in_bands(buffers, inputs, *, block_pixels: int, solver: str, seed: 
     solve = _BlockSolver(buffers, inputs, raw, guide=filter, block_pixels=block_pixels,
                          options=dict(solver=solver, seed=seed, max_iterations=max_iterations,
                                       tolerance=tolerance, weights=weights, channels=channels,
-                                      start=start))
+                                      start=start, away_steps=away_steps))
     passes = dict(radius=radius, blur=guide_variance_blur == "gaussian9", outliers=outlier_removal != "none")
     statistics = (weight_filter.normal_statistics(buffers.normal)
                   if filter and normal_features == "standardised" else None)

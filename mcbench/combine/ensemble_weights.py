@@ -21,7 +21,9 @@ equations and our departures):
   2C x N (the points a_i = (y_i^A, y_i^B) in R^2C, b = (x^B, x^A)): ``"iterative"`` sums Eq.
   29's c1 and c2 over the channels, ``"exact"`` uses Wolfe's minimum-norm-point algorithm,
   ``"qp"`` the QP solver on the 2C-D problem;
-* ``start``: the iterative solver's start (the paper's random one by default).
+* ``start``: the iterative solver's start (the paper's random one by default);
+* ``away_steps``: the iterative solver's alpha in [-w_i / (1 - w_i), 1] (our option) instead of
+  the paper's [0, 1] (Eq. 29, the default).
 
 :func:`solve_block` solves the rows y0 .. y1 - 1 of an image alone with exactly the weights the
 whole image's solve gives them (the iterative solver's generator is keyed by the problem's
@@ -42,7 +44,7 @@ from mcbench.filters.bilateral import COLOUR_DISTANCES
 
 __all__ = ["WEIGHTS", "CHANNELS", "GUIDE_VARIANCE_BLURS", "OUTLIER_PASSES", "FILTER_BORDERS",
            "NORMAL_FEATURES", "CHOICES", "ENSEMBLE_DEFAULTS",
-           "check_choices", "check_shapes", "check_finite", "nonfinite_pixels", "raise_nonfinite",
+           "check_choices", "check_away_steps", "check_shapes", "check_finite", "nonfinite_pixels", "raise_nonfinite",
            "solve_block", "solve_weights"]
 
 WEIGHTS = ("simplex", "unconstrained")
@@ -61,21 +63,23 @@ CHOICES = {"solver": SOLVERS, "weights": WEIGHTS, "channels": CHANNELS,
            "normal_features": NORMAL_FEATURES, "start": STARTS}
 #: The ensemble's (``methods/ensemble.py``'s combine()) defaults of the options that change what
 #: is solved or filtered. The first four are the paper's method (changing one is an ablation,
-#: Sec. 5.2.1-5.2.4). The weight filter's details follow the paper's text where it decides and
-#: the authors' public code where the text is silent (LuisaGroup/Ensemble-Denoising; never chosen
-#: by their error on the test scenes): Eq. 33's ||.||^2 sums over the channels (text and code);
-#: the guide variance is blurred (9 x 9), the filtered maps pass the code's outlier pass
-#: (``remove_outliers<3>``, whole pixel -> 7 x 7 blur), windows reflect at the borders and Eq.
-#: 33's denominator is floored at 1e-6 as the code does (the text says none of these). Eq. 32
-#: is the text's: the feature g is the rendered buffer (the code standardises the normal first)
-#: and each term divides by 2 sigma^2 (the code divides by sigma, listed as its slip); both are
-#: switches (``normal_features``, the sigmas) and docs/fidelity_ensemble.md measures them. The iterative solver
-#: starts at random as in the paper. ``mcbench.analysis.comparisons`` reads them to tell an
-#: ablation or a variant from the full method.
+#: Sec. 5.2.1-5.2.4). The rest follow the paper's text where it decides and the authors' public
+#: code where the text is silent (LuisaGroup/Ensemble-Denoising at becc556; never chosen by their
+#: error on the test scenes). Text: the iterative solver starts at random and clips Eq. 29's alpha
+#: to [0, 1] (``away_steps=False``; the code too, src/solve.h:112), Eq. 33's ||.||^2 sums over the
+#: channels (text and code), and Eq. 32's feature terms divide by 2 sigma^2 (the code divides by
+#: sigma, listed as its slip; the sigmas are a switch). Silent text, so the code's: the normal is
+#: standardised per channel (mean, population std floored at 1e-3, z-score clipped to +-3,
+#: src/main.cpp:34-43), the guide variance is blurred (9 x 9), the filtered maps pass the code's
+#: outlier pass (``remove_outliers<3>``, whole pixel -> 7 x 7 blur), windows reflect at the
+#: borders and Eq. 33's denominator is floored at 1e-6. docs/fidelity_ensemble.md measures each.
+#: ``mcbench.analysis.comparisons`` reads them to tell an ablation or a variant from the full
+#: method.
 ENSEMBLE_DEFAULTS = {"weights": "simplex", "channels": "rgb", "solver": "iterative", "filter": True,
                      "guide_variance_blur": "gaussian9", "outlier_removal": "public_code",
                      "colour_distance": "sum", "filter_border": "reflect101",
-                     "normal_features": "raw", "variance_sum_floor": 1e-6, "start": "random"}
+                     "normal_features": "standardised", "variance_sum_floor": 1e-6, "start": "random",
+                     "away_steps": False}
 
 
 def nonfinite_pixels(arrays) -> int:
@@ -116,6 +120,12 @@ def check_shapes(xa, xb, ya, yb) -> None:
                          f"(N, H, W, C) with N >= 1 and (H, W, C) = {xa.shape}")
 
 
+def check_away_steps(away_steps) -> None:
+    """Raises ValueError unless ``away_steps`` is a bool (True/False, not 0/1 or a string)."""
+    if not isinstance(away_steps, (bool, np.bool_)):
+        raise ValueError(f"ensemble away_steps must be true or false, got {away_steps!r}")
+
+
 def check_choices(**named) -> None:
     """Raises ValueError for a value of an option of :data:`CHOICES` outside its choices."""
     for name, value in named.items():
@@ -143,7 +153,7 @@ def _stacked_points(ya, yb, xa, xb):
 
 
 def solve_block(xa, xb, ya, yb, *, solver, seed, max_iterations, tolerance, weights, channels,
-                first_row, start="random"):
+                first_row, start="random", away_steps=False):
     """Weights of the rows first_row .. first_row + T - 1 of an image: float64 xa, xb (T, W, C),
     ya, yb (N, T, W, C), all finite (unchecked). Returns (N, T, W, C) float64 weights and
     (T, W, C) info (see :func:`solve_weights`); a block gets exactly the weights of the whole
@@ -167,7 +177,7 @@ def solve_block(xa, xb, ya, yb, *, solver, seed, max_iterations, tolerance, weig
             raise ValueError(f"max_iterations must be >= 1, got {max_iterations}")
         w, info = iterative_weights(ya_d, yb_d, xa_d, xb_d, seed_state(seed), int(max_iterations),
                                     float(tolerance), first_row * wd * per_problem,
-                                    STARTS.index(start))
+                                    STARTS.index(start), bool(away_steps))
     elif solver == "exact" and channels == "single":
         w, info = shared_exact_weights(ya_d, yb_d, xa_d, xb_d)
     elif solver == "exact":
@@ -186,7 +196,7 @@ def solve_block(xa, xb, ya, yb, *, solver, seed, max_iterations, tolerance, weig
 def solve_weights(color_a, color_b, denoised_a, denoised_b, solver=ENSEMBLE_DEFAULTS["solver"],
                   seed=0, max_iterations=MAX_ITERATIONS, tolerance=TOLERANCE, return_info=False, *,
                   weights=ENSEMBLE_DEFAULTS["weights"], channels=ENSEMBLE_DEFAULTS["channels"],
-                  start=ENSEMBLE_DEFAULTS["start"]):
+                  start=ENSEMBLE_DEFAULTS["start"], away_steps=ENSEMBLE_DEFAULTS["away_steps"]):
     """Per-pixel, per-channel ensemble weights minimising Eq. 13 (with <M> from Eq. 11-12).
 
     Parameters
@@ -217,6 +227,9 @@ def solve_weights(color_a, color_b, denoised_a, denoised_b, solver=ENSEMBLE_DEFA
         ensemble of Eq. 29 over all pairs, O(N^2) per problem; it is the optimum whenever the
         optimum has two non-zero weights, so the solver stops after one cycle). The iterations
         are the paper's either way; see ``benchmarks/bench_solvers.py``.
+    away_steps : the iterative solver's range of Eq. 29's alpha: False (the paper's [0, 1]) or
+        True ([-w_i / (1 - w_i), 1], steps that also move weight off the chosen denoiser; our
+        option, :mod:`mcbench.combine.simplex_solvers.iterative`). Ignored by the other solvers.
 
     All arithmetic is float64 (the solvers' geometry needs it: Eq. 29's c1 and the hull tests
     subtract nearly equal radiance values).
@@ -232,12 +245,14 @@ def solve_weights(color_a, color_b, denoised_a, denoised_b, solver=ENSEMBLE_DEFA
     (the message gives the number of bad pixels).
     """
     check_choices(solver=solver, weights=weights, channels=channels, start=start)
+    check_away_steps(away_steps)
     xa, xb, ya, yb = (np.asarray(a, np.float64) for a in (color_a, color_b, denoised_a, denoised_b))
     check_shapes(xa, xb, ya, yb)
     check_finite({"color_a": xa, "color_b": xb, "denoised_a": ya, "denoised_b": yb})
     result, info = solve_block(xa, xb, ya, yb, solver=solver, seed=seed,
                                max_iterations=max_iterations, tolerance=tolerance,
-                               weights=weights, channels=channels, first_row=0, start=start)
+                               weights=weights, channels=channels, first_row=0, start=start,
+                               away_steps=away_steps)
     if return_info:
         return result, info
     return result

@@ -13,8 +13,8 @@ clipping).
 
 **The public code's passes and details** (LuisaGroup/Ensemble-Denoising, ``filter.h`` /
 ``main.cpp``), each a switch of :func:`filter_weights` and of the ensemble's combine():
-``guide_variance_blur="gaussian9"``: Var[z] blurred with a 9 x 9 Gaussian (OpenCV's sigma-0
-rule, sigma = 1.7, borders reflected) before the filter; ``outlier_removal="public_code"``:
+``guide_variance_blur="gaussian9"``: Var[z] blurred with a 9 x 9 Gaussian (OpenCV's fixed
+9-tap table for sigma 0, borders reflected) before the filter; ``outlier_removal="public_code"``:
 after the filter, a pixel of a weight map where any channel lies 2.5 or more standard
 deviations from the mean of the other 48 pixels of its 7 x 7 window takes the map's 7 x 7
 Gaussian blur (:func:`mcbench.filters.blur_and_outliers.remove_outlier_pixels`), ``"neighbour_mean"``
@@ -23,9 +23,10 @@ our own reading (one value -> the neighbours' mean,
 the simplex (onto sum one when unconstrained; a pixel-channel left with all weights 0 keeps its
 filtered ones); ``filter_border="reflect101"``: windows reflected at the image borders;
 ``variance_sum_floor=1e-6``: Eq. 33's denominator max(v_p + v_q, 1e-6);
-``normal_features="standardised"``: the normal feature standardised per channel and clipped to
-+-3. Eq. 33's ||.||^2 is a sum over the channels (the text and the code; ``colour_distance=
-"mean"`` is our own reading). The ensemble's defaults
+``normal_features="standardised"``: the normal feature standardised per channel (mean,
+population std floored at 1e-3) and clipped to +-3 (``main.cpp:34-43``; the text is silent).
+Eq. 33's ||.||^2 is a sum over the channels (the text and the code; ``colour_distance="mean"``
+is our own reading). The ensemble's defaults
 (``mcbench.combine.ensemble_weights.ENSEMBLE_DEFAULTS``) follow the text where it decides and the
 code where it is silent; :data:`PAPER_FILTER` is Sec. 4.2 alone and :data:`PUBLIC_CODE_FILTER`
 the code's choices (with :func:`public_code_sigmas` for its feature terms).

@@ -238,25 +238,77 @@ def test_iterative_never_below_exact():
 
 @pytest.mark.parametrize("problems", [random_plane_problems, biased_denoiser_problems])
 def test_iterative_reaches_the_optimum_on_99_percent(problems):
-    """At least 99 % of pixel-channels end within 1e-6 s^2 of the exact optimum of Eq. 13.
-
-    The away steps (mcbench/combine/simplex_solvers/iterative.py docstring) are what lets the solver reach
-    this: with the paper's alpha in [0, 1] alone the share on these problems is far below 99 %."""
+    """With ``away_steps=True`` at least 99 % of pixel-channels end within 1e-6 s^2 of the exact
+    optimum of Eq. 13. The paper's alpha in [0, 1] (the default) moves weight off a denoiser only
+    as the others gain, so within the 1024 iterations far fewer get that close (measured: 67 %
+    and 86 %), but all within 1e-2 s^2 (measured max 1.7e-3) and none below the optimum."""
     xa, xb, ya, yb = problems()
-    gap = gap_above_optimum(solve_weights(xa, xb, ya, yb, solver="iterative"), xa, xb, ya, yb)
+    gap = gap_above_optimum(solve_weights(xa, xb, ya, yb, solver="iterative", away_steps=True),
+                            xa, xb, ya, yb)
     share = float(np.mean(gap <= 1e-6))
     assert share >= 0.99, share
+    paper = gap_above_optimum(solve_weights(xa, xb, ya, yb, solver="iterative"), xa, xb, ya, yb)
+    assert paper.min() >= -1e-12 and paper.max() <= 1e-2
+    assert float(np.mean(paper <= 1e-6)) < 0.95
+
+
+def two_denoiser_line_problems(t_star, seed=31, m=4000):
+    """m problems of N = 2 points a_1, a_2 and a target b whose projection onto the line through
+    the points is a_1 + t* (a_2 - a_1) (plus a perpendicular offset). Returns the solver inputs."""
+    rng = np.random.default_rng(seed)
+    a1, a2 = rng.normal(size=(2, m, 2))
+    d = a2 - a1
+    normal = np.stack([-d[:, 1], d[:, 0]], -1)
+    b = a1 + np.asarray(t_star)[..., None] * d + rng.normal(size=(m, 1)) * normal
+    return as_problems(np.stack([a1, a2], axis=1), b)
+
+
+def test_iterative_alpha_range_in_one_step():
+    """Eq. 29's clip decides where one step can go. N = 2, w = (1 - t, t) on the segment, t* the
+    unclipped minimiser on the line. A step towards e_2 with alpha in [0, 1] reaches t in
+    [t0, 1], one towards e_1 t in [0, t0] (t0 the random start); with away steps alpha in
+    [-w_i / (1 - w_i), 1] both reach any t in [0, 1]. So after one iteration:
+
+    * t* < 0 (optimum at e_1): with away steps every problem is at t = 0 exactly; with the paper's
+      clip the half that stepped towards e_2 cannot move weight off it and stays at its start
+      t0 > 0, the other half is at 0; after one whole cycle (2 iterations) all are at 0.
+    * 0 < t* < 1: with away steps every problem is at t*; with the paper's clip half are (those
+      whose start lay on the chosen vertex's far side of t*), half stay at t0; after one cycle
+      all are at t*."""
+    m = 4000
+    xa, xb, ya, yb = two_denoiser_line_problems(np.full(m, -0.5))
+    away = solve_weights(xa, xb, ya, yb, max_iterations=1, away_steps=True)[1].ravel()
+    np.testing.assert_array_equal(away, 0.0)
+    paper = solve_weights(xa, xb, ya, yb, max_iterations=1)[1].ravel()
+    stayed = paper > 0
+    assert 0.45 < stayed.mean() < 0.55, stayed.mean()
+    np.testing.assert_array_equal(paper[~stayed], 0.0)
+    assert len(np.unique(paper[stayed])) == stayed.sum()          # the random starts
+    np.testing.assert_array_equal(solve_weights(xa, xb, ya, yb, max_iterations=2)[1].ravel(), 0.0)
+
+    t_star = np.random.default_rng(32).uniform(0.2, 0.8, m)
+    xa, xb, ya, yb = two_denoiser_line_problems(t_star, seed=33)
+    away = solve_weights(xa, xb, ya, yb, max_iterations=1, away_steps=True)[1].ravel()
+    np.testing.assert_allclose(away, t_star, rtol=0, atol=1e-12)
+    paper = solve_weights(xa, xb, ya, yb, max_iterations=1)[1].ravel()
+    reached = np.abs(paper - t_star) <= 1e-12
+    assert 0.45 < reached.mean() < 0.55, reached.mean()
+    np.testing.assert_allclose(solve_weights(xa, xb, ya, yb, max_iterations=2)[1].ravel(), t_star,
+                               rtol=0, atol=1e-12)
+    for bad in (1, 0, "yes", None):
+        with pytest.raises(ValueError, match="away_steps must be true or false"):
+            solve_weights(xa, xb, ya, yb, away_steps=bad)
 
 
 @pytest.mark.parametrize("start", ["vertex", "pair"])
 def test_iterative_deterministic_starts(start):
     """start="vertex" begins at the best single denoiser, "pair" at the best two-denoiser
-    ensemble (Eq. 29 over all pairs). Both reach the optimum like the paper's random start;
+    ensemble (Eq. 29 over all pairs). With away steps both reach the optimum like the random start;
     "pair" *is* the optimum where the exact solution has two non-zero weights (b outside the
     hull, nearest point inside an edge), so one cycle of N steps moves nothing and it stops,
     with the exact weights."""
     xa, xb, ya, yb = random_plane_problems(seed=5, n=5, m=3000)
-    w, iterations = solve_weights(xa, xb, ya, yb, start=start, return_info=True)
+    w, iterations = solve_weights(xa, xb, ya, yb, start=start, return_info=True, away_steps=True)
     assert_simplex(w)
     gap = gap_above_optimum(w, xa, xb, ya, yb)
     assert gap.min() >= -1e-12 and np.mean(gap <= 1e-6) >= 0.99

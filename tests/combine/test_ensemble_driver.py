@@ -56,8 +56,8 @@ def test_plugin_hands_every_option_through(solver, weights, make_render_buffers)
     options = dict(solver=solver, seed=3, max_iterations=8, tolerance=3e-2, weights=weights,
                    channels="single", radius=3, sigma_spatial=2.5, sigma_color=0.7, sigma_albedo=0.2,
                    sigma_normal=0.3, guide_variance_blur="none", outlier_removal="neighbour_mean",
-                   colour_distance="mean", filter_border="clip", normal_features="standardised",
-                   variance_sum_floor=1e-3, start="pair")
+                   colour_distance="mean", filter_border="clip", normal_features="raw",
+                   variance_sum_floor=1e-3, start="pair", away_steps=True)
     assert set(options) == set(defaults()) - {"filter"}
     assert {k for k, v in defaults().items() if options.get(k) == v} <= {"solver", "weights"}
     got = E.combine(buffers, inputs, **options)

@@ -105,6 +105,7 @@ def test_ensemble_equals_the_authors_program(case):
 #: seen by the comparison (the blend or the weights beyond their tolerance)
 DEPARTURES = {
     "iterative solver (the paper's; the program ran fbstab)": dict(solver="iterative"),
+    "iterative solver with away steps (our switch)": dict(solver="iterative", away_steps=True),
     "guide variance not blurred": dict(guide_variance_blur="none"),
     "our outlier pass (value -> neighbours' mean)": dict(outlier_removal="neighbour_mean"),
     "no outlier pass": dict(outlier_removal="none"),

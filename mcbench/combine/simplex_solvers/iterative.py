@@ -8,14 +8,24 @@ two-denoiser closed form (Eq. 29, c1 and c2 summed over the D channels) and upda
 w <- (1 - alpha) w + alpha e_i (Eq. 31); the denoiser is chosen cycling through all N in a
 freshly shuffled order per cycle; stop when no weight moved by more than ``tolerance`` over a
 whole cycle or after ``max_iterations`` iterations.
-**Departure (away steps):** the paper clips alpha to [0, 1], so weight only ever moves
-*towards* the chosen denoiser and a denoiser that should get weight 0 fades geometrically
-slowly. We clip alpha to the whole feasible segment of the line through w and e_i,
-[-w_i / (1 - w_i), 1]: a negative alpha is the same closed form moving weight *off* denoiser
-i, down to w_i = 0 (exactly 0 at the bound), and w is renormalised after each update against
-rounding. Every step is still the exact minimiser of Eq. 13 on its line, so the objective
-decreases monotonically as in the paper's argument (tests/combine/test_ensemble.py compares how many
-problems reach the optimum with and without away steps).
+**Alpha's range (``away_steps``).** The paper clips alpha to [0, 1] (Eq. 29, "clamps the value
+into [0, 1]"; Sec. 4.1.2: "we always clamp alpha to [0, 1]"), and so does the authors' code
+(``alpha = std::clamp(b / a, 0.0, 1.0)``, src/solve.h:112 at becc556): weight only ever moves
+*towards* the chosen denoiser, and a denoiser that should get weight 0 loses it only as the
+others gain (geometrically slowly). That is the default (``away_steps=False``). With
+``away_steps=True`` (our option) alpha is clipped to the whole feasible segment of the line
+through w and e_i, [-w_i / (1 - w_i), 1]: a negative alpha is the same closed form moving weight
+*off* denoiser i, down to w_i = 0 (exactly 0 at the bound). Either way every step is the exact
+minimiser of Eq. 13 on its (clipped) segment, so the objective never increases, and w is
+renormalised after each update against rounding (as the code does, src/solve.h:116).
+tests/combine/test_ensemble.py compares how many problems reach the optimum with either.
+**c1 (Eq. 29's denominator):** the text divides by c1 with no floor; the code floors it,
+``std::max(c1, 1e-6)`` (src/solve.h:92, :110), an absolute constant that shrinks every step of
+dark pixels (radiance differences below ~1e-3) by the factor c1 / 1e-6. The text decides: no
+floor; only c1 = 0 (then c2 = 0: the ensemble equals denoiser i) leaves w unchanged.
+**Stop:** the paper stops when "w is not changing for several iterations" or at 1024; ours stops
+after a whole cycle of N updates none of which moved a weight by more than ``tolerance`` (the
+code: 2N + 1 consecutive steps with alpha < 1e-10, src/solve.h:91, :104, :113).
 **Departure (random numbers):** a counter-based splitmix64 generator seeded from
 (seed, problem index in the image), not ``np.random``: inside numba ``prange`` loops
 ``np.random`` draws from per-thread states, so which pixel gets which numbers would depend on
@@ -136,10 +146,11 @@ def _deterministic_start(ya, yb, xa, xb, w, start):
 
 
 @cached_njit()
-def _iterative_one(ya, yb, xa, xb, w, order, state, max_iterations, tolerance, start):
+def _iterative_one(ya, yb, xa, xb, w, order, state, max_iterations, tolerance, start, away_steps):
     """One problem: ya, yb (N, D) with D channels sharing the weights (D = 1 per
     pixel-channel; D = C for one weight vector per pixel, whose Eq. 29 sums c1 and c2 over
-    the channels); xa, xb (D,). Writes w (N,); returns the iteration count."""
+    the channels); xa, xb (D,). alpha in [0, 1] (the paper's), or in [-w_i / (1 - w_i), 1] with
+    ``away_steps``. Writes w (N,); returns the iteration count."""
     n = ya.shape[0]
     d = ya.shape[1]
     if start == START_RANDOM:
@@ -182,11 +193,11 @@ def _iterative_one(ya, yb, xa, xb, w, order, state, max_iterations, tolerance, s
                 db = zb - yb[i, k]
                 c1 += da * da + db * db
                 c2 += (za - xb[k]) * da + (zb - xa[k]) * db
-            # feasible step range on the line w -> e_i: alpha <= 1 keeps the others >= 0, and
-            # alpha >= -w_i / (1 - w_i) keeps w_i >= 0 (an "away" step that moves weight off
-            # denoiser i; the paper's Eq. 29 clips at 0, see the module docstring)
+            # Eq. 29's clip: alpha in [0, 1] (the paper's and the code's, src/solve.h:112); with
+            # away_steps the whole feasible segment of the line w -> e_i: alpha <= 1 keeps the
+            # others >= 0, alpha >= -w_i / (1 - w_i) keeps w_i >= 0 (moves weight off denoiser i)
             lower = 0.0
-            if w[i] < 1.0:
+            if away_steps and w[i] < 1.0:
                 lower = -w[i] / (1.0 - w[i])
             alpha = 0.0
             if c1 > 0.0 and np.isfinite(c1):
@@ -217,13 +228,14 @@ def _iterative_one(ya, yb, xa, xb, w, order, state, max_iterations, tolerance, s
 
 @cached_njit(parallel=True)
 def iterative_weights(ya, yb, xa, xb, seed_state, max_iterations, tolerance, first_problem,
-                      start):
-    """The iterative solver (Sec. 4.1, Eq. 29-31, with away steps) on P problems of N base
+                      start, away_steps=False):
+    """The iterative solver (Sec. 4.1, Eq. 29-31) on P problems of N base
     denoisers whose D channels share the weights: ya, yb (P, N, D) float64; xa, xb (P, D).
     ``seed_state`` from :func:`seed_state`; the problems are first_problem .. first_problem +
     P - 1 of the image (the generator of problem p is seeded from (seed, p), so a block of rows
     solved alone gets the numbers the whole image would); ``start`` the index of the start in
-    :data:`STARTS`. Returns weights (P, N) and iteration counts (P,)."""
+    :data:`STARTS`; ``away_steps``: alpha in [-w_i / (1 - w_i), 1] instead of the paper's [0, 1]
+(the module docstring). Returns weights (P, N) and iteration counts (P,)."""
     P, n = ya.shape[0], ya.shape[1]
     seed_state = _mix64(seed_state)
     out = np.empty((P, n))
@@ -235,7 +247,7 @@ def iterative_weights(ya, yb, xa, xb, seed_state, max_iterations, tolerance, fir
         for p in range(c * CHUNK, min(P, (c + 1) * CHUNK)):
             state = _mix64(seed_state + np.uint64(first_problem + p))
             iters[p] = _iterative_one(ya[p], yb[p], xa[p], xb[p], w, order, state,
-                                      max_iterations, tolerance, start)
+                                      max_iterations, tolerance, start, away_steps)
             for j in range(n):
                 out[p, j] = w[j]
     return out, iters
