@@ -132,6 +132,36 @@ def test_a_wrong_constant_fails(monkeypatch):
                for name in _strict_first())
 
 
+def _mse_without_residual(fa, fb, color_a, color_b, var_a, var_b):
+    """Sec. 5.3's MSE estimate without the -(F_A - F_B)^2 / 4 term (D:73-75)."""
+    return 0.5 * ((fa - color_b) ** 2 - var_b + (fb - color_a) ** 2 - var_a)
+
+
+#: Constants at a wrong value: each 0.5 / 1.0 of Tungsten's program (D:51,59,81,94,122,132) in the
+#: other's place, and the MSE estimate without its residual term. (Dropping the -Var terms of the
+#: MSE does not change the output: they are the same for both bandwidths and the MSE filter is
+#: linear, so the selection is unchanged; the intermediate goldens catch it,
+#: tests/methods/test_nfor_golden_intermediates.py.)
+WRONG_CONSTANTS = {
+    "prefilter k 0.5 -> 1.0": ("FEATURE_PREFILTER", dict(nfor.FEATURE_PREFILTER, k=1.0)),
+    "bandwidths (0.5, 1.0) -> (0.5, 0.5)": ("BANDWIDTHS", (0.5, 0.5)),
+    "bandwidths (0.5, 1.0) -> (1.0, 1.0)": ("BANDWIDTHS", (1.0, 1.0)),
+    "MSE/selection filter k 1.0 -> 0.5": ("MSE_FILTER", dict(nfor.MSE_FILTER, k=0.5)),
+    "second-pass regression k 1.0 -> 0.5": ("SECOND_PASS_K", 0.5),
+    "second-pass feature filter k 0.5 -> 1.0": ("SECOND_PASS_FEATURES", dict(nfor.SECOND_PASS_FEATURES, k=1.0)),
+    "MSE without -(F_A - F_B)^2 / 4": ("mse_estimate", _mse_without_residual),
+}
+
+
+@pytest.mark.parametrize("label", WRONG_CONSTANTS)
+def test_a_wrong_k_or_mse_term_fails(label, monkeypatch):
+    """The golden comparison has teeth: each wrong constant exceeds the bounds by >= 10x on some
+    case (measured: 110x to 3700x, docs/fidelity_nfor.md)."""
+    attribute, value = WRONG_CONSTANTS[label]
+    monkeypatch.setattr(nfor, attribute, value)
+    assert any(excess(name, nfor.denoise(load(name)[0]).full) > FAIL_FACTOR for name in _strict_first()), label
+
+
 @pytest.mark.parametrize("switch", ["second_pass_variance_scale", "regression_channels", "filter_channels",
                                     "nlm_epsilon", "feature_variance", "color_variance", "patch_borders",
                                     "rank_threshold"])
