@@ -25,12 +25,11 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(ROOT / "tests"))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
 from baseline import load_baseline, print_comparison, time_denoisers  # noqa: E402
-from conftest import build_render_buffers  # noqa: E402
-from test_nfor import synthetic_scene  # noqa: E402
+from tests.conftest import build_render_buffers  # noqa: E402
+from tests.methods.test_nfor import synthetic_scene  # noqa: E402
 
 from methods import nfor  # noqa: E402
 
