@@ -15,8 +15,8 @@ Why these and not 1e-6. Tungsten computes in float32 (unit roundoff u = 6e-8) an
 fmath's table exp (10-bit table plus a first-order term: relative error ~6e-8 (1 + |x|) for
 exp(-x)). NL-means distances subtract variance terms of similar size, so a weight's relative
 error is ~u (|D| + 1) ~ 1e-6 for the distances that matter; the stages made of NL-means filters
-agree to ~1e-4 at worst (measured once on the prefiltered features, the MSE and selection maps
-with a local Tungsten build that also saved its intermediates; docs/fidelity_nfor.md). The weighted least-squares fits multiply that by
+agree to ~1e-4 at worst (measured once on the prefiltered features, and on the stored MSE and
+selection maps of tests/methods/test_nfor_golden_intermediates.py; docs/fidelity_nfor.md). The weighted least-squares fits multiply that by
 the condition number of sqrt(W) X, solved by Tungsten in float32 column-pivoted QR on unscaled
 columns (1, dx, dy up to 9, feature differences down to 1e-6): where it is moderate (every
 window of the textured scene) the output agrees to <= 7e-5 in err (so 5e-4 leaves 7x room).
@@ -29,9 +29,11 @@ size of our difference from Tungsten there (max 0.14-0.29, relMSE 1.0e-5-2.3e-5)
 So per-pixel agreement cannot be asked on such scenes; the few pixels it concerns keep relMSE
 <= 2.3e-5 on every case (4x below 1e-4), while every change below exceeds a bound 10x somewhere.
 
-The test can fail: regression radius 9 -> 8, or any of the switches that change numbers back at
-our default, exceeds one of the bounds by at least 10x on some case
-(:func:`test_a_wrong_constant_fails`, :func:`test_each_switch_off_fails`). The switches
+The test can fail: regression radius 9 -> 8, any of the switches that change numbers at its
+former value (``nfor.OURS``), each k of Tungsten's program (0.5 / 1.0) in the other's place, or
+the MSE estimate without its -(F_A - F_B)^2 / 4 term exceeds one of the bounds by at least 10x on
+some case (:func:`test_a_wrong_constant_fails`, :func:`test_each_switch_off_fails`,
+:func:`test_a_wrong_k_or_mse_term_fails`). The switches
 ``filter_clamp``, ``feature_resolution`` and ``pivot_tolerance`` change the golden errors by less
 than the float32 noise (docs/fidelity_nfor.md, departure table).
 """
