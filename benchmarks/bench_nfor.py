@@ -7,7 +7,10 @@ with another normal and depth) with Gaussian noise of sigma 0.1 per half buffer
 compiles / loads the numba kernels, so the timings exclude JIT. Prints per size the wall and
 CPU seconds of both, the speed-ups and the relMSE of the current outputs against the baseline's
 and against the baseline with the current code's one behaviour change (``baseline_fix``: feature
-differences within 1e-9 relative of zero count as 0, see methods/nfor.py).
+differences within 1e-9 relative of zero count as 0, see methods/nfor.py). The baseline predates
+the Tungsten switches, so this comparison runs the current code with its former settings
+(``nfor.OURS``, ``new``); a second line per size times NFOR's defaults (Tungsten's behaviour,
+``tungsten``) against ``nfor.OURS`` (``ours``) on the same input.
 The DAG runs methods at one thread: ``NUMBA_NUM_THREADS=1``.
 
     NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/bench_nfor.py [--sizes 128 512] [--repeats 1] [--no-baseline]
@@ -16,17 +19,17 @@ The DAG runs methods at one thread: ``NUMBA_NUM_THREADS=1``.
 from __future__ import annotations
 
 import argparse
+import functools
 import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(ROOT / "tests"))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
 from baseline import load_baseline, print_comparison, time_denoisers  # noqa: E402
-from conftest import build_render_buffers  # noqa: E402
-from test_nfor import synthetic_scene  # noqa: E402
+from tests.conftest import build_render_buffers  # noqa: E402
+from tests.methods.test_nfor import synthetic_scene  # noqa: E402
 
 from methods import nfor  # noqa: E402
 
@@ -50,17 +53,22 @@ def main(argv=None) -> None:
     parser.add_argument("--no-baseline", action="store_true", help="time the current implementation only")
     args = parser.parse_args(argv)
 
-    denoisers = {"new": nfor.denoise}
+    ours = functools.partial(nfor.denoise, **nfor.OURS)
+    denoisers = {"new": ours}
     if not args.no_baseline:
         denoisers["baseline"] = load_baseline("methods/nfor.py").denoise
         # the baseline with the current code's one behaviour change (feature differences within 1e-9
         # relative of zero count as 0), untimed: the current outputs equal it to rounding
         denoisers["baseline_fix"] = load_baseline("methods/nfor.py", patches={SNAP_OLD: SNAP_NEW},
                                                   suffix="_fix").denoise
-    for denoise in denoisers.values():
+    for denoise in (*denoisers.values(), nfor.denoise):
         denoise(synthetic_buffers(24))    # numba compilation / cache load
     for size in args.sizes:
-        print_comparison(size, time_denoisers(denoisers, synthetic_buffers(size), args.repeats))
+        buffers = synthetic_buffers(size)
+        if not args.no_baseline:
+            print_comparison(size, time_denoisers(denoisers, buffers, args.repeats))
+        print_comparison(size, time_denoisers({"tungsten": nfor.denoise, "ours": ours}, buffers, args.repeats),
+                         new="tungsten", old="ours")
 
 
 if __name__ == "__main__":

@@ -1,91 +1,107 @@
 """NFOR: Nonlinearly Weighted First-order Regression (Bitterli et al. 2016), #4 in Zheng et al. 2021.
 
+By default this is the program of the NFOR authors' public re-implementation, Tungsten's
+``src/denoiser/`` (tunabrain/tungsten 88ea020; D = ``denoiser.cpp``, N = ``NlMeans.hpp``,
+Rg = ``Regression.cpp``): every switch of :func:`denoise` defaults to Tungsten's behaviour
+(:data:`TUNGSTEN`), and on stored 32x32 renders the output matches Tungsten's ``denoiser`` to
+relMSE <= 2.3e-5, its intermediates (pass-1 regressions, MSE and selection maps, r^A, r^B) to
+relMSE <= 5.8e-5 (``tests/methods/test_nfor_golden.py``,
+``tests/methods/test_nfor_golden_intermediates.py``, ``docs/fidelity_nfor.md``). The paper's text was not available; where it might differ from
+Tungsten, Tungsten is followed. :data:`OURS` holds this module's former settings.
+
 Pipeline (section numbers of Bitterli et al., CGF 35(4) 2016):
 
-1. **Feature cross-prefiltering (Sec. 5.1).** Every scalar feature f (normal x/y/z, albedo r/g/b,
-   depth: 7 features) has half buffers f_A, f_B. The variance of one half buffer is estimated from
-   their difference, Var[f_A] = Var[f_B] ~ (f_A - f_B)^2 / 2, and each half is NL-means filtered
-   with weights from the *other* half (values f_A, guide f_B and vice versa): 11x11 window
-   (radius 5), 7x7 patches (patch radius 3), k = 0.5.
-2. **Collaborative first-order regression (Sec. 5.2).** For every pixel p, a weighted least-squares
-   fit of colour over the 19x19 window (radius 9) with design rows
+1. **Feature cross-prefiltering (Sec. 5.1, D:44-51).** Every scalar feature f (normal x/y/z,
+   albedo r/g/b, depth: 7 features) has half buffers f_A, f_B. The variance of one half buffer is
+   2 x the render's variance of the full-buffer mean (``<feature>_variance``; D:48-51 with
+   ``varianceScale`` 2, N:72-73), and each half is NL-means filtered with weights from the
+   *other* half (values f_A, guide f_B and vice versa): 11x11 window (radius 5), 7x7 patches
+   (patch radius 3), k = 0.5.
+2. **Collaborative first-order regression (Sec. 5.2, D:59-65, Rg).** For every pixel p, a
+   weighted least-squares fit of colour over the 19x19 window (radius 9) with design rows
    x_q = [1, q_x - p_x, q_y - p_y, f(q) - f(p)] (d = 10 columns) and NL-means weights w_pq
-   (7x7 patches) computed on the *other* half buffer's colour with that buffer's variance. The
-   fit is evaluated at every q of the window and accumulated, result(q) = sum_p w_pq x_q beta_p /
-   sum_p w_pq. Colour A is regressed with colour-B weights and the B-side prefiltered features,
-   colour B symmetrically (cross filtering), for two bandwidths k = 0.5 and k = 1.0.
-3. **MSE estimation and bandwidth selection (Sec. 5.3).** Per bandwidth i, with F_i^A, F_i^B the
-   filtered halves and x^A, x^B the noisy halves (Zheng et al. 2021 Eq. 36-37):
-   MSE[F_i^A] ~ (F_i^A - x^B)^2 - Var[x^B], MSE[F_i^B] ~ (F_i^B - x^A)^2 - Var[x^A],
+   (7x7 patches, the minimum of the per-channel weights, N:37-40,87) computed on the *other*
+   half buffer's colour with variance 2 x ``variance`` (Rg:72). The fit is evaluated at every q
+   of the window and accumulated, result(q) = sum_p w_pq x_q beta_p / sum_p w_pq. Colour A is
+   regressed with colour-B weights and the B-side prefiltered features, colour B symmetrically
+   (cross filtering), for two bandwidths k = 0.5 and k = 1.0.
+3. **MSE estimation and bandwidth selection (Sec. 5.3, D:67-102).** Per bandwidth i, with
+   F_i^A, F_i^B the filtered halves, x^A, x^B the noisy halves and V = 2 x ``variance`` (D:71-75;
+   Zheng et al. 2021 Eq. 36-37):
+   MSE[F_i^A] ~ (F_i^A - x^B)^2 - V, MSE[F_i^B] ~ (F_i^B - x^A)^2 - V,
    MSE[F_i] ~ (MSE[F_i^A] + MSE[F_i^B]) / 2 - (F_i^A - F_i^B)^2 / 4.
    The MSE maps are NL-means filtered (guide: full colour with its variance, 19x19 window, 3x3
-   patches, k = 1); a per-pixel, per-channel binary selection map (1 where k = 1.0 has the lower
-   filtered MSE) is filtered the same way and used to blend the candidates:
-   r^A = (1 - s) F_0.5^A + s F_1.0^A, r^B likewise.
-4. **Second pass (Sec. 5.4).** Features: the mean of the two prefiltered halves, with variance
-   (f'_A - f'_B)^2 / 4, NL-means filtered by themselves (5x5 window, 7x7 patches, k = 0.5).
-   Colour: r = (r^A + r^B) / 2 with variance (r^A - r^B)^2 / 4 is regressed again with weights
-   from itself (19x19 window, 7x7 patches, k = 1.0). That regression is the final output.
+   patches, k = 1, an independent weight per channel, N:33-36); a per-pixel, per-channel binary
+   selection map (1 where k = 1.0 has the lower filtered MSE, ties 1) is filtered the same way
+   and used to blend the candidates: r^A = (1 - s) F_0.5^A + s F_1.0^A, r^B likewise.
+4. **Second pass (Sec. 5.4, D:107-132).** Features: the mean of the two prefiltered halves, with
+   variance (f'_A - f'_B)^2 / 4, NL-means filtered by themselves (5x5 window, 7x7 patches,
+   k = 0.5). Colour: r = (r^A + r^B) / 2 with variance 2 x (r^A - r^B)^2 / 4 (Tungsten's
+   regression multiplies every variance by 2, Rg:72) is regressed again with weights from itself
+   (19x19 window, 7x7 patches, k = 1.0). That regression is the final output.
+
+Every NL-means filter uses Tungsten's epsilon 1e-7 (N:51), its per-pixel distance clamp 1e4
+(N:53,76) and truncated patch means at the image borders (N:62-67,83); the regressions' rank rule
+is Eigen's float32 one (:func:`denoise`, ``rank_threshold``).
 
 Output: ``Denoised(full, a, b)`` with ``a = r^A``, ``b = r^B`` (the internal first-pass,
 bandwidth-selected half-buffer results, which Zheng et al. 2021 Sec. 5.1 saved from NFOR instead
 of running it three times) and ``full`` the second-pass result. ``extras["selection"]`` holds the
-filtered selection map s (H, W, 3) in [0, 1]. All images (H, W, 3) float32 linear radiance.
+filtered selection map s (H, W, 3) in [0, 1]; ``intermediates=True`` adds the per-bandwidth
+regressions and MSE maps. All images (H, W, 3) float32 linear radiance.
 
-Constants taken from the NFOR paper / its authors' public re-implementation (Tungsten):
-feature prefilter R = 5, F = 3, k = 0.5; regression R = 9, F = 3, k in {0.5, 1.0};
-MSE and selection filters R = 9, F = 1, k = 1; second pass features R = 2, F = 3, k = 0.5 and
-regression R = 9, F = 3, k = 1.0; NL-means alpha = 1 (Rousselle et al. 2012).
+Constants from Tungsten (D:51,59,63,65,81,94,122,132): feature prefilter R = 5, F = 3, k = 0.5;
+regression R = 9, F = 3, k in {0.5, 1.0}; MSE and selection filters R = 9, F = 1, k = 1; second
+pass features R = 2, F = 3, k = 0.5 and regression R = 9, F = 3, k = 1.0; NL-means alpha = 1
+(Rousselle et al. 2012).
 
-Constants we had to choose (one-line reasons):
+Constants we chose (implementation, not Tungsten's):
 
-* ``NLM_EPSILON = 1e-10``: same epsilon as :mod:`mcbench.filters.nlmeans`, so zero-variance inputs give
-  weight 1 for identical colours and 0 otherwise (noise-free input is returned unchanged).
-* ``DISTANCE_CLAMP = 1e4``: per-pixel distances are clipped before the patch mean (as Tungsten
-  does); exp(-1e4 / 49) is already 0, it only keeps sums finite with 1e4-scale fireflies.
-* ``PIVOT_TOLERANCE = 1e-9``: in the Cholesky solve of the column-normalised normal equations
-  a column whose pivot (1 - R^2 against the previous columns) falls below this is dropped
-  (coefficient 0): constant or collinear features (grey albedo r = g = b) never make the system
-  singular; the intercept column always has a pivot of 1, so the fit falls back to the weighted
-  mean at worst. Float64 Cholesky keeps ~7 significant digits at this pivot.
+* ``DISTANCE_CLAMP = 1e4``: Tungsten's clamp (N:53,76); the regressions always apply it,
+  the NL-means filters with ``filter_clamp`` (default on).
 * ``CHUNK_ROWS = 8``: rows per parallel work item of the regression (weights of one chunk are
   8 x W x 361 float64, pixel-major, ~12 MB at W = 512); affects speed only.
-* ``FEATURE_RESOLUTION = 1e-9``: a feature difference f(q) - f(p) within 1e-9 of max(|f(q)|,
-  |f(p)|) counts as 0. The prefiltered features are float64 means of float32 data, so real
-  differences are >= ~6e-8 relative and rounding noise is ~1e-16; without it a feature that is
-  constant up to rounding (a flat albedo region after NL-means) becomes a unit-scaled regressor
-  of pure noise, so rounding-level perturbations of the input change the output
-  (``benchmarks/bench_nfor.py`` compares the output with a reference implementation with and
-  without the rule).
-* Feature variance of a half buffer: the raw per-pixel (f_A - f_B)^2 / 2, not smoothed, because
-  the paper derives it from the half-buffer difference and NL-means averages it over 7x7 patches.
-* Distances are averaged over colour channels (Rousselle et al. 2012 Eq. 5, as
-  :mod:`mcbench.filters.nlmeans`), and patches replicate image edges like :mod:`mcbench.filters.nlmeans`.
 
-Tungsten switches. :func:`denoise` has keyword switches that turn each departure from Tungsten's
-``src/denoiser/`` (tunabrain/tungsten 88ea020) into Tungsten's behaviour; their defaults keep this
-module's numbers, and :data:`TUNGSTEN` sets them all. With :data:`TUNGSTEN` our output matches
-Tungsten's ``denoiser`` on stored renders (``tests/data/golden/tungsten_nfor/``,
-``tests/methods/test_nfor_golden.py``); ``docs/fidelity_nfor.md`` tabulates each switch's effect.
+Former settings (:data:`OURS`, defaults until 2026-12-04; each a switch of :func:`denoise`, with
+the reason it was chosen; their effects against Tungsten in ``docs/fidelity_nfor.md``):
+
+* ``nlm_epsilon = NLM_EPSILON = 1e-10``: the epsilon of :mod:`mcbench.filters.nlmeans`, so
+  zero-variance inputs give weight 1 for identical colours and 0 otherwise.
+* ``pivot_tolerance = PIVOT_TOLERANCE = 1e-9``, ``rank_threshold = 0``: in the Cholesky solve of
+  the column-normalised normal equations a column whose pivot (1 - R^2 against the previous
+  columns) falls below 1e-9 is dropped (coefficient 0), so constant or collinear features (grey
+  albedo r = g = b) never make the system singular; float64 Cholesky keeps ~7 significant digits
+  at this pivot.
+* ``feature_resolution = FEATURE_RESOLUTION = 1e-9``: a feature difference f(q) - f(p) within
+  1e-9 of max(|f(q)|, |f(p)|) counts as 0, so that a feature constant up to float64 rounding is
+  not a regressor of pure noise (with Tungsten's rank rule it is redundant).
+* ``feature_variance = "halves"``: the per-pixel (f_A - f_B)^2 / 2, attributed to the paper but
+  with no source we could check; a 1-degree-of-freedom estimate, the largest departure from
+  Tungsten (relMSE 8e-3 at 8 spp), so no longer a default.
+* ``color_variance = "halves"``: each half's own ``variance_a`` / ``variance_b``.
+* ``regression_channels = filter_channels = "mean"``: distances averaged over colour channels
+  (Rousselle et al. 2012 Eq. 5, as :mod:`mcbench.filters.nlmeans`); ``patch_borders =
+  "replicate"``, ``filter_clamp = False``: the conventions of :mod:`mcbench.filters.nlmeans`.
+* ``second_pass_variance_scale = 1``: the variance of the mean of the halves, (r^A - r^B)^2 / 4.
+
+The helpers :func:`collaborative_regression` and :func:`prefilter_features` keep these former
+values as their own keyword defaults (their tests compare with brute force at those values);
+:func:`denoise` passes every switch explicitly.
 
 Implementation and speed. NL-means filters are :func:`mcbench.filters.nlmeans.nl_means_filter`
 (compiled). The regression computes, per chunk of rows, the NL-means weights of every window
 offset, pixel-major (:func:`mcbench.filters.nlmeans.nl_means_window_weights`), then per pixel
 gathers the neighbours with w > 0 into columns (design row and colour), forms the normal
-equations as dot products over the neighbours (float64, reassociated so they vectorise; the
-normal equations and the Cholesky solve stay float64 because the pivot test at 1e-9 needs
-~7 digits after the column scaling), solves, and evaluates the fit at every neighbour. All
-kernels use float64: the weights' distances subtract variance terms of similar size, and
-float32 buys little where the time is in exp, divisions and the dot products (the five
-regressions take most of it, the NL-means filters the rest). ``benchmarks/bench_nfor.py``
-measures the speed (``NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/bench_nfor.py --sizes 128 512``).
+equations as dot products over the neighbours (float64, reassociated so they vectorise), solves
+by pivot-dropping Cholesky on the scaled normal equations (with Eigen's rank rule,
+``rank_threshold``), and evaluates the fit at every neighbour. All kernels use float64 (Tungsten:
+float32, the source of the remaining ~1e-5 differences). ``benchmarks/bench_nfor.py`` measures
+the speed (``NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/bench_nfor.py --sizes 128 512``).
 
-Departures from the paper: NL-means weights over colour channels are averaged (Tungsten takes
-the per-channel minimum weight in its regressions and per-channel weights in its MSE and selection
-filters); we have 7 features (no direct-visibility feature: the renders
-do not produce one); the normal equations are solved by pivot-dropping Cholesky rather than a
-column-pivoted QR; the second-pass guide variance is (r^A - r^B)^2 / 4, the variance of the mean
-of the halves (``second_pass_variance_scale`` multiplies it; Tungsten effectively uses 2).
+Remaining departures from Tungsten: float64 instead of float32 and exact exp instead of fmath's
+table exp; Cholesky of the normal equations instead of Eigen's column-pivoted QR (the same
+least-squares fit at full rank); 7 features (no direct-visibility feature: the renders do not
+produce one; Tungsten uses it only if listed).
 """
 
 from __future__ import annotations
@@ -114,12 +130,21 @@ BANDWIDTHS = (0.5, 1.0)                                          # Sec. 5.2
 MSE_FILTER = dict(radius=9, patch_radius=1, k=1.0)               # Sec. 5.3 (also selection maps)
 SECOND_PASS_FEATURES = dict(radius=2, patch_radius=3, k=0.5)     # Sec. 5.4
 SECOND_PASS_K = 1.0                                              # Sec. 5.4
-#: Every switch of :func:`denoise` at Tungsten's behaviour (``docs/fidelity_nfor.md``,
-#: ``tests/methods/test_nfor_golden.py``).
+#: Every switch of :func:`denoise` at Tungsten's behaviour: these are :func:`denoise`'s defaults
+#: (``docs/fidelity_nfor.md``, ``tests/methods/test_nfor_golden.py``).
 TUNGSTEN = dict(second_pass_variance_scale=2.0, regression_channels="min", filter_channels="independent",
                 nlm_epsilon=1e-7, feature_variance="buffer", color_variance="buffer", patch_borders="truncate",
                 filter_clamp=True, feature_resolution=0.0, rank_threshold=float(np.finfo(np.float32).eps),
                 pivot_tolerance=float(np.finfo(np.float32).eps) ** 2)
+#: The switches at this module's former defaults (until 2026-12-04): our reading of the paper with
+#: the conventions of :mod:`mcbench.filters.nlmeans`, before the comparison with Tungsten's program.
+#: Kept for comparison (``tools/golden/tungsten_nfor_departures.py``); each entry's reason is in
+#: the module docstring, its measured effect in ``docs/fidelity_nfor.md``. Not a default anywhere:
+#: ``feature_variance="halves"`` has no source and moves the output by relMSE 8e-3 at 8 spp.
+OURS = dict(second_pass_variance_scale=1.0, regression_channels="mean", filter_channels="mean",
+            nlm_epsilon=NLM_EPSILON, feature_variance="halves", color_variance="halves", patch_borders="replicate",
+            filter_clamp=False, feature_resolution=FEATURE_RESOLUTION, rank_threshold=0.0,
+            pivot_tolerance=PIVOT_TOLERANCE)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -363,11 +388,13 @@ def _features(buffers: RenderBuffers, suffix: str) -> np.ndarray:
 
 def _feature_variance(buffers: RenderBuffers) -> np.ndarray:
     """(H, W, 7) float64 variance of the full-buffer feature means (``normal_variance``,
-    ``albedo_variance``, ``depth_variance``), clipped at 0; KeyError names a missing layer."""
+    ``albedo_variance``, ``depth_variance``), clipped at 0; ValueError names a missing layer."""
     layers = buffers.layers
     missing = [n for n in ("normal_variance", "albedo_variance", "depth_variance") if n not in layers]
     if missing:
-        raise KeyError(f"feature_variance='buffer' needs the layers {missing}")
+        raise ValueError(f"NFOR's feature_variance='buffer' (the default, Tungsten's) needs the layers {missing}, "
+                         "which every render of mcbench.render.renderer holds; for buffers without them pass "
+                         "feature_variance='halves' (methods.nfor.OURS)")
     depth = np.asarray(layers["depth_variance"], dtype=np.float64)
     if depth.ndim == 3:
         depth = depth[..., 0]
@@ -396,16 +423,35 @@ def prefilter_features(features_a, features_b, variance=None, *, epsilon=NLM_EPS
     return out_a, out_b
 
 
-def denoise(buffers: RenderBuffers, *, second_pass_variance_scale: float = 1.0, regression_channels: str = "mean",
-            filter_channels: str = "mean", nlm_epsilon: float = NLM_EPSILON, feature_variance: str = "halves",
-            color_variance: str = "halves", patch_borders: str = "replicate", filter_clamp: bool = False,
-            feature_resolution: float = FEATURE_RESOLUTION, rank_threshold: float = 0.0,
-            pivot_tolerance: float = PIVOT_TOLERANCE) -> Denoised:
+def mse_estimate(filtered_a, filtered_b, color_a, color_b, variance_a, variance_b):
+    """Sec. 5.3 (D:69-76): the unfiltered MSE map of one bandwidth's candidate, (H, W, 3) float64.
+
+    ``filtered_a``/``filtered_b``: the regressions of halves A and B; ``color_a``/``color_b``:
+    the noisy halves; ``variance_a``/``variance_b``: their variances (Tungsten: 2 x ``variance``
+    for both). MSE_A = (F_A - x_B)^2 - Var[x_B], MSE_B = (F_B - x_A)^2 - Var[x_A],
+    MSE = (MSE_A + MSE_B) / 2 - (F_A - F_B)^2 / 4.
+    """
+    mse_a = (filtered_a - color_b) ** 2 - variance_b
+    mse_b = (filtered_b - color_a) ** 2 - variance_a
+    return 0.5 * (mse_a + mse_b) - 0.25 * (filtered_a - filtered_b) ** 2
+
+
+def denoise(buffers: RenderBuffers, *, second_pass_variance_scale: float = 2.0, regression_channels: str = "min",
+            filter_channels: str = "independent", nlm_epsilon: float = 1e-7, feature_variance: str = "buffer",
+            color_variance: str = "buffer", patch_borders: str = "truncate", filter_clamp: bool = True,
+            feature_resolution: float = 0.0, rank_threshold: float = float(np.finfo(np.float32).eps),
+            pivot_tolerance: float = float(np.finfo(np.float32).eps) ** 2,
+            intermediates: bool = False) -> Denoised:
     """NFOR on one render. Returns ``Denoised(full, a, b, extras={"selection": s})``, float32.
 
-    Keyword switches; the defaults are this module's behaviour, and :data:`TUNGSTEN` sets each to
-    Tungsten's (tunabrain/tungsten 88ea020, ``src/denoiser/``: D = ``denoiser.cpp``,
-    N = ``NlMeans.hpp``, Rg = ``Regression.cpp``; ``docs/fidelity_nfor.md`` measures each):
+    Keyword switches. The defaults are Tungsten's behaviour (tunabrain/tungsten 88ea020,
+    ``src/denoiser/``: D = ``denoiser.cpp``, N = ``NlMeans.hpp``, Rg = ``Regression.cpp``), the
+    same values as :data:`TUNGSTEN`; :data:`OURS` sets each to this module's former setting
+    (``docs/fidelity_nfor.md`` measures each). Layers read: ``color``, ``color_a``, ``color_b``,
+    ``variance`` and the features ``normal``, ``albedo``, ``depth`` with their ``_a``/``_b``
+    halves; with the defaults also ``normal_variance``, ``albedo_variance``, ``depth_variance``
+    (every render of :mod:`mcbench.render.renderer` has them); with ``color_variance="halves"``
+    also ``variance_a``, ``variance_b``.
 
     * ``second_pass_variance_scale``: the second-pass guide variance is this times
       (r^A - r^B)^2 / 4; Tungsten 2 (its regression multiplies every variance by 2, Rg:72, also
@@ -436,6 +482,12 @@ def denoise(buffers: RenderBuffers, *, second_pass_variance_scale: float = 1.0, 
       ones) below which a column is dropped. Tungsten has no such rule (Eigen keeps every column
       above its rank threshold); its float32 QR cannot resolve a residual below float32 epsilon
       of the column's own norm, so :data:`TUNGSTEN` uses eps_32^2 = 1.4e-14 instead of 1e-9.
+    * ``intermediates``: also return, in ``extras``, the first-pass regressions of each half per
+      bandwidth (``"filtered_a_k0.5"``, ``"filtered_b_k0.5"``, ``"filtered_a_k1.0"``,
+      ``"filtered_b_k1.0"``: D:63,65) and the filtered MSE maps (``"mse_k0.5"``, ``"mse_k1.0"``:
+      D:81), each (H, W, 3) float32, the quantities Tungsten's ``denoiser`` saves with
+      ``tools/golden/tungsten_nfor_intermediates.patch``. ``extras["selection"]`` (D:94) and
+      ``a``/``b`` (resultA/resultB, D:97-102) are always returned.
     """
     if feature_variance not in ("halves", "buffer") or color_variance not in ("halves", "buffer"):
         raise ValueError(f"feature_variance {feature_variance!r}, color_variance {color_variance!r}: "
@@ -463,18 +515,18 @@ def denoise(buffers: RenderBuffers, *, second_pass_variance_scale: float = 1.0, 
     stage_done("feature prefiltering (Sec. 5.1)")
 
     # 2. cross-filtered regression for each bandwidth (Sec. 5.2) and 3. MSE estimates (Sec. 5.3)
-    cand_a, cand_b, mses = [], [], []
+    cand_a, cand_b, mses, stages = [], [], [], {}
     for k in BANDWIDTHS:
         fa = collaborative_regression(color_a, color_b, var_b, feat_b, k=k, **regression)
         fb = collaborative_regression(color_b, color_a, var_a, feat_a, k=k, **regression)
-        mse_a = (fa - color_b) ** 2 - var_b
-        mse_b = (fb - color_a) ** 2 - var_a
-        mses.append(0.5 * (mse_a + mse_b) - 0.25 * (fa - fb) ** 2)
+        mses.append(mse_estimate(fa, fb, color_a, color_b, var_a, var_b))
         cand_a.append(fa)
         cand_b.append(fb)
+        stages[f"filtered_a_k{k:.1f}"], stages[f"filtered_b_k{k:.1f}"] = fa, fb
         stage_done(f"regression of A and B at k = {k} (Sec. 5.2)")
     filtered_mse = nl_means_filter(np.concatenate(mses, axis=2), color, variance, channels=filter_channels,
                                    **filters, **MSE_FILTER)
+    stages.update({f"mse_k{k:.1f}": filtered_mse[..., 3 * i:3 * i + 3] for i, k in enumerate(BANDWIDTHS)})
     raw_selection = (filtered_mse[..., 3:] <= filtered_mse[..., :3]).astype(np.float64)
     selection = nl_means_filter(raw_selection, color, variance, channels=filter_channels, **filters, **MSE_FILTER)
     selection = np.clip(selection, 0.0, 1.0)
@@ -499,8 +551,10 @@ def denoise(buffers: RenderBuffers, *, second_pass_variance_scale: float = 1.0, 
     def f32(x):
         return np.ascontiguousarray(x, dtype=np.float32)
 
-    return Denoised(full=f32(full), a=f32(result_a), b=f32(result_b),
-                    extras={"selection": f32(selection)})
+    extras = {"selection": f32(selection)}
+    if intermediates:
+        extras.update({name: f32(image) for name, image in stages.items()})
+    return Denoised(full=f32(full), a=f32(result_a), b=f32(result_b), extras=extras)
 
 
 METHOD = MethodSpec(kind="denoiser", label="#4 NFOR", run=denoise)

@@ -43,16 +43,18 @@ def small_buffers(h=12, w=13, feature_variance=True):
     return RenderBuffers(layers, spp=8)
 
 
-def test_tungsten_switches_run_and_differ_from_defaults():
+def test_former_settings_run_and_differ_from_the_defaults():
     buffers = small_buffers()
-    ours = nfor.denoise(buffers).full
-    tungsten = nfor.denoise(buffers, **nfor.TUNGSTEN).full
+    ours = nfor.denoise(buffers, **nfor.OURS).full
+    tungsten = nfor.denoise(buffers).full
     assert np.isfinite(tungsten).all() and tungsten.shape == ours.shape
     assert np.abs(tungsten - ours).max() > 1e-4
 
 
 def test_buffer_feature_variance_needs_the_layers():
-    with pytest.raises(KeyError, match="normal_variance"):
-        nfor.denoise(small_buffers(feature_variance=False), feature_variance="buffer")
+    with pytest.raises(ValueError, match=r"normal_variance.*feature_variance='halves'"):
+        nfor.denoise(small_buffers(feature_variance=False))
+    out = nfor.denoise(small_buffers(feature_variance=False), feature_variance="halves")
+    assert np.isfinite(out.full).all()
     with pytest.raises(ValueError, match="feature_variance"):
         nfor.denoise(small_buffers(), feature_variance="pooled")

@@ -51,6 +51,11 @@ SEED = 3                   # base seed of the noisy renders (0..6 allowed, mcben
 REFERENCE_SEED = 5         # base seed of the reference renders
 REFERENCE_SPP = 4096
 
+#: Markers of the README section that ``tools/golden/tungsten_nfor_intermediates.py`` writes;
+#: :func:`write_readme` keeps that section when it rewrites the README.
+MARK_BEGIN = "<!-- intermediates: written by tools/golden/tungsten_nfor_intermediates.py -->"
+MARK_END = "<!-- end of intermediates -->"
+
 BUILD_RECIPE = f"""\
 Source: {TUNGSTEN_REPO} at commit {TUNGSTEN_COMMIT}. Only CMakeLists.txt, cmake/, src/ and
 LICENSE.txt are needed (a full checkout also works; here the `fetch` mirror lacked some large
@@ -100,6 +105,15 @@ def run_denoiser(denoiser: Path, case: Path) -> tuple[list[str], float]:
     if result.returncode != 0 or not (case / OUTPUT_FILE).exists():
         raise SystemExit(f"denoiser failed in {case} (exit {result.returncode}):\n{result.stdout}\n{result.stderr}")
     return command, seconds
+
+
+def write_readme(path: Path, text: str) -> None:
+    """Write ``text`` to ``path``, keeping an existing intermediates section (:data:`MARK_BEGIN`)."""
+    old = path.read_text() if path.exists() else ""
+    if MARK_BEGIN in old and MARK_END in old:
+        section = old[old.index(MARK_BEGIN):old.index(MARK_END) + len(MARK_END)]
+        text = text.rstrip("\n") + "\n\n" + section + "\n"
+    path.write_text(text)
 
 
 def readme(manifest: dict) -> str:
@@ -166,7 +180,7 @@ def main(argv: list[str] | None = None) -> None:
                         help="only rewrite README.md from the existing manifest.json (no render, no denoiser)")
     args = parser.parse_args(argv)
     if args.readme_only:
-        (args.out / "README.md").write_text(readme(json.loads((args.out / "manifest.json").read_text())))
+        write_readme(args.out / "README.md", readme(json.loads((args.out / "manifest.json").read_text())))
         return
     if not args.denoiser or not Path(args.denoiser).is_file():
         parser.error(f"no denoiser binary: {args.denoiser!r} (give --denoiser or set TUNGSTEN_DENOISER)")
@@ -205,7 +219,7 @@ def main(argv: list[str] | None = None) -> None:
                                             "render_seconds": ref_meta["seconds"], "sha256": sha256(ref)}
         print(f"{ref.name}: rendered in {ref_meta['seconds']} s", flush=True)
     (args.out / "manifest.json").write_text(json.dumps(manifest, indent=2) + "\n")
-    (args.out / "README.md").write_text(readme(manifest))
+    write_readme(args.out / "README.md", readme(manifest))
 
 
 if __name__ == "__main__":

@@ -1,8 +1,9 @@
 """Measure each departure of our NFOR from Tungsten's on the stored golden cases.
 
 For every case in ``tests/data/golden/tungsten_nfor/`` (made by ``tools/golden/tungsten_nfor.py``)
-our NFOR runs with every switch at Tungsten's behaviour (``methods.nfor.TUNGSTEN``), then with
-each switch back at our default in turn, then with all defaults (our method). Per variant it
+our NFOR runs with every switch at Tungsten's behaviour (its defaults, ``methods.nfor.TUNGSTEN``),
+then with each switch at its former setting (``methods.nfor.OURS``) in turn, then with all of
+``OURS`` (the former NFOR). Per variant it
 reports the relMSE (:func:`mcbench.analysis.metrics.relmse`) of our output against Tungsten's
 output (the golden) and against the scene's reference render, averaged over the cases, per spp
 level. Prints a Markdown table (``--out`` also writes it)::
@@ -30,7 +31,7 @@ from methods import nfor  # noqa: E402
 GOLDEN = ROOT / "tests" / "data" / "golden" / "tungsten_nfor"
 OUTPUT_FILE = "tungsten_nfor.pfm"
 
-#: switch -> what turning it back to our default does (the row label).
+#: switch -> what setting it to its former value (``nfor.OURS``) does (the row label).
 SWITCHES = {
     "regression_channels": "regression weights from the channel-mean distance (not min over channels)",
     "filter_channels": "MSE/selection filter weights from the channel-mean distance (not per channel)",
@@ -60,13 +61,12 @@ def load_cases(folder: Path) -> list[dict]:
 
 
 def variants() -> list[tuple[str, dict]]:
-    """(label, switches) for Tungsten, each switch back at our default, and all defaults."""
-    defaults = {name: param.default for name, param in
-                __import__("inspect").signature(nfor.denoise).parameters.items() if name in nfor.TUNGSTEN}
-    rows = [("all switches at Tungsten's behaviour", dict(nfor.TUNGSTEN))]
+    """(label, switches) for Tungsten (the defaults), each switch at its former value, and all of OURS."""
+    former = nfor.OURS
+    rows = [("all switches at Tungsten's behaviour (the defaults)", dict(nfor.TUNGSTEN))]
     for switch, label in SWITCHES.items():
-        rows.append((f"`{switch}={defaults[switch]!r}`: {label}", dict(nfor.TUNGSTEN, **{switch: defaults[switch]})))
-    rows.append(("all switches at our defaults (our NFOR)", {}))
+        rows.append((f"`{switch}={former[switch]!r}`: {label}", dict(nfor.TUNGSTEN, **{switch: former[switch]})))
+    rows.append(("all switches at their former values (`nfor.OURS`, the former NFOR)", dict(former)))
     return rows
 
 
