@@ -76,6 +76,12 @@ def _mirror(pos, n):
     return min(max(pos, 0), n - 1)
 
 
+@cached_njit(error_model="numpy")
+def _weight(d):
+    """exp(-max(0, d)) (C:473-475,616-618)."""
+    return 1.0 if d <= 0.0 else np.exp(-d)
+
+
 @cached_njit(parallel=True, error_model="numpy")
 def _box(src, tmp, dst, r):
     """conv_box (C:255-280) along x then y: mean over the in-image taps of a (2r+1) box."""
@@ -96,6 +102,92 @@ def _box(src, tmp, dst, r):
             for i in range(lo, hi + 1):
                 acc += tmp[i, x]
             dst[y, x] = acc / (hi - lo + 1)
+
+
+@cached_njit(error_model="numpy", inline="always")
+def _dist_one(gc, g1, g2, vc, vn1, vn2, vdc, vd1, vd2, k2, diff):
+    """One channel of ``distance``/``distance_delta``/``dist_wgt_feat`` (C:350-465,575-605) at one
+    pixel: centre value gc, neighbours g1 (p+o) and g2 (p-o), their Vn and Vd. Returns the three
+    normalised distances and those of the 1.01-scaled centre (C:440-446)."""
+    eps = DISTANCE_EPSILON
+    v1 = min(vc, vn1)
+    v2 = min(vc, vn2)
+    if diff:
+        den1 = eps + k2 * (vdc + vd1)
+        den2 = eps + k2 * (vdc + vd2)
+        den3 = eps + k2 * (vdc + (vd1 + vd2) / 4.0)
+    else:
+        den1 = eps + k2 * (vdc * 2.0)
+        den2 = den1
+        den3 = den1
+    r1 = vc + v1
+    r2 = vc + v2
+    r3 = vc + (v1 + v2) / 4.0
+    m = (g1 + g2) / 2.0
+    gs = DELTA_SCALE * gc
+    q1 = gc - g1
+    q2 = gc - g2
+    q3 = gc - m
+    u1 = gs - g1
+    u2 = gs - g2
+    u3 = gs - m
+    return ((q1 * q1 - r1) / den1, (q2 * q2 - r2) / den2, (q3 * q3 - r3) / den3,
+            (u1 * u1 - r1) / den1, (u2 * u2 - r2) / den2, (u3 * u3 - r3) / den3)
+
+
+@cached_njit(error_model="numpy")
+def _dist_rows(img, vn, vd, c0, c1, y, y1, y2, dx, lo, hi, mx1, mx2, k2, diff, delta, o1, o2, o3, s1, s2, s3):
+    """Channel means over c0..c1 of the distances of row y for offset (dx, y1 - y) into o1, o2, o3
+    (and, if ``delta``, the scaled ones into s1, s2, s3): the interior [lo, hi) has unmirrored
+    neighbours x +- dx, the other columns the mirrored ones mx1, mx2."""
+    w = o1.shape[0]
+    inv = 1.0 / (c1 - c0)
+    for x in range(w):
+        x1 = x + dx if lo <= x < hi else mx1[x]
+        x2 = x - dx if lo <= x < hi else mx2[x]
+        a1 = 0.0
+        a2 = 0.0
+        a3 = 0.0
+        b1 = 0.0
+        b2 = 0.0
+        b3 = 0.0
+        for c in range(c0, c1):
+            t1, t2, t3, u1, u2, u3 = _dist_one(img[c, y, x], img[c, y1, x1], img[c, y2, x2],
+                                               vn[c, y, x], vn[c, y1, x1], vn[c, y2, x2],
+                                               vd[c, y, x], vd[c, y1, x1], vd[c, y2, x2], k2, diff)
+            a1 += t1
+            a2 += t2
+            a3 += t3
+            b1 += u1
+            b2 += u2
+            b3 += u3
+        o1[x] = a1 * inv
+        o2[x] = a2 * inv
+        o3[x] = a3 * inv
+        if delta:
+            s1[x] = b1 * inv
+            s2[x] = b2 * inv
+            s3[x] = b3 * inv
+
+
+@cached_njit(error_model="numpy")
+def _sym(d1, d2, ds, w1, w2):
+    """Weights exp(-max(0, d)) of both neighbours with the symmetric blend (C:479-491,620-626);
+    returns (w1, w2, a) with ``w1``/``w2`` the weights when a is 0 (passed in, already computed)."""
+    a = 0.0
+    if d1 < MAX_D2 and d2 < MAX_D2:
+        a = min(1.0, max(0.0, _weight(ds) / max(w1 + w2, 1e-300) - 1.0))
+    if a > 0.0:
+        ws = _weight(ds)
+        w1 = a * ws + (1.0 - a) * w1
+        w2 = a * ws + (1.0 - a) * w2
+    return w1, w2, a
+
+
+@cached_njit(error_model="numpy")
+def _axpy2(out, d1, u1, d2, u2):
+    for i in range(out.shape[0]):
+        out[i] += d1[i] * u1[i] + d2[i] * u2[i]
 
 
 @cached_njit(parallel=True, error_model="numpy")
@@ -129,62 +221,24 @@ def _nlm_kernel(data, g, vn, vd, feat, fvn, fvd, fstart, wnd, ptc, ptc_wgt, k2c,
     w1s = np.zeros((h, w))
     w2s = np.zeros((h, w))
     wc = 1.0 / ((2 * ptc + 1) * (2 * ptc + 1))
-    eps = DISTANCE_EPSILON
+    mx1 = np.zeros(w, dtype=np.int64)
+    mx2 = np.zeros(w, dtype=np.int64)
     for dy in range(-wnd, 1):
         dx_max = -1 if dy == 0 else wnd
         for dx in range(-wnd, dx_max + 1):
+            for x in range(w):
+                mx1[x] = _mirror(x + dx, w)
+                mx2[x] = _mirror(x - dx, w)
+            lo = min(abs(dx), w)
+            hi = max(w - abs(dx), lo)
             w1[:] = 1.0
             w2[:] = 1.0
             w1s[:] = 1.0
             w2s[:] = 1.0
             if colour:
                 for y in prange(h):
-                    y1 = _mirror(y + dy, h)
-                    y2 = _mirror(y - dy, h)
-                    for x in range(w):
-                        x1 = _mirror(x + dx, w)
-                        x2 = _mirror(x - dx, w)
-                        a1 = 0.0
-                        a2 = 0.0
-                        a3 = 0.0
-                        b1 = 0.0
-                        b2 = 0.0
-                        b3 = 0.0
-                        for c in range(cg):
-                            gc = g[c, y, x]
-                            g1 = g[c, y1, x1]
-                            g2 = g[c, y2, x2]
-                            vc = vn[c, y, x]
-                            v1 = min(vc, vn[c, y1, x1])
-                            v2 = min(vc, vn[c, y2, x2])
-                            if diff_c:
-                                den1 = eps + k2c * (vd[c, y, x] + vd[c, y1, x1])
-                                den2 = eps + k2c * (vd[c, y, x] + vd[c, y2, x2])
-                                den3 = eps + k2c * (vd[c, y, x] + (vd[c, y1, x1] + vd[c, y2, x2]) / 4.0)
-                            else:
-                                den1 = eps + k2c * (vd[c, y, x] * 2.0)
-                                den2 = den1
-                                den3 = den1
-                            q = gc - g1
-                            a1 += (q * q - (vc + v1)) / den1
-                            q = gc - g2
-                            a2 += (q * q - (vc + v2)) / den2
-                            q = gc - (g1 + g2) / 2.0
-                            a3 += (q * q - (vc + (v1 + v2) / 4.0)) / den3
-                            if delta:
-                                gs = DELTA_SCALE * gc
-                                q = gs - g1
-                                b1 += (q * q - (vc + v1)) / den1
-                                q = gs - g2
-                                b2 += (q * q - (vc + v2)) / den2
-                                q = gs - (g1 + g2) / 2.0
-                                b3 += (q * q - (vc + (v1 + v2) / 4.0)) / den3
-                        d1[y, x] = a1 / cg
-                        d2[y, x] = a2 / cg
-                        ds[y, x] = a3 / cg
-                        s1[y, x] = b1 / cg
-                        s2[y, x] = b2 / cg
-                        ss[y, x] = b3 / cg
+                    _dist_rows(g, vn, vd, 0, cg, y, _mirror(y + dy, h), _mirror(y - dy, h), dx, lo, hi, mx1, mx2,
+                               k2c, diff_c, delta, d1[y], d2[y], ds[y], s1[y], s2[y], ss[y])
                 if ptc > 0:
                     _box(d1, tmp, p1, ptc)
                     _box(d2, tmp, p2, ptc)
@@ -198,25 +252,18 @@ def _nlm_kernel(data, g, vn, vd, feat, fvn, fvd, fstart, wnd, ptc, ptc_wgt, k2c,
                         for x in range(w):
                             n1 = p1[y, x]
                             n2 = p2[y, x]
-                            n3 = ps[y, x]
+                            c1, c2, a = _sym(n1, n2, ps[y, x], _weight(n1), _weight(n2))
                             m1 = n1 + wc * (s1[y, x] - d1[y, x])
                             m2 = n2 + wc * (s2[y, x] - d2[y, x])
-                            m3 = n3 + wc * (ss[y, x] - ds[y, x])
-                            c1 = np.exp(-max(0.0, n1))
-                            c2 = np.exp(-max(0.0, n2))
-                            c3 = np.exp(-max(0.0, n3))
-                            t1 = np.exp(-max(0.0, m1))
-                            t2 = np.exp(-max(0.0, m2))
-                            t3 = np.exp(-max(0.0, m3))
-                            a = 0.0
-                            if n1 < MAX_D2 and n2 < MAX_D2:
-                                a = min(1.0, max(0.0, c3 / max(c1 + c2, 1e-300) - 1.0))
-                            c1 = a * c3 + (1.0 - a) * c1
-                            c2 = a * c3 + (1.0 - a) * c2
+                            m3 = ps[y, x] + wc * (ss[y, x] - ds[y, x])
+                            t1 = _weight(m1)
+                            t2 = _weight(m2)
                             if m1 < MAX_D2 and m2 < MAX_D2:       # else a is kept (C:685-689)
-                                a = min(1.0, max(0.0, t3 / max(t1 + t2, 1e-300) - 1.0))
-                            t1 = a * t3 + (1.0 - a) * t1
-                            t2 = a * t3 + (1.0 - a) * t2
+                                a = min(1.0, max(0.0, _weight(m3) / max(t1 + t2, 1e-300) - 1.0))
+                            if a > 0.0:
+                                t3 = _weight(m3)
+                                t1 = a * t3 + (1.0 - a) * t1
+                                t2 = a * t3 + (1.0 - a) * t2
                             w1[y, x] = min(w1[y, x], c1)
                             w2[y, x] = min(w2[y, x], c2)
                             w1s[y, x] = min(w1s[y, x], t1)
@@ -224,9 +271,9 @@ def _nlm_kernel(data, g, vn, vd, feat, fvn, fvd, fstart, wnd, ptc, ptc_wgt, k2c,
                 else:
                     for y in prange(h):
                         for x in range(w):
-                            e1[y, x] = np.exp(-max(0.0, p1[y, x]))
-                            e2[y, x] = np.exp(-max(0.0, p2[y, x]))
-                            es[y, x] = np.exp(-max(0.0, ps[y, x]))
+                            e1[y, x] = _weight(p1[y, x])
+                            e2[y, x] = _weight(p2[y, x])
+                            es[y, x] = _weight(ps[y, x])
                     if ptc_wgt > 0:
                         _box(e1, tmp, e1, ptc_wgt)
                         _box(e2, tmp, e2, ptc_wgt)
@@ -238,75 +285,43 @@ def _nlm_kernel(data, g, vn, vd, feat, fvn, fvd, fstart, wnd, ptc, ptc_wgt, k2c,
                                 a = min(1.0, max(0.0, es[y, x] / max(e1[y, x] + e2[y, x], 1e-300) - 1.0))
                             w1[y, x] = min(w1[y, x], a * es[y, x] + (1.0 - a) * e1[y, x])
                             w2[y, x] = min(w2[y, x], a * es[y, x] + (1.0 - a) * e2[y, x])
-            for j in range(nfeat):
-                c0 = fstart[j]
-                c1_ = fstart[j + 1]
-                nfc = c1_ - c0
-                for y in prange(h):
-                    y1 = _mirror(y + dy, h)
-                    y2 = _mirror(y - dy, h)
+            for y in prange(h):
+                y1 = _mirror(y + dy, h)
+                y2 = _mirror(y - dy, h)
+                f1 = np.empty(w)
+                f2 = np.empty(w)
+                f3 = np.empty(w)
+                for j in range(nfeat):
+                    _dist_rows(feat, fvn, fvd, fstart[j], fstart[j + 1], y, y1, y2, dx, lo, hi, mx1, mx2,
+                               k2f, diff_f, False, f1, f2, f3, f1, f2, f3)
                     for x in range(w):
-                        x1 = _mirror(x + dx, w)
-                        x2 = _mirror(x - dx, w)
-                        a1 = 0.0
-                        a2 = 0.0
-                        a3 = 0.0
-                        for c in range(c0, c1_):
-                            fc = feat[c, y, x]
-                            f1 = feat[c, y1, x1]
-                            f2 = feat[c, y2, x2]
-                            vc = fvn[c, y, x]
-                            v1 = min(vc, fvn[c, y1, x1])
-                            v2 = min(vc, fvn[c, y2, x2])
-                            if diff_f:
-                                den1 = eps + k2f * (fvd[c, y, x] + fvd[c, y1, x1])
-                                den2 = eps + k2f * (fvd[c, y, x] + fvd[c, y2, x2])
-                                den3 = eps + k2f * (fvd[c, y, x] + (fvd[c, y1, x1] + fvd[c, y2, x2]) / 4.0)
-                            else:
-                                den1 = eps + k2f * (fvd[c, y, x] * 2.0)
-                                den2 = den1
-                                den3 = den1
-                            q = fc - f1
-                            a1 += (q * q - (vc + v1)) / den1
-                            q = fc - f2
-                            a2 += (q * q - (vc + v2)) / den2
-                            q = fc - (f1 + f2) / 2.0
-                            a3 += (q * q - (vc + (v1 + v2) / 4.0)) / den3
-                        a1 /= nfc
-                        a2 /= nfc
-                        a3 /= nfc
-                        c1 = np.exp(-max(0.0, a1))
-                        c2 = np.exp(-max(0.0, a2))
-                        c3 = np.exp(-max(0.0, a3))
-                        a = 0.0
-                        if a1 < MAX_D2 and a2 < MAX_D2:
-                            a = min(1.0, max(0.0, c3 / max(c1 + c2, 1e-300) - 1.0))
-                        c1 = a * c3 + (1.0 - a) * c1
-                        c2 = a * c3 + (1.0 - a) * c2
+                        c1, c2, a = _sym(f1[x], f2[x], f3[x], _weight(f1[x]), _weight(f2[x]))
                         w1[y, x] = min(w1[y, x], c1)
                         w2[y, x] = min(w2[y, x], c2)
                         w1s[y, x] = min(w1s[y, x], c1)
                         w2s[y, x] = min(w2s[y, x], c2)
-            for y in prange(h):
-                y1 = _mirror(y + dy, h)
-                y2 = _mirror(y - dy, h)
                 for x in range(w):
-                    x1 = _mirror(x + dx, w)
-                    x2 = _mirror(x - dx, w)
-                    u1 = w1[y, x]
-                    u2 = w2[y, x]
-                    wmax[y, x] = max(wmax[y, x], max(u1, u2))
-                    wsum[y, x] += u1 + u2
-                    for b in range(nb):
-                        for c in range(nc):
-                            out[b, c, y, x] += data[b, c, y1, x1] * u1 + data[b, c, y2, x2] * u2
-                    if delta:
-                        u1 = w1s[y, x]
-                        u2 = w2s[y, x]
-                        wmax_s[y, x] = max(wmax_s[y, x], max(u1, u2))
-                        wsum_s[y, x] += u1 + u2
-                        for c in range(cg):
-                            outs[c, y, x] += g[c, y1, x1] * u1 + g[c, y2, x2] * u2
+                    wmax[y, x] = max(wmax[y, x], max(w1[y, x], w2[y, x]))
+                    wsum[y, x] += w1[y, x] + w2[y, x]
+                for b in range(nb):
+                    for c in range(nc):
+                        if hi > lo:
+                            _axpy2(out[b, c, y, lo:hi], data[b, c, y1, lo + dx:hi + dx], w1[y, lo:hi],
+                                   data[b, c, y2, lo - dx:hi - dx], w2[y, lo:hi])
+                        for x in range(w):
+                            if x < lo or x >= hi:
+                                out[b, c, y, x] += data[b, c, y1, mx1[x]] * w1[y, x] + data[b, c, y2, mx2[x]] * w2[y, x]
+                if delta:
+                    for x in range(w):
+                        wmax_s[y, x] = max(wmax_s[y, x], max(w1s[y, x], w2s[y, x]))
+                        wsum_s[y, x] += w1s[y, x] + w2s[y, x]
+                    for c in range(cg):
+                        if hi > lo:
+                            _axpy2(outs[c, y, lo:hi], g[c, y1, lo + dx:hi + dx], w1s[y, lo:hi],
+                                   g[c, y2, lo - dx:hi - dx], w2s[y, lo:hi])
+                        for x in range(w):
+                            if x < lo or x >= hi:
+                                outs[c, y, x] += g[c, y1, mx1[x]] * w1s[y, x] + g[c, y2, mx2[x]] * w2s[y, x]
     for y in prange(h):
         for x in range(w):
             wsum[y, x] += wmax[y, x]
