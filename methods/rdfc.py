@@ -137,25 +137,23 @@ def feature_set(prefiltered: dict, tau: float, max_pos: float) -> list[Feature]:
 
 def candidates(a, b, y, v, prefiltered, max_pos, *, radius: int, clamp: bool = True):
     """The three candidates (F:688-756) of buffers A, B: returns lists (one per candidate) of the
-    filtered buffers (2, H, W, 3), the filtered mean (H, W, 3) and dF/dy (H, W, 3)."""
-    bufs, means, derivs = [], [], []
-    for _, k_c, patch, tau in CANDIDATES:
-        feats = feature_set(prefiltered, tau, max_pos)
-        if k_c is None:     # THIRD: feat_only, FilterData with weight box 0 (C:1046-1048)
-            res = nl_means(np.stack([a, b]), y, v, radius=radius, patch_radius=patch, weight_radius=0,
-                           k=1.0, use_colour=False, features=feats, feature_k=K_FEATURE)
-            deriv = np.repeat(res.centre[..., None], 3, axis=-1)      # C:1343-1346
-        else:               # FilterDataDelta (C:1181-1237)
-            res = nl_means(np.stack([a, b]), y, v, radius=radius, patch_radius=patch, weight_radius=0,
-                           k=k_c, features=feats, feature_k=K_FEATURE, delta=True)
-            mean = res.buffers.mean(axis=0)
-            deriv = finite_difference_derivative(mean, res.scaled, y)
-        if clamp:
-            deriv = clamp_rule(deriv, res.centre)
-        bufs.append(res.buffers)
-        means.append(res.buffers.mean(axis=0))
-        derivs.append(deriv)
-    return bufs, means, derivs
+    filtered buffers (2, H, W, 3), the filtered mean (H, W, 3) and dF/dy (H, W, 3). FIRST and SECOND
+    (FilterDataDelta, C:1181-1237) differ only in the patch radius and run as one kernel call."""
+    (_, k_c, patch1, tau1), (_, k_c2, patch2, tau2), (_, k_third, patch3, tau3) = CANDIDATES
+    if k_c != k_c2 or tau1 != tau2 or k_third is not None:
+        raise ValueError("FIRST and SECOND must share k_c and tau, THIRD be features only (CANDIDATES)")
+    both = np.stack([a, b])
+    results = nl_means(both, y, v, radius=radius, patch_radius=(patch1, patch2), weight_radius=0, k=k_c,
+                       features=feature_set(prefiltered, tau1, max_pos), feature_k=K_FEATURE, delta=True)
+    derivs = [finite_difference_derivative(res.buffers.mean(axis=0), res.scaled, y) for res in results]
+    # THIRD: feat_only, FilterData with weight box 0 (C:1046-1048); dF/dy = w_max / sum w (C:1343-1346)
+    third = nl_means(both, y, v, radius=radius, patch_radius=patch3, weight_radius=0, k=1.0, use_colour=False,
+                     features=feature_set(prefiltered, tau3, max_pos), feature_k=K_FEATURE)
+    results.append(third)
+    derivs.append(np.repeat(third.centre[..., None], 3, axis=-1))
+    if clamp:
+        derivs = [clamp_rule(d, res.centre) for d, res in zip(derivs, results)]
+    return [res.buffers for res in results], [res.buffers.mean(axis=0) for res in results], derivs
 
 
 def select_and_blend(bufs, means, derivs, y, v, *, index_bug: bool = True):

@@ -191,18 +191,22 @@ def _axpy2(out, d1, u1, d2, u2):
 
 
 @cached_njit(parallel=True, error_model="numpy")
-def _nlm_kernel(data, g, vn, vd, feat, fvn, fvd, fstart, wnd, ptc, ptc_wgt, k2c, colour, diff_c,
+def _nlm_kernel(data, g, vn, vd, feat, fvn, fvd, fstart, wnd, ptcs, ptc_wgt, k2c, colour, diff_c,
                 k2f, diff_f, delta):
-    """See :func:`nl_means`. data (B, C, H, W); g, vn, vd (Cg, H, W); feat, fvn, fvd (Cf, H, W)."""
+    """See :func:`nl_means`. data (B, C, H, W); g, vn, vd (Cg, H, W); feat, fvn, fvd (Cf, H, W);
+    ptcs (K,) patch radii: K filters that differ only in the patch radius, sharing the per-pixel
+    distances and the feature weights of each offset (FIRST and SECOND). Returns (K, B, C, H, W)
+    outputs, (K, H, W) w_max and sum w, (K, Cg, H, W) scaled filters."""
     nb, nc, h, w = data.shape
+    nk = ptcs.shape[0]
     cg = g.shape[0]
     nfeat = fstart.shape[0] - 1
-    out = np.zeros((nb, nc, h, w))
-    wsum = np.zeros((h, w))
-    wmax = np.full((h, w), WEIGHT_EPSILON)
-    outs = np.zeros((cg, h, w))
-    wsum_s = np.zeros((h, w))
-    wmax_s = np.full((h, w), WEIGHT_EPSILON)
+    out = np.zeros((nk, nb, nc, h, w))
+    wsum = np.zeros((nk, h, w))
+    wmax = np.full((nk, h, w), WEIGHT_EPSILON)
+    outs = np.zeros((nk, cg, h, w))
+    wsum_s = np.zeros((nk, h, w))
+    wmax_s = np.full((nk, h, w), WEIGHT_EPSILON)
     d1 = np.zeros((h, w))
     d2 = np.zeros((h, w))
     ds = np.zeros((h, w))
@@ -216,11 +220,10 @@ def _nlm_kernel(data, g, vn, vd, feat, fvn, fvd, fstart, wnd, ptc, ptc_wgt, k2c,
     e2 = np.zeros((h, w))
     es = np.zeros((h, w))
     tmp = np.zeros((h, w))
-    w1 = np.zeros((h, w))
-    w2 = np.zeros((h, w))
-    w1s = np.zeros((h, w))
-    w2s = np.zeros((h, w))
-    wc = 1.0 / ((2 * ptc + 1) * (2 * ptc + 1))
+    w1 = np.zeros((nk, h, w))
+    w2 = np.zeros((nk, h, w))
+    w1s = np.zeros((nk, h, w))
+    w2s = np.zeros((nk, h, w))
     mx1 = np.zeros(w, dtype=np.int64)
     mx2 = np.zeros(w, dtype=np.int64)
     for dy in range(-wnd, 1):
@@ -239,52 +242,55 @@ def _nlm_kernel(data, g, vn, vd, feat, fvn, fvd, fstart, wnd, ptc, ptc_wgt, k2c,
                 for y in prange(h):
                     _dist_rows(g, vn, vd, 0, cg, y, _mirror(y + dy, h), _mirror(y - dy, h), dx, lo, hi, mx1, mx2,
                                k2c, diff_c, delta, d1[y], d2[y], ds[y], s1[y], s2[y], ss[y])
-                if ptc > 0:
-                    _box(d1, tmp, p1, ptc)
-                    _box(d2, tmp, p2, ptc)
-                    _box(ds, tmp, ps, ptc)
-                else:
-                    p1[:] = d1
-                    p2[:] = d2
-                    ps[:] = ds
-                if delta:
-                    for y in prange(h):
-                        for x in range(w):
-                            n1 = p1[y, x]
-                            n2 = p2[y, x]
-                            c1, c2, a = _sym(n1, n2, ps[y, x], _weight(n1), _weight(n2))
-                            m1 = n1 + wc * (s1[y, x] - d1[y, x])
-                            m2 = n2 + wc * (s2[y, x] - d2[y, x])
-                            m3 = ps[y, x] + wc * (ss[y, x] - ds[y, x])
-                            t1 = _weight(m1)
-                            t2 = _weight(m2)
-                            if m1 < MAX_D2 and m2 < MAX_D2:       # else a is kept (C:685-689)
-                                a = min(1.0, max(0.0, _weight(m3) / max(t1 + t2, 1e-300) - 1.0))
-                            if a > 0.0:
-                                t3 = _weight(m3)
-                                t1 = a * t3 + (1.0 - a) * t1
-                                t2 = a * t3 + (1.0 - a) * t2
-                            w1[y, x] = min(w1[y, x], c1)
-                            w2[y, x] = min(w2[y, x], c2)
-                            w1s[y, x] = min(w1s[y, x], t1)
-                            w2s[y, x] = min(w2s[y, x], t2)
-                else:
-                    for y in prange(h):
-                        for x in range(w):
-                            e1[y, x] = _weight(p1[y, x])
-                            e2[y, x] = _weight(p2[y, x])
-                            es[y, x] = _weight(ps[y, x])
-                    if ptc_wgt > 0:
-                        _box(e1, tmp, e1, ptc_wgt)
-                        _box(e2, tmp, e2, ptc_wgt)
-                        _box(es, tmp, es, ptc_wgt)
-                    for y in prange(h):
-                        for x in range(w):
-                            a = 0.0
-                            if p1[y, x] < MAX_D2 and p2[y, x] < MAX_D2:
-                                a = min(1.0, max(0.0, es[y, x] / max(e1[y, x] + e2[y, x], 1e-300) - 1.0))
-                            w1[y, x] = min(w1[y, x], a * es[y, x] + (1.0 - a) * e1[y, x])
-                            w2[y, x] = min(w2[y, x], a * es[y, x] + (1.0 - a) * e2[y, x])
+                for k in range(nk):
+                    ptc = ptcs[k]
+                    wc = 1.0 / ((2 * ptc + 1) * (2 * ptc + 1))
+                    if ptc > 0:
+                        _box(d1, tmp, p1, ptc)
+                        _box(d2, tmp, p2, ptc)
+                        _box(ds, tmp, ps, ptc)
+                    else:
+                        p1[:] = d1
+                        p2[:] = d2
+                        ps[:] = ds
+                    if delta:
+                        for y in prange(h):
+                            for x in range(w):
+                                n1 = p1[y, x]
+                                n2 = p2[y, x]
+                                c1, c2, a = _sym(n1, n2, ps[y, x], _weight(n1), _weight(n2))
+                                m1 = n1 + wc * (s1[y, x] - d1[y, x])
+                                m2 = n2 + wc * (s2[y, x] - d2[y, x])
+                                m3 = ps[y, x] + wc * (ss[y, x] - ds[y, x])
+                                t1 = _weight(m1)
+                                t2 = _weight(m2)
+                                if m1 < MAX_D2 and m2 < MAX_D2:       # else a is kept (C:685-689)
+                                    a = min(1.0, max(0.0, _weight(m3) / max(t1 + t2, 1e-300) - 1.0))
+                                if a > 0.0:
+                                    t3 = _weight(m3)
+                                    t1 = a * t3 + (1.0 - a) * t1
+                                    t2 = a * t3 + (1.0 - a) * t2
+                                w1[k, y, x] = min(w1[k, y, x], c1)
+                                w2[k, y, x] = min(w2[k, y, x], c2)
+                                w1s[k, y, x] = min(w1s[k, y, x], t1)
+                                w2s[k, y, x] = min(w2s[k, y, x], t2)
+                    else:
+                        for y in prange(h):
+                            for x in range(w):
+                                e1[y, x] = _weight(p1[y, x])
+                                e2[y, x] = _weight(p2[y, x])
+                                es[y, x] = _weight(ps[y, x])
+                        if ptc_wgt > 0:
+                            _box(e1, tmp, e1, ptc_wgt)
+                            _box(e2, tmp, e2, ptc_wgt)
+                            _box(es, tmp, es, ptc_wgt)
+                        for y in prange(h):
+                            for x in range(w):
+                                a = 0.0
+                                if p1[y, x] < MAX_D2 and p2[y, x] < MAX_D2:
+                                    a = min(1.0, max(0.0, es[y, x] / max(e1[y, x] + e2[y, x], 1e-300) - 1.0))
+                                w1[k, y, x] = min(w1[k, y, x], a * es[y, x] + (1.0 - a) * e1[y, x])
+                                w2[k, y, x] = min(w2[k, y, x], a * es[y, x] + (1.0 - a) * e2[y, x])
             for y in prange(h):
                 y1 = _mirror(y + dy, h)
                 y2 = _mirror(y - dy, h)
@@ -296,42 +302,47 @@ def _nlm_kernel(data, g, vn, vd, feat, fvn, fvd, fstart, wnd, ptc, ptc_wgt, k2c,
                                k2f, diff_f, False, f1, f2, f3, f1, f2, f3)
                     for x in range(w):
                         c1, c2, a = _sym(f1[x], f2[x], f3[x], _weight(f1[x]), _weight(f2[x]))
-                        w1[y, x] = min(w1[y, x], c1)
-                        w2[y, x] = min(w2[y, x], c2)
-                        w1s[y, x] = min(w1s[y, x], c1)
-                        w2s[y, x] = min(w2s[y, x], c2)
-                for x in range(w):
-                    wmax[y, x] = max(wmax[y, x], max(w1[y, x], w2[y, x]))
-                    wsum[y, x] += w1[y, x] + w2[y, x]
+                        for k in range(nk):
+                            w1[k, y, x] = min(w1[k, y, x], c1)
+                            w2[k, y, x] = min(w2[k, y, x], c2)
+                            w1s[k, y, x] = min(w1s[k, y, x], c1)
+                            w2s[k, y, x] = min(w2s[k, y, x], c2)
+                for k in range(nk):
+                    for x in range(w):
+                        wmax[k, y, x] = max(wmax[k, y, x], max(w1[k, y, x], w2[k, y, x]))
+                        wsum[k, y, x] += w1[k, y, x] + w2[k, y, x]
+                    for b in range(nb):
+                        for c in range(nc):
+                            if hi > lo:
+                                _axpy2(out[k, b, c, y, lo:hi], data[b, c, y1, lo + dx:hi + dx], w1[k, y, lo:hi],
+                                       data[b, c, y2, lo - dx:hi - dx], w2[k, y, lo:hi])
+                            for x in range(w):
+                                if x < lo or x >= hi:
+                                    out[k, b, c, y, x] += (data[b, c, y1, mx1[x]] * w1[k, y, x]
+                                                           + data[b, c, y2, mx2[x]] * w2[k, y, x])
+                    if delta:
+                        for x in range(w):
+                            wmax_s[k, y, x] = max(wmax_s[k, y, x], max(w1s[k, y, x], w2s[k, y, x]))
+                            wsum_s[k, y, x] += w1s[k, y, x] + w2s[k, y, x]
+                        for c in range(cg):
+                            if hi > lo:
+                                _axpy2(outs[k, c, y, lo:hi], g[c, y1, lo + dx:hi + dx], w1s[k, y, lo:hi],
+                                       g[c, y2, lo - dx:hi - dx], w2s[k, y, lo:hi])
+                            for x in range(w):
+                                if x < lo or x >= hi:
+                                    outs[k, c, y, x] += g[c, y1, mx1[x]] * w1s[k, y, x] + g[c, y2, mx2[x]] * w2s[k, y, x]
+    for y in prange(h):
+        for k in range(nk):
+            for x in range(w):
+                wsum[k, y, x] += wmax[k, y, x]
                 for b in range(nb):
                     for c in range(nc):
-                        if hi > lo:
-                            _axpy2(out[b, c, y, lo:hi], data[b, c, y1, lo + dx:hi + dx], w1[y, lo:hi],
-                                   data[b, c, y2, lo - dx:hi - dx], w2[y, lo:hi])
-                        for x in range(w):
-                            if x < lo or x >= hi:
-                                out[b, c, y, x] += data[b, c, y1, mx1[x]] * w1[y, x] + data[b, c, y2, mx2[x]] * w2[y, x]
+                        out[k, b, c, y, x] = (out[k, b, c, y, x] + data[b, c, y, x] * wmax[k, y, x]) / wsum[k, y, x]
                 if delta:
-                    for x in range(w):
-                        wmax_s[y, x] = max(wmax_s[y, x], max(w1s[y, x], w2s[y, x]))
-                        wsum_s[y, x] += w1s[y, x] + w2s[y, x]
+                    wsum_s[k, y, x] += wmax_s[k, y, x]
                     for c in range(cg):
-                        if hi > lo:
-                            _axpy2(outs[c, y, lo:hi], g[c, y1, lo + dx:hi + dx], w1s[y, lo:hi],
-                                   g[c, y2, lo - dx:hi - dx], w2s[y, lo:hi])
-                        for x in range(w):
-                            if x < lo or x >= hi:
-                                outs[c, y, x] += g[c, y1, mx1[x]] * w1s[y, x] + g[c, y2, mx2[x]] * w2s[y, x]
-    for y in prange(h):
-        for x in range(w):
-            wsum[y, x] += wmax[y, x]
-            for b in range(nb):
-                for c in range(nc):
-                    out[b, c, y, x] = (out[b, c, y, x] + data[b, c, y, x] * wmax[y, x]) / wsum[y, x]
-            if delta:
-                wsum_s[y, x] += wmax_s[y, x]
-                for c in range(cg):
-                    outs[c, y, x] = (outs[c, y, x] + DELTA_SCALE * g[c, y, x] * wmax_s[y, x]) / wsum_s[y, x]
+                        outs[k, c, y, x] = ((outs[k, c, y, x] + DELTA_SCALE * g[c, y, x] * wmax_s[k, y, x])
+                                            / wsum_s[k, y, x])
     return out, wmax, wsum, outs
 
 
@@ -414,7 +425,7 @@ def dual_buffer_variance(buffer_a, buffer_b) -> np.ndarray:
     return pyramid_smooth((a - b) ** 2 / 4.0)
 
 
-def nl_means(buffers, guide, guide_variance, *, radius: int, patch_radius: int, weight_radius: int,
+def nl_means(buffers, guide, guide_variance, *, radius: int, patch_radius, weight_radius: int,
              k: float, use_colour: bool = True, use_diff_var: bool = True, features=(),
              feature_k: float = 0.6, feature_diff_var: bool | None = None, delta: bool = False,
              guide_variance_den=None) -> Filtered:
@@ -422,7 +433,8 @@ def nl_means(buffers, guide, guide_variance, *, radius: int, patch_radius: int, 
 
     ``guide`` (H, W, Cg): colour guide (the buffers' mean in the authors' calls); ``guide_variance``:
     its Vn (and Vd unless ``guide_variance_den`` is given). ``radius``: window radius; ``patch_radius``
-    f; ``weight_radius``: radius of the box on the weight maps (the authors: f - 1, and 0 for the
+    f, or a tuple of radii: then a list of results, one per radius, of filters identical but for f
+    (FIRST and SECOND, computed together: same per-pixel distances and feature weights); ``weight_radius``: radius of the box on the weight maps (the authors: f - 1, and 0 for the
     candidates' ``delta`` filter and for THIRD, C:1048). ``k``: k_c (``var_den_scale = k^2``);
     ``use_colour=False``: feature weights only (THIRD, ``feat_only``, C:1028,1157). ``features``: a
     sequence of :class:`Feature`; their normaliser is :func:`feature_normaliser` with their tau;
@@ -455,12 +467,14 @@ def nl_means(buffers, guide, guide_variance, *, radius: int, patch_radius: int, 
     else:
         feat = fvn = fvd = np.zeros((1, h, w))
     diff_f = use_diff_var if feature_diff_var is None else feature_diff_var
+    radii = np.atleast_1d(np.asarray(patch_radius, dtype=np.int64))
     out, wmax, wsum, outs = _nlm_kernel(data, g, vn, vd, feat, fvn, fvd, np.asarray(fstart, dtype=np.int64),
-                                        int(radius), int(patch_radius), int(weight_radius), float(k) ** 2,
+                                        int(radius), radii, int(weight_radius), float(k) ** 2,
                                         bool(use_colour), bool(use_diff_var), float(feature_k) ** 2,
                                         bool(diff_f), bool(delta))
-    return Filtered(buffers=np.moveaxis(out, 1, -1), centre=wmax / wsum,
-                    scaled=np.moveaxis(outs, 0, -1) if delta else None)
+    results = [Filtered(buffers=np.moveaxis(out[i], 1, -1), centre=wmax[i] / wsum[i],
+                        scaled=np.moveaxis(outs[i], 0, -1) if delta else None) for i in range(len(radii))]
+    return results if np.ndim(patch_radius) else results[0]
 
 
 def finite_difference_derivative(filtered, scaled, guide) -> np.ndarray:

@@ -221,13 +221,21 @@ def test_feature_only_filter_is_the_authors_third_candidate():
     np.testing.assert_allclose(ours.centre, centre, rtol=1e-10)
 
 
-@pytest.mark.parametrize("f", [1, 3])
+@pytest.mark.parametrize("f", [1, 3, (1, 3)])
 def test_delta_filter_and_derivative_are_the_authors(f):
     """FilterDataDelta (C:1181-1237): 1.01-scaled centre in the n = 0 patch term (weight
     1/(2f+1)^2, C:1529) and in the centre value, no weight box; derivative (C:132-141)."""
     a, b, guide, var, feats = small_case(seed=3)
-    ours = rf.nl_means(np.stack([a, b]), guide, var, radius=2, patch_radius=f, weight_radius=0, k=0.45,
-                       features=feats, delta=True)
+    results = rf.nl_means(np.stack([a, b]), guide, var, radius=2, patch_radius=f, weight_radius=0, k=0.45,
+                          features=feats, delta=True)
+    if isinstance(f, tuple):      # FIRST and SECOND in one call: each as its own brute force
+        for ours, fi in zip(results, f):
+            out, _, scaled = brute_filter(np.stack([a, b]), guide, var, var, brute_feats(feats), R=2, f=fi, fw=0,
+                                          k=0.45, delta=True)
+            np.testing.assert_allclose(ours.buffers, out, rtol=1e-10, atol=1e-13)
+            np.testing.assert_allclose(ours.scaled, scaled, rtol=1e-10, atol=1e-13)
+        return
+    ours = results
     out, centre, scaled = brute_filter(np.stack([a, b]), guide, var, var, brute_feats(feats), R=2, f=f, fw=0,
                                        k=0.45, delta=True)
     np.testing.assert_allclose(ours.buffers, out, rtol=1e-10, atol=1e-13)
@@ -330,7 +338,9 @@ def test_denoise_runs_the_authors_filters_with_their_constants(make_render_buffe
     def taus(call):
         return [f.tau for f in call["features"]]
 
-    first, second, third, err, sel, p2 = calls[4:]
+    first_second, third, err, sel, p2 = calls[4:]
+    first = dict(first_second, patch_radius=first_second["patch_radius"][0])
+    second = dict(first_second, patch_radius=first_second["patch_radius"][1])
     expected_taus = lambda t: [t, t, max_pos ** 2 * t, t]       # normal, albedo, position, visibility
     assert (first["radius"], first["patch_radius"], first["weight_radius"], first["k"]) == (R, 1, 0, 0.45)
     assert first["delta"] and first.get("use_colour", True) and first["feature_k"] == 0.6
