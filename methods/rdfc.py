@@ -45,8 +45,23 @@ Switches (keyword-only; defaults are the authors'):
   unscaled (the authors' own branch for random samples, F:227-228,716-721 ``use_ld_samples``
   false).
 * ``clamp_derivative=True`` (C:1354-1369); False keeps the finite difference unclamped.
-* ``index_bug=True`` (F:656); False compares with SECOND's own derivative, as the comment-free
-  code evidently intends (``derivatives[0][3*pix]`` on the other side).
+* ``index_bug=True`` (F:656); False compares with SECOND's own derivative, as the code evidently
+  intends (``derivatives[0][3*pix]`` on the other side of the same comparison).
+
+Departures without a switch (each with its reason; docs/fidelity_rdfc.md):
+
+* Features per pixel, not per sample (the renderer writes pixel means): exact for the normal map
+  and the position matrix (affine); the albedo division by max(1, max channel) acts on each
+  buffer's mean (the same wherever every sample's albedo is <= 1). Feature variances are the
+  renderer's ``*_variance`` mapped through the same transforms (the position's without the
+  components' covariance, which is not rendered). Visibility is the renderer's fraction of samples
+  whose emitter sample is unoccluded with nonzero contribution; theirs tests the red channel of the
+  sample's direct light, ``DIRECT_R > 0`` (F:123).
+* ``GetScaledSampleVariance`` box-filters with a hard-coded 3-channel stride (C:1406-1409), which
+  for the 1-channel visibility reads other pixels and memory left from earlier kernels; we box the
+  one channel (stale memory cannot be reproduced).
+* float64 throughout (theirs float32); window neighbours mirrored as C:40-41 and then clipped into
+  the image, which only matters for windows wider than the image (their index leaves the buffer).
 """
 
 from __future__ import annotations

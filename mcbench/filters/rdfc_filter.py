@@ -20,8 +20,8 @@ of weights (``apply_weights`` loops over buffers, C:68-89).
   eps + k^2 * 2 Vd_p (C:386-390). eps = 1e-10 (``DISTANCE_EPSILON``, C:18). The three maps are
   box-averaged over the patch (2f+1)^2 (``conv_box``, truncated at the borders, C:255-280,1448-1451),
   turned into weights exp(-max(0, d)) (C:467-476), the weight maps box-averaged over
-  (2 f_w + 1)^2 (C:1455-1458; f_w = f - 1 = ``PTC_RAD_D`` below f, C:19-20,1029), and the symmetric
-  weight blended in where both patch distances are below ``MAX_D2`` = 25 (C:19,479-491):
+  (2 f_w + 1)^2 (C:1455-1458; f_w = f - PTC_RAD_D = f - 1 in ``PushData``, C:20,1029), and the
+  symmetric weight blended in where both patch distances are below ``MAX_D2`` = 25 (C:19,479-491):
   a = clip(w_s / (w1 + w2) - 1, 0, 1), w_i <- a w_s + (1 - a) w_i. Feature weights
   (``dist_wgt_feat``, C:567-633): the same distances per pixel (no patch) with the feature's
   Vn (its residual variance) and Vd (its normaliser, :func:`feature_normaliser`), k = k_f, the same
@@ -57,7 +57,6 @@ DELTA_OFFSET_DEN = 1e-10    # C:15
 WEIGHT_EPSILON = 1e-3       # C:17
 DISTANCE_EPSILON = 1e-10    # C:18
 MAX_D2 = 25.0               # C:19
-PTC_RAD_D = 1               # C:20: weight-box radius = patch radius - 1
 RATIO_EPSILON = 1e-10       # C:150,160
 VARIANCE_BOX = 10           # C:1406-1409: 21 x 21 box of the dual-buffer rescaling
 GRADIENT_STEP = 0.5         # C:224-225,234-235: one-sided differences divided by 2 ("half-pixel")
@@ -369,7 +368,7 @@ class Filtered:
     scaled: np.ndarray | None
 
 
-def _planes(a, channels_last=True):
+def _planes(a):
     a = np.asarray(a, dtype=np.float64)
     if a.ndim == 2:
         a = a[..., None]
