@@ -98,6 +98,9 @@ RENDER_LAYERS = ("color_a", "color_b", "variance",
 
 
 def _layer(buffers: RenderBuffers, name: str) -> np.ndarray:
+    if name not in buffers.layers:
+        raise ValueError(f"{buffers.source}: RDFC reads the render layer {name!r}, which this render lacks; "
+                         f"re-render with a renderer that writes {', '.join(RENDER_LAYERS)}")
     a = np.nan_to_num(np.asarray(buffers.layers[name], dtype=np.float64))
     return a[..., None] if a.ndim == 2 else a
 

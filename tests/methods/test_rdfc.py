@@ -185,3 +185,7 @@ def test_switches_run_and_change_the_output(make_render_buffers):
         assert np.all(np.isfinite(out.full)) and not np.array_equal(out.full, base.full), kw
     with pytest.raises(ValueError, match="variance must be"):
         rdfc.denoise(buffers, variance="half")
+    lacking = RenderBuffers(layers={k: v for k, v in buffers.layers.items() if not k.startswith("visibility")},
+                            spp=buffers.spp)
+    with pytest.raises(ValueError, match="'visibility_a'"):
+        rdfc.denoise(lacking, radius=SMALL_RADIUS)
