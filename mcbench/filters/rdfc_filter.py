@@ -329,7 +329,8 @@ def _nlm_kernel(data, g, vn, vd, feat, fvn, fvd, fstart, wnd, ptcs, ptc_wgt, k2c
                                        g[c, y2, lo - dx:hi - dx], w2s[k, y, lo:hi])
                             for x in range(w):
                                 if x < lo or x >= hi:
-                                    outs[k, c, y, x] += g[c, y1, mx1[x]] * w1s[k, y, x] + g[c, y2, mx2[x]] * w2s[k, y, x]
+                                    outs[k, c, y, x] += (g[c, y1, mx1[x]] * w1s[k, y, x]
+                                                         + g[c, y2, mx2[x]] * w2s[k, y, x])
     for y in prange(h):
         for k in range(nk):
             for x in range(w):
@@ -433,7 +434,8 @@ def nl_means(buffers, guide, guide_variance, *, radius: int, patch_radius, weigh
     ``guide`` (H, W, Cg): colour guide (the buffers' mean in the authors' calls); ``guide_variance``:
     its Vn (and Vd unless ``guide_variance_den`` is given). ``radius``: window radius; ``patch_radius``
     f, or a tuple of radii: then a list of results, one per radius, of filters identical but for f
-    (FIRST and SECOND, computed together: same per-pixel distances and feature weights); ``weight_radius``: radius of the box on the weight maps (the authors: f - 1, and 0 for the
+    (FIRST and SECOND, computed together: same per-pixel distances and feature weights);
+    ``weight_radius``: radius of the box on the weight maps (the authors: f - 1, and 0 for the
     candidates' ``delta`` filter and for THIRD, C:1048). ``k``: k_c (``var_den_scale = k^2``);
     ``use_colour=False``: feature weights only (THIRD, ``feat_only``, C:1028,1157). ``features``: a
     sequence of :class:`Feature`; their normaliser is :func:`feature_normaliser` with their tau;
