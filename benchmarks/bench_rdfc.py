@@ -4,10 +4,10 @@ implementation with the NumPy NL-means (``benchmarks/baseline.py``) in the same 
     NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/bench_rdfc.py [--sizes 128 256 512] [--repeats 1] [--no-baseline]
 
 Synthetic data: smooth colour with a piecewise-constant albedo (two regions), Gaussian
-half-buffer noise of known variance, noise-free normal/depth. Every timing is taken after a
+half-buffer noise of known variance, noise-free normal/position/visibility. Every timing is taken after a
 warm-up call (numba compilation) on a 32^2 image. Reported per size: total seconds per image
 (full + both half buffers, i.e. one ``denoise`` call), the stages (feature prefiltering; one
-candidate-filter kernel call, 3 candidates, r = 10; one select-and-blend), and the ratio of
+three candidate filters, r = 10; selection and blend), and the ratio of
 the total to the 128^2 total next to the pixel-count ratio; then (unless ``--no-baseline``) the
 wall and CPU seconds of the current and the baseline's ``denoise``, the speed-ups and the relMSE of
 the current outputs against the baseline's. The DAG runs methods at one thread: NUMBA_NUM_THREADS=1.
@@ -45,10 +45,16 @@ def synthetic(size: int, seed: int = 0, half_variance: float = 0.02) -> RenderBu
     layers["variance"] = layers["variance_a"] / 2
     normal = np.zeros(truth.shape, np.float32)
     normal[..., 2] = 1
+    position = np.stack([xx, yy, np.ones_like(xx)], -1).astype(np.float32)
     for s in ("", "_a", "_b"):
         layers["albedo" + s] = albedo.astype(np.float32)
         layers["normal" + s] = normal
         layers["depth" + s] = np.ones((size, size), np.float32)
+        layers["position" + s] = position
+        layers["visibility" + s] = np.ones((size, size), np.float32)
+        for name in ("albedo", "normal", "position"):
+            layers[f"{name}_variance{s}"] = np.zeros(truth.shape, np.float32)
+        layers["visibility_variance" + s] = np.zeros((size, size), np.float32)
     return RenderBuffers(layers=layers, spp=8)
 
 
@@ -70,13 +76,15 @@ def main(argv=None):
     for size in args.sizes:
         buffers = synthetic(size)
         t_total, _ = timed(lambda: rdfc.denoise(buffers), args.repeats)
-        t_pre, feats = timed(lambda: rdfc.prefilter_features(buffers), args.repeats)
-        y = np.asarray(buffers.color_a, np.float64)
-        v = np.asarray(buffers.variance_a, np.float64)
-        t_kernel, (filt, deriv, ovar) = timed(lambda: rdfc.candidate_filters(y, v, *feats["a"]),
-                                              args.repeats)
-        errors = rdfc.sure(filt, deriv, y, v).sum(axis=3)
-        t_sel, _ = timed(lambda: rdfc.select_and_blend(filt, ovar, errors, y, v), args.repeats)
+        features, max_pos = rdfc.authors_features(buffers)
+        t_pre, feats = timed(lambda: rdfc.prefilter_features(features), args.repeats)
+        a = np.asarray(buffers.color_a, np.float64)
+        b = np.asarray(buffers.color_b, np.float64)
+        y = (a + b) / 2
+        v = rdfc.scaled_sample_variance(a, b, np.asarray(buffers.variance, np.float64))
+        t_kernel, cands = timed(lambda: rdfc.candidates(a, b, y, v, feats, max_pos, radius=rdfc.WINDOW_RADIUS),
+                                args.repeats)
+        t_sel, _ = timed(lambda: rdfc.select_and_blend(*cands, y, v), args.repeats)
         if base is None:
             base = (t_total, size * size)
         print(f"{size:>4}^2 {t_total:8.3f} {t_pre:9.3f} {t_kernel:8.3f} {t_sel:8.3f} "

@@ -60,7 +60,7 @@ def synthetic_truth(albedo: np.ndarray, normal: np.ndarray) -> np.ndarray:
 
 def build_render_buffers(truth=None, *, height: int = 16, width: int = 16, spp: int = 8,
                          half_std=0.1, seed=0, albedo=None, normal=None, depth=None,
-                         variance=None, bins: bool = False) -> RenderBuffers:
+                         variance=None, bins: bool = False, position=None, visibility=None) -> RenderBuffers:
     """Synthetic render buffers with independent Gaussian noise in each half buffer.
 
     ``truth``: noise-free radiance (H, W, 3); when given, its shape overrides ``height`` and
@@ -73,7 +73,9 @@ def build_render_buffers(truth=None, *, height: int = 16, width: int = 16, spp: 
     ``variance_b`` (broadcastable to (H, W, 3)); default ``half_std**2``. The full image's
     ``variance`` is half of it, as for the mean of two independent halves.
     ``albedo``/``normal`` (H, W, 3), ``depth`` (H, W): features, identical (separate copies)
-    in the full, A and B buffers; defaults from :func:`synthetic_features`.
+    in the full, A and B buffers; defaults from :func:`synthetic_features`. ``position``
+    (H, W, 3) world position, default (x, y, depth) of the pixel grid; ``visibility`` (H, W),
+    default 1 (the optional layers RDFC reads).
 
     ``bins``: also the four quarter-sample bins of :data:`mcbench.io.buffers.BIN_LAYERS` (noise
     ``sqrt(2) * half_std`` each, drawn bin 0..3 after A and B are *replaced* by the means of bins
@@ -81,7 +83,7 @@ def build_render_buffers(truth=None, *, height: int = 16, width: int = 16, spp: 
 
     Layers: ``color = (color_a + color_b) / 2``; every layer float32; all of
     :data:`mcbench.io.buffers.REQUIRED_LAYERS` present plus ``albedo_a/_b``, ``normal_a/_b``,
-    ``depth_a/_b``.
+    ``depth_a/_b``, ``position{,_a,_b}``, ``visibility{,_a,_b}`` and every feature's ``_variance``.
     """
     if truth is not None:
         truth = np.asarray(truth, np.float64)
@@ -113,8 +115,14 @@ def build_render_buffers(truth=None, *, height: int = 16, width: int = 16, spp: 
     mean = (layers["color_a"].astype(np.float64) + layers["color_b"]) / 2
     layers["color"] = mean.astype(np.float32)
     layers["variance"] = (half_variance / 2).astype(np.float32)
-    features = {"albedo": albedo, "normal": normal, "depth": depth}
-    expected = {"albedo": shape, "normal": shape, "depth": shape[:2]}
+    if position is None:
+        yy, xx = np.mgrid[0:height, 0:width].astype(np.float64)
+        position = np.stack([xx, yy, np.asarray(depth, np.float64)], axis=-1) / max(height, width, 1)
+    visibility = np.ones(shape[:2]) if visibility is None else visibility
+    features = {"albedo": albedo, "normal": normal, "depth": depth, "position": position,
+                "visibility": visibility}
+    expected = {"albedo": shape, "normal": shape, "depth": shape[:2], "position": shape,
+                "visibility": shape[:2]}
     for name, value in features.items():
         value = np.asarray(value, np.float32)
         if value.shape != expected[name]:
