@@ -123,17 +123,22 @@ def test_flat_black_and_fireflies_stay_finite(make_render_buffers):
     assert np.abs(out.full[:, 26:]).max() == 0.0
 
 
-@pytest.fixture(scope="module")
-def cornell_series():
+@pytest.fixture(scope="module", params=[
+    pytest.param("cornell_box", marks=pytest.mark.xfail(strict=True, reason=(
+        "the authors' algorithm leaks the directly visible light into the ceiling: THIRD (features only) with the "
+        "symmetric weights on the linear position feature blends q2 (the light, same albedo and normal, visibility "
+        "0 as the authors define it) with q1 on the far side; docs/fidelity_rdfc.md, 'Known failure'"))),
+    "veach_ajar"])
+def cornell_series(request):
     from mcbench.render.renderer import merge_reference_chunks, render_buffers, render_reference_chunk
     from mcbench.io.buffers import ALL_LAYERS
     from scenes import load_scene
     if not set(rdfc.METHOD.render_layers) <= set(ALL_LAYERS):
         pytest.skip("the renderer does not write RDFC's position/visibility layers yet")
     resolution = (48, 48)
-    reference, _ = merge_reference_chunks([render_reference_chunk(load_scene("cornell_box"), 4096, chunk, resolution=resolution)
+    reference, _ = merge_reference_chunks([render_reference_chunk(load_scene(request.param), 4096, chunk, resolution=resolution)
                                            for chunk in range(2)])
-    renders = {spp: RenderBuffers(layers=render_buffers(load_scene("cornell_box"), spp, resolution=resolution)[0], spp=spp)
+    renders = {spp: RenderBuffers(layers=render_buffers(load_scene(request.param), spp, resolution=resolution)[0], spp=spp)
                for spp in (16, 64, 256, 1024)}
     missing = [name for name in rdfc.METHOD.render_layers if name not in renders[16].layers]
     if missing:
