@@ -47,6 +47,12 @@ Switches (keyword-only; defaults are the authors'):
 * ``clamp_derivative=True`` (C:1354-1369); False keeps the finite difference unclamped.
 * ``index_bug=True`` (F:656); False compares with SECOND's own derivative, as the code evidently
   intends (``derivatives[0][3*pix]`` on the other side of the same comparison).
+* ``symmetric_weights=True`` (C:479-491,620-626: the symmetric weight blended in where both
+  distances are below ``MAX_D2`` = 25, C:19); False turns the blend off in every NL-means call
+  (prefilter, candidates, error and selection filters, second pass): each neighbour keeps
+  exp(-max(0, d)). A diagnostic switch, not a departure the default takes: on cornell_box the blend
+  lets THIRD average the directly visible light into the ceiling (docs/fidelity_rdfc.md, "Known
+  failure").
 
 Departures without a switch (each with its reason; docs/fidelity_rdfc.md):
 
@@ -68,7 +74,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from mcbench.filters.rdfc_filter import (Feature, clamp_derivative as clamp_rule, dual_buffer_variance,
+from mcbench.filters.rdfc_filter import (MAX_D2, Feature, clamp_derivative as clamp_rule, dual_buffer_variance,
                                          finite_difference_derivative, nl_means, scaled_sample_variance,
                                          select_candidate, sure)
 from mcbench.io.buffers import Denoised, RenderBuffers
@@ -135,14 +141,14 @@ def authors_features(buffers: RenderBuffers):
     return out, max_pos
 
 
-def prefilter_features(features: dict):
+def prefilter_features(features: dict, *, max_d2: float = MAX_D2):
     """F:300-359 / C:854-871: each feature's two buffers NL-means filtered with shared weights
     (``PREFILTER``; guide = their mean, variance = :func:`scaled_sample_variance` of the feature's
-    sample variance); returns {name: (mean of the filtered buffers, (A~ - B~)^2/4 pyramid-smoothed)}."""
+    sample variance; ``max_d2``: :func:`nl_means`'s symmetric-blend threshold); returns {name: (mean of the filtered buffers, (A~ - B~)^2/4 pyramid-smoothed)}."""
     out = {}
     for name, (a, b, var) in features.items():
         guide_var = scaled_sample_variance(a, b, var)
-        filt = nl_means(np.stack([a, b]), (a + b) / 2.0, guide_var, **PREFILTER).buffers
+        filt = nl_means(np.stack([a, b]), (a + b) / 2.0, guide_var, max_d2=max_d2, **PREFILTER).buffers
         out[name] = ((filt[0] + filt[1]) / 2.0, dual_buffer_variance(filt[0], filt[1]))
     return out
 
@@ -153,7 +159,7 @@ def feature_set(prefiltered: dict, tau: float, max_pos: float) -> list[Feature]:
             for name, (value, var) in prefiltered.items()]
 
 
-def candidates(a, b, y, v, prefiltered, max_pos, *, radius: int, clamp: bool = True):
+def candidates(a, b, y, v, prefiltered, max_pos, *, radius: int, clamp: bool = True, max_d2: float = MAX_D2):
     """The three candidates (F:688-756) of buffers A, B: returns lists (one per candidate) of the
     filtered buffers (2, H, W, 3), the filtered mean (H, W, 3) and dF/dy (H, W, 3). FIRST and SECOND
     (FilterDataDelta, C:1181-1237) differ only in the patch radius and run as one kernel call."""
@@ -162,11 +168,12 @@ def candidates(a, b, y, v, prefiltered, max_pos, *, radius: int, clamp: bool = T
         raise ValueError("FIRST and SECOND must share k_c and tau, THIRD be features only (CANDIDATES)")
     both = np.stack([a, b])
     results = nl_means(both, y, v, radius=radius, patch_radius=(patch1, patch2), weight_radius=0, k=k_c,
-                       features=feature_set(prefiltered, tau1, max_pos), feature_k=K_FEATURE, delta=True)
+                       features=feature_set(prefiltered, tau1, max_pos), feature_k=K_FEATURE, delta=True,
+                       max_d2=max_d2)
     derivs = [finite_difference_derivative(res.buffers.mean(axis=0), res.scaled, y) for res in results]
     # THIRD: feat_only, FilterData with weight box 0 (C:1046-1048); dF/dy = w_max / sum w (C:1343-1346)
     third = nl_means(both, y, v, radius=radius, patch_radius=patch3, weight_radius=0, k=1.0, use_colour=False,
-                     features=feature_set(prefiltered, tau3, max_pos), feature_k=K_FEATURE)
+                     features=feature_set(prefiltered, tau3, max_pos), feature_k=K_FEATURE, max_d2=max_d2)
     results.append(third)
     derivs.append(np.repeat(third.centre[..., None], 3, axis=-1))
     if clamp:
@@ -174,31 +181,31 @@ def candidates(a, b, y, v, prefiltered, max_pos, *, radius: int, clamp: bool = T
     return [res.buffers for res in results], [res.buffers.mean(axis=0) for res in results], derivs
 
 
-def select_and_blend(bufs, means, derivs, y, v, *, index_bug: bool = True):
+def select_and_blend(bufs, means, derivs, y, v, *, index_bug: bool = True, max_d2: float = MAX_D2):
     """F:631-685 and F:581-628: SURE maps filtered (``ERROR_FILTER``), the argmin rule, binary maps
     filtered (``SELECTION_FILTER``), blend. Returns the blended buffers (2, H, W, 3) and the
     selection weights (H, W, K)."""
     errors = np.stack([sure(m, d, y, v) for m, d in zip(means, derivs)])            # (K, H, W)
-    err_f = nl_means(errors[..., None], y, v, **ERROR_FILTER).buffers[..., 0]
+    err_f = nl_means(errors[..., None], y, v, max_d2=max_d2, **ERROR_FILTER).buffers[..., 0]
     sel = select_candidate(err_f, derivs[0], derivs[1], index_bug=index_bug)
     onehot = np.stack([(sel == i).astype(np.float64) for i in range(len(means))])
-    weights = nl_means(onehot[..., None], y, v, **SELECTION_FILTER).buffers[..., 0]   # (K, H, W)
+    weights = nl_means(onehot[..., None], y, v, max_d2=max_d2, **SELECTION_FILTER).buffers[..., 0]   # (K, H, W)
     acc = np.maximum(weights.sum(axis=0), 1e-300)
     blend = np.einsum("khw,kbhwc->bhwc", weights, np.stack(bufs)) / acc[None, :, :, None]
     return blend, np.moveaxis(weights / acc, 0, -1)
 
 
-def second_pass(blend, prefiltered, max_pos, *, radius: int):
+def second_pass(blend, prefiltered, max_pos, *, radius: int, max_d2: float = MAX_D2):
     """F:409-423: the two pass-1 buffers filtered again with shared weights (``SECOND_PASS``),
     guide = their mean, variance :func:`dual_buffer_variance` (C:900-916); (2, H, W, 3)."""
     guide_var = dual_buffer_variance(blend[0], blend[1])
     return nl_means(blend, blend.mean(axis=0), guide_var, radius=max(radius // 2, 1),
                     features=feature_set(prefiltered, TAU_SECOND, max_pos), feature_k=K_FEATURE,
-                    **SECOND_PASS).buffers
+                    max_d2=max_d2, **SECOND_PASS).buffers
 
 
 def denoise(buffers: RenderBuffers, *, radius: int = WINDOW_RADIUS, variance: str = "rescaled",
-            clamp_derivative: bool = True, index_bug: bool = True):
+            clamp_derivative: bool = True, index_bug: bool = True, symmetric_weights: bool = True):
     """RDFC as the authors' code runs it (module docstring); returns Denoised(full, a, b) float32
     (H, W, 3). Keyword switches: module docstring."""
     if variance not in ("rescaled", "raw"):
@@ -209,14 +216,16 @@ def denoise(buffers: RenderBuffers, *, radius: int = WINDOW_RADIUS, variance: st
     y = (a + b) / 2.0
     v_full = np.maximum(_layer(buffers, "variance"), 0.0)
     v = scaled_sample_variance(a, b, v_full) if variance == "rescaled" else v_full
+    max_d2 = MAX_D2 if symmetric_weights else -np.inf
     stage_done = StageLog.for_image("rdfc", *y.shape[:2])    # prints on large images only
     features, max_pos = authors_features(buffers)
-    prefiltered = prefilter_features(features)
+    prefiltered = prefilter_features(features, max_d2=max_d2)
     stage_done("feature prefiltering")
-    bufs, means, derivs = candidates(a, b, y, v, prefiltered, max_pos, radius=int(radius), clamp=clamp_derivative)
+    bufs, means, derivs = candidates(a, b, y, v, prefiltered, max_pos, radius=int(radius), clamp=clamp_derivative,
+                                   max_d2=max_d2)
     stage_done("candidate filters")
-    blend, _ = select_and_blend(bufs, means, derivs, y, v, index_bug=index_bug)
-    final = second_pass(blend, prefiltered, max_pos, radius=int(radius))
+    blend, _ = select_and_blend(bufs, means, derivs, y, v, index_bug=index_bug, max_d2=max_d2)
+    final = second_pass(blend, prefiltered, max_pos, radius=int(radius), max_d2=max_d2)
     stage_done("selection and second pass")
     out_a = np.nan_to_num(final[0]).astype(np.float32)
     out_b = np.nan_to_num(final[1]).astype(np.float32)

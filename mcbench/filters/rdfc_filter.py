@@ -22,7 +22,8 @@ of weights (``apply_weights`` loops over buffers, C:68-89).
   turned into weights exp(-max(0, d)) (C:467-476), the weight maps box-averaged over
   (2 f_w + 1)^2 (C:1455-1458; f_w = f - PTC_RAD_D = f - 1 in ``PushData``, C:20,1029), and the
   symmetric weight blended in where both patch distances are below ``MAX_D2`` = 25 (C:19,479-491):
-  a = clip(w_s / (w1 + w2) - 1, 0, 1), w_i <- a w_s + (1 - a) w_i. Feature weights
+  a = clip(w_s / (w1 + w2) - 1, 0, 1), w_i <- a w_s + (1 - a) w_i (the threshold is the argument
+  ``max_d2``, default ``MAX_D2``; ``-inf`` switches the blend off, a diagnostic). Feature weights
   (``dist_wgt_feat``, C:567-633): the same distances per pixel (no patch) with the feature's
   Vn (its residual variance) and Vd (its normaliser, :func:`feature_normaliser`), k = k_f, the same
   symmetric blend; the weight of a neighbour is the minimum over colour and every feature
@@ -170,11 +171,12 @@ def _dist_rows(img, vn, vd, c0, c1, y, y1, y2, dx, lo, hi, mx1, mx2, k2, diff, d
 
 
 @cached_njit(error_model="numpy")
-def _sym(d1, d2, ds, w1, w2):
-    """Weights exp(-max(0, d)) of both neighbours with the symmetric blend (C:479-491,620-626);
-    returns (w1, w2, a) with ``w1``/``w2`` the weights when a is 0 (passed in, already computed)."""
+def _sym(d1, d2, ds, w1, w2, max_d2):
+    """Weights exp(-max(0, d)) of both neighbours with the symmetric blend (C:479-491,620-626) where
+    both distances are below ``max_d2`` (-inf: never); returns (w1, w2, a) with ``w1``/``w2`` the
+    weights when a is 0 (passed in, already computed)."""
     a = 0.0
-    if d1 < MAX_D2 and d2 < MAX_D2:
+    if d1 < max_d2 and d2 < max_d2:
         a = min(1.0, max(0.0, _weight(ds) / max(w1 + w2, 1e-300) - 1.0))
     if a > 0.0:
         ws = _weight(ds)
@@ -191,10 +193,11 @@ def _axpy2(out, d1, u1, d2, u2):
 
 @cached_njit(parallel=True, error_model="numpy")
 def _nlm_kernel(data, g, vn, vd, feat, fvn, fvd, fstart, wnd, ptcs, ptc_wgt, k2c, colour, diff_c,
-                k2f, diff_f, delta):
+                k2f, diff_f, delta, max_d2):
     """See :func:`nl_means`. data (B, C, H, W); g, vn, vd (Cg, H, W); feat, fvn, fvd (Cf, H, W);
     ptcs (K,) patch radii: K filters that differ only in the patch radius, sharing the per-pixel
-    distances and the feature weights of each offset (FIRST and SECOND). Returns (K, B, C, H, W)
+    distances and the feature weights of each offset (FIRST and SECOND). ``max_d2``: threshold of
+    the symmetric blend (``MAX_D2``; -inf turns the blend off). Returns (K, B, C, H, W)
     outputs, (K, H, W) w_max and sum w, (K, Cg, H, W) scaled filters."""
     nb, nc, h, w = data.shape
     nk = ptcs.shape[0]
@@ -257,13 +260,13 @@ def _nlm_kernel(data, g, vn, vd, feat, fvn, fvd, fstart, wnd, ptcs, ptc_wgt, k2c
                             for x in range(w):
                                 n1 = p1[y, x]
                                 n2 = p2[y, x]
-                                c1, c2, a = _sym(n1, n2, ps[y, x], _weight(n1), _weight(n2))
+                                c1, c2, a = _sym(n1, n2, ps[y, x], _weight(n1), _weight(n2), max_d2)
                                 m1 = n1 + wc * (s1[y, x] - d1[y, x])
                                 m2 = n2 + wc * (s2[y, x] - d2[y, x])
                                 m3 = ps[y, x] + wc * (ss[y, x] - ds[y, x])
                                 t1 = _weight(m1)
                                 t2 = _weight(m2)
-                                if m1 < MAX_D2 and m2 < MAX_D2:       # else a is kept (C:685-689)
+                                if m1 < max_d2 and m2 < max_d2:       # else a is kept (C:685-689)
                                     a = min(1.0, max(0.0, _weight(m3) / max(t1 + t2, 1e-300) - 1.0))
                                 if a > 0.0:
                                     t3 = _weight(m3)
@@ -286,7 +289,7 @@ def _nlm_kernel(data, g, vn, vd, feat, fvn, fvd, fstart, wnd, ptcs, ptc_wgt, k2c
                         for y in prange(h):
                             for x in range(w):
                                 a = 0.0
-                                if p1[y, x] < MAX_D2 and p2[y, x] < MAX_D2:
+                                if p1[y, x] < max_d2 and p2[y, x] < max_d2:
                                     a = min(1.0, max(0.0, es[y, x] / max(e1[y, x] + e2[y, x], 1e-300) - 1.0))
                                 w1[k, y, x] = min(w1[k, y, x], a * es[y, x] + (1.0 - a) * e1[y, x])
                                 w2[k, y, x] = min(w2[k, y, x], a * es[y, x] + (1.0 - a) * e2[y, x])
@@ -300,7 +303,7 @@ def _nlm_kernel(data, g, vn, vd, feat, fvn, fvd, fstart, wnd, ptcs, ptc_wgt, k2c
                     _dist_rows(feat, fvn, fvd, fstart[j], fstart[j + 1], y, y1, y2, dx, lo, hi, mx1, mx2,
                                k2f, diff_f, False, f1, f2, f3, f1, f2, f3)
                     for x in range(w):
-                        c1, c2, a = _sym(f1[x], f2[x], f3[x], _weight(f1[x]), _weight(f2[x]))
+                        c1, c2, a = _sym(f1[x], f2[x], f3[x], _weight(f1[x]), _weight(f2[x]), max_d2)
                         for k in range(nk):
                             w1[k, y, x] = min(w1[k, y, x], c1)
                             w2[k, y, x] = min(w2[k, y, x], c2)
@@ -428,7 +431,7 @@ def dual_buffer_variance(buffer_a, buffer_b) -> np.ndarray:
 def nl_means(buffers, guide, guide_variance, *, radius: int, patch_radius, weight_radius: int,
              k: float, use_colour: bool = True, use_diff_var: bool = True, features=(),
              feature_k: float = 0.6, feature_diff_var: bool | None = None, delta: bool = False,
-             guide_variance_den=None) -> Filtered:
+             guide_variance_den=None, max_d2: float = MAX_D2) -> Filtered:
     """The authors' NL-means (module docstring) of ``buffers`` (B, H, W, C) with shared weights.
 
     ``guide`` (H, W, Cg): colour guide (the buffers' mean in the authors' calls); ``guide_variance``:
@@ -440,8 +443,13 @@ def nl_means(buffers, guide, guide_variance, *, radius: int, patch_radius, weigh
     ``use_colour=False``: feature weights only (THIRD, ``feat_only``, C:1028,1157). ``features``: a
     sequence of :class:`Feature`; their normaliser is :func:`feature_normaliser` with their tau;
     ``feature_diff_var`` (default ``use_diff_var``): p+q (True) or 2p (False) denominators.
-    ``delta``: also the scaled filter of the guide (needs ``weight_radius == 0``).
+    ``delta``: also the scaled filter of the guide (needs ``weight_radius == 0``). ``max_d2``: the
+    symmetric blend's threshold on both distances (default ``MAX_D2`` = 25, C:19); ``-inf`` turns the
+    blend off, leaving w_i = exp(-max(0, d_i)) (a merely negative value would not: distances net of
+    the variance can be negative).
     """
+    if np.isnan(max_d2):
+        raise ValueError("max_d2 must be a number (25: the authors'; -inf: no symmetric blend), got nan")
     bufs = np.asarray(buffers, dtype=np.float64)
     if bufs.ndim == 3:
         bufs = bufs[..., None]
@@ -472,7 +480,7 @@ def nl_means(buffers, guide, guide_variance, *, radius: int, patch_radius, weigh
     out, wmax, wsum, outs = _nlm_kernel(data, g, vn, vd, feat, fvn, fvd, np.asarray(fstart, dtype=np.int64),
                                         int(radius), radii, int(weight_radius), float(k) ** 2,
                                         bool(use_colour), bool(use_diff_var), float(feature_k) ** 2,
-                                        bool(diff_f), bool(delta))
+                                        bool(diff_f), bool(delta), float(max_d2))
     results = [Filtered(buffers=np.moveaxis(out[i], 1, -1), centre=wmax[i] / wsum[i],
                         scaled=np.moveaxis(outs[i], 0, -1) if delta else None) for i in range(len(radii))]
     return results if np.ndim(patch_radius) else results[0]

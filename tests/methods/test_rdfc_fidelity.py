@@ -74,17 +74,19 @@ def pixel_distances(img, vn, vd, y, x, y1, x1, y2, x2, k2, diff, scale=1.0):
     return out / nc
 
 
-def sym_blend(d1, d2, w1, w2, ws, a=0.0):
-    """keep_valid_sym_weights (C:479-491): returns blended (w1, w2, a)."""
-    if d1 < 25 and d2 < 25:
+def sym_blend(d1, d2, w1, w2, ws, a=0.0, max_d2=25.0):
+    """keep_valid_sym_weights (C:479-491): returns blended (w1, w2, a); ``max_d2`` = MAX_D2 (C:19),
+    -inf for the filter without the blend."""
+    if d1 < max_d2 and d2 < max_d2:
         a = min(1.0, max(0.0, ws / (w1 + w2) - 1))
     return a * ws + (1 - a) * w1, a * ws + (1 - a) * w2, a
 
 
 def brute_filter(data, guide, vn, vd, feats, *, R, f, fw, k, colour=True, diff=True, kf=0.6, diff_f=None,
-                 delta=False):
+                 delta=False, max_d2=25.0):
     """FilterData (C:1138-1178) / FilterDataDelta (C:1181-1237) by loops. data (B, H, W, C);
-    guide, vn, vd (H, W, Cg); feats: list of (value, Vn, Vd) (H, W, C). Returns (out, wmax/wsum,
+    guide, vn, vd (H, W, Cg); feats: list of (value, Vn, Vd) (H, W, C); ``max_d2``: the symmetric
+    blend's threshold (-inf: no blend). Returns (out, wmax/wsum,
     scaled filter of the guide or None)."""
     diff_f = diff if diff_f is None else diff_f
     B, H, W, C = data.shape
@@ -116,8 +118,9 @@ def brute_filter(data, guide, vn, vd, feats, *, R, f, fw, k, colour=True, diff=T
                     wgt_s = np.exp(-np.maximum(0, ds_))
                     for y in range(H):
                         for x in range(W):
-                            c1, c2, a = sym_blend(d[0, y, x], d[1, y, x], *wgt[:, y, x])
-                            t1, t2, _ = sym_blend(ds_[0, y, x], ds_[1, y, x], *wgt_s[:, y, x], a=a)
+                            c1, c2, a = sym_blend(d[0, y, x], d[1, y, x], *wgt[:, y, x], max_d2=max_d2)
+                            t1, t2, _ = sym_blend(ds_[0, y, x], ds_[1, y, x], *wgt_s[:, y, x], a=a,
+                                                  max_d2=max_d2)
                             w1[y, x], w2[y, x] = min(w1[y, x], c1), min(w2[y, x], c2)
                             w1s[y, x], w2s[y, x] = min(w1s[y, x], t1), min(w2s[y, x], t2)
                 else:
@@ -125,13 +128,13 @@ def brute_filter(data, guide, vn, vd, feats, *, R, f, fw, k, colour=True, diff=T
                         wgt = np.stack([brute_box(m, fw) for m in wgt])     # C:1455-1458
                     for y in range(H):
                         for x in range(W):
-                            c1, c2, _ = sym_blend(d[0, y, x], d[1, y, x], *wgt[:, y, x])
+                            c1, c2, _ = sym_blend(d[0, y, x], d[1, y, x], *wgt[:, y, x], max_d2=max_d2)
                             w1[y, x], w2[y, x] = min(w1[y, x], c1), min(w2[y, x], c2)
             for value, fvn, fvd in feats:
                 for y in range(H):
                     for x in range(W):
                         dd = pixel_distances(value, fvn, fvd, y, x, *idx[y][x], kf2, diff_f)
-                        c1, c2, _ = sym_blend(dd[0], dd[1], *np.exp(-np.maximum(0, dd)))
+                        c1, c2, _ = sym_blend(dd[0], dd[1], *np.exp(-np.maximum(0, dd)), max_d2=max_d2)
                         w1[y, x], w2[y, x] = min(w1[y, x], c1), min(w2[y, x], c2)
                         w1s[y, x], w2s[y, x] = min(w1s[y, x], c1), min(w2s[y, x], c2)
             for y in range(H):
@@ -176,6 +179,20 @@ def small_case(h=7, w=9, seed=0):
     f2 = (np.arange(h)[:, None, None] > h // 2) * np.ones((h, w, 1)) + 0.05 * rng.random((h, w, 1))
     feats = [rf.Feature(f1, 1e-4 * rng.random((h, w, 3)), 1e-3), rf.Feature(f2, 1e-3 * rng.random((h, w, 1)), 1e-3)]
     return a, b, guide, var, feats
+
+
+def ramp_case(h=7, w=9, seed=0):
+    """Linear ramps (colour and a 3-channel feature) with small noise: the symmetric pair's
+    midpoint matches the centre, so the blend of C:479-491 acts (on :func:`small_case` with patch 3
+    it never does)."""
+    rng = np.random.default_rng(seed)
+    yy, xx = np.mgrid[0:h, 0:w].astype(np.float64)
+    base = (0.3 * xx + 0.2 * yy)[..., None] * np.array([1.0, 0.8, 0.6]) / 3
+    a = base + 0.01 * rng.standard_normal((h, w, 3))
+    b = base + 0.01 * rng.standard_normal((h, w, 3))
+    var = 1e-4 * (0.5 + rng.random((h, w, 3)))
+    f1 = np.stack([0.1 * xx, 0.05 * yy, 0.1 * xx + 0.05 * yy], -1) + 1e-3 * rng.standard_normal((h, w, 3))
+    return a, b, (a + b) / 2, var, [rf.Feature(f1, 1e-6 * rng.random((h, w, 3)), 1e-4)]
 
 
 def brute_feats(feats):
@@ -244,6 +261,73 @@ def test_delta_filter_and_derivative_are_the_authors(f):
     den = 1e-10 + guide - 1.01 * guide
     np.testing.assert_allclose(rf.finite_difference_derivative(mean, scaled, guide), mean / den - scaled / den,
                                rtol=1e-9)
+
+
+@pytest.mark.parametrize(("R", "f", "fw", "k", "colour", "delta"), [
+    (2, 3, 2, 1.0, True, False),      # FilterData with a weight box (prefilter / error / selection)
+    (3, 3, 0, 1.0, False, False),     # THIRD (feat_only)
+    (2, 1, 0, 0.45, True, True),      # FilterDataDelta (FIRST)
+])
+def test_nl_means_without_the_symmetric_blend(R, f, fw, k, colour, delta):
+    """``max_d2=-inf``: the authors' filter with keep_valid_sym_weights (C:479-491,620-626,685-689)
+    never blending, by the brute force with the blend's threshold at -inf; on ramps, where the blend
+    acts (the default differs, and matches the brute force with the threshold 25)."""
+    a, b, guide, var, feats = ramp_case()
+    kw = dict(radius=R, patch_radius=f, weight_radius=fw, k=k, use_colour=colour, features=feats, delta=delta)
+    ours = rf.nl_means(np.stack([a, b]), guide, var, max_d2=-np.inf, **kw)
+    out, centre, scaled = brute_filter(np.stack([a, b]), guide, var, var, brute_feats(feats), R=R, f=f, fw=fw, k=k,
+                                       colour=colour, delta=delta, max_d2=-np.inf)
+    np.testing.assert_allclose(ours.buffers, out, rtol=1e-10, atol=1e-13)
+    np.testing.assert_allclose(ours.centre, centre, rtol=1e-10)
+    if delta:
+        np.testing.assert_allclose(ours.scaled, scaled, rtol=1e-10, atol=1e-13)
+    default = rf.nl_means(np.stack([a, b]), guide, var, **kw)
+    assert np.abs(default.buffers - ours.buffers).max() > 1e-2
+    out25, _, _ = brute_filter(np.stack([a, b]), guide, var, var, brute_feats(feats), R=R, f=f, fw=fw, k=k,
+                               colour=colour, delta=delta)
+    np.testing.assert_allclose(default.buffers, out25, rtol=1e-10, atol=1e-13)
+    with pytest.raises(ValueError, match="max_d2"):
+        rf.nl_means(np.stack([a, b]), guide, var, max_d2=np.nan, **kw)
+
+
+def test_third_on_a_linear_ramp_with_and_without_the_symmetric_blend():
+    """Closed form (the 'Known failure' of docs/fidelity_rdfc.md): feature f = s x (noise-free,
+    tau << s^2/4, so Vd = grad^2 = s^2/4 inside, C:212-252), THIRD's filter (features only, k_f 0.6,
+    window 2). A neighbour dx columns away has distance d = (s dx)^2 / (1e-10 + k_f^2 s^2/2)
+    ~ 5.56 dx^2 (22.2 < 25 for dx = 2), the symmetric pair's distance 0 (the ramp is linear), so
+    with the blend a = clip(1/(2 e^-d) - 1, 0, 1) = 1 and every neighbour gets weight 1: a bright
+    pixel two columns away gets weight 1 and the output is the 5x5 window mean 1/25. Without the
+    blend its weight is e^-d(2) and the output e^-d(2) / (1 + 4 + 10 e^-d(1) + 10 e^-d(2))."""
+    h, w, s, kf = 5, 9, 0.1, 0.6
+    ramp = np.broadcast_to(s * np.arange(w, dtype=np.float64)[None, :, None], (h, w, 1)).copy()
+    feat = [rf.Feature(ramp, np.zeros((h, w, 1)), 1e-8)]
+    data = np.zeros((1, h, w, 1))
+    data[0, 2, 6] = 1.0                                    # the bright pixel, p = (2, 4)
+    guide = np.zeros((h, w, 1))
+    kw = dict(radius=2, patch_radius=3, weight_radius=0, k=1.0, use_colour=False, features=feat, feature_k=kf)
+    d = [(s * dx) ** 2 / (1e-10 + kf ** 2 * (s * s / 4 + s * s / 4)) for dx in (1, 2)]
+    assert d[1] < 25
+    blend = rf.nl_means(data, guide, guide, **kw)
+    assert blend.buffers[0, 2, 4, 0] == pytest.approx(1 / 25, rel=1e-12)
+    plain = rf.nl_means(data, guide, guide, max_d2=-np.inf, **kw)
+    expected = np.exp(-d[1]) / (1 + 4 + 10 * np.exp(-d[0]) + 10 * np.exp(-d[1]))
+    assert plain.buffers[0, 2, 4, 0] == pytest.approx(expected, rel=1e-9)
+
+
+def test_symmetric_weights_switch_reaches_every_filter(make_render_buffers, monkeypatch):
+    """``denoise(symmetric_weights=False)`` passes max_d2 = -inf to every NL-means call (prefilter,
+    candidates, error and selection filters, second pass); the default passes MAX_D2 = 25 (C:19)."""
+    real = rdfc.nl_means
+    for switch, expected in ((True, 25.0), (False, -np.inf)):
+        seen = []
+
+        def spy(buffers, guide, var, **kw):
+            seen.append(kw.get("max_d2", "default"))
+            return real(buffers, guide, var, **kw)
+
+        monkeypatch.setattr(rdfc, "nl_means", spy)
+        rdfc.denoise(make_render_buffers(height=8, width=9, seed=1), radius=2, symmetric_weights=switch)
+        assert len(seen) == 9 and all(m == expected for m in seen), seen
 
 
 def test_centre_weight_is_the_largest_neighbour_weight_floored():
