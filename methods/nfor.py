@@ -557,4 +557,13 @@ def denoise(buffers: RenderBuffers, *, second_pass_variance_scale: float = 2.0, 
     return Denoised(full=f32(full), a=f32(result_a), b=f32(result_b), extras=extras)
 
 
-METHOD = MethodSpec(kind="denoiser", label="#4 NFOR", run=denoise)
+def params_layers(params: dict) -> tuple[str, ...]:
+    """The render layers NFOR needs with ``params`` beyond every render's required ones: the
+    feature variances of the full image with ``feature_variance='buffer'`` (the default,
+    Tungsten's), so that renders imported without them are refused when the DAG is parsed."""
+    if params.get("feature_variance", "buffer") == "buffer":
+        return ("normal_variance", "albedo_variance", "depth_variance")
+    return ()
+
+
+METHOD = MethodSpec(kind="denoiser", label="#4 NFOR", run=denoise, params_layers=params_layers)

@@ -64,6 +64,10 @@ class MethodSpec:
       method on one image, re-run by progressive denoising's divergence (``methods.single_image_function``).
     * ``check_config`` -- ``f(params, *, config_key)``: checks of param values no annotation
       describes (raise ``ValueError`` naming ``config_key``), run when the DAG is parsed.
+    * ``params_layers`` -- ``f(params) -> tuple[str, ...]``: render layers the method needs with
+      these params beyond what ``render_layers`` / ``image_quantities`` say (e.g. NFOR's feature
+      variances for ``feature_variance='buffer'``), checked against imported renders when the DAG
+      is parsed (``mcbench.pipeline.methods.needed_layers``).
     * ``warm_up`` -- False: no untimed warm-up run on a crop before the timed run.
     * ``program_seconds`` -- ``f() -> float``: when set, the recorded time of a run is what it
       returns after the run (an external program's wall time), not the wall time of ``run``.
@@ -97,6 +101,7 @@ class MethodSpec:
     image_quantities: Optional[tuple[str, ...]] = None
     denoise_image: Optional[Callable] = None
     check_config: Optional[Callable] = None
+    params_layers: Optional[Callable] = None
     warm_up: bool = True
     program_seconds: Optional[Callable] = None
     required_files: Optional[Callable] = None

@@ -157,24 +157,28 @@ def render_layers(modules) -> tuple[str, ...] | None:
     return tuple(names)
 
 
-def needed_layers(module, *, halves: bool = True) -> tuple[str, ...]:
+def needed_layers(module, *, halves: bool = True, params: dict | None = None) -> tuple[str, ...]:
     """The render layers a method cannot run without, checked against an imported render's when
     the DAG is parsed (:mod:`mcbench.pipeline.plan`): its declared ``render_layers``; or, for a
     single-image denoiser declaring ``image_quantities`` (:class:`mcbench.io.method_spec.MethodSpec`), those quantities
     of the full image plus the halves' own colour (and variance, if it reads variance) when
     ``halves`` (half-buffer features fall back to the full image's,
     :meth:`mcbench.io.buffers.RenderBuffers.image`); else every layer of
-    :data:`mcbench.io.buffers.REQUIRED_LAYERS`."""
+    :data:`mcbench.io.buffers.REQUIRED_LAYERS`; plus, with ``params``, the layers its
+    ``params_layers`` hook names for them."""
     from mcbench.io.buffers import REQUIRED_LAYERS
 
     spec = method_spec(module)
+    extra = tuple(spec.params_layers(dict(params or {}))) if spec.params_layers is not None else ()
     if spec.render_layers is not None:
-        return spec.render_layers
-    quantities = spec.image_quantities
-    if quantities is None:
-        return REQUIRED_LAYERS
-    own = [q for q in ("color", "variance") if q in quantities]
-    return (*quantities, *(q + s for s in ("_a", "_b") for q in own if halves))
+        base = spec.render_layers
+    elif spec.image_quantities is None:
+        base = REQUIRED_LAYERS
+    else:
+        quantities = spec.image_quantities
+        own = [q for q in ("color", "variance") if q in quantities]
+        base = (*quantities, *(q + s for s in ("_a", "_b") for q in own if halves))
+    return tuple(dict.fromkeys((*base, *extra)))
 
 
 def _apply(module, buffers: RenderBuffers, inputs: list[Denoised], params: dict) -> Denoised:

@@ -233,7 +233,7 @@ def _check_render_folders(config: dict, methods: dict, scenes: list[str], spps: 
         file_of = {layer: name for name, layer in AUTHORS_FILES.items()}
         for name, spec in methods.items():
             module = load_method(spec["module"])
-            needed = needed_layers(module, halves=halves)
+            needed = needed_layers(module, halves=halves, params=spec.get("params") or {})
             lacking = [layer for layer in needed if layer not in layers_in_all]
             if not lacking and not halves and spec["kind"] == "combiner":
                 lacking = ["color_a", "color_b"]    # a combiner weighs its inputs by their halves

@@ -102,7 +102,13 @@ def test_what_the_folder_lacks_is_refused_when_the_dag_is_parsed(folder_scenes, 
 
 
 def test_a_folder_with_every_layer_takes_every_method(folder_scenes):
-    result = plan(scenes=["cornell_box", "attic"], denoisers=["oidn", "jbf", "nfor"],
+    # the authors' layout holds no feature variances: NFOR's default (Tungsten's, feature_variance
+    # 'buffer') reads them and is refused when the DAG is parsed; its 'halves' estimator runs
+    with pytest.raises(BenchError, match=r"method 'nfor' \(nfor\) reads render layer\(s\) \['normal_variance', "
+                                         r"'albedo_variance', 'depth_variance'\], which scene 'attic' lacks"):
+        plan(scenes=["cornell_box", "attic"], denoisers=["oidn", "nfor"])
+    nfor = {"name": "nfor", "method": "nfor", "params": {"feature_variance": "halves"}}
+    result = plan(scenes=["cornell_box", "attic"], denoisers=["oidn", "jbf", nfor],
                   combiners=[{"name": "ens", "method": "ensemble", "inputs": ["oidn", "nfor"]}],
                   metrics=["relmse", "relmse_corrected"])
     assert list(result["render_folders"]) == ["attic"]
