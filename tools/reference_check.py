@@ -1,21 +1,21 @@
-"""How many ranks move when a scene's reference is replaced by a cleaner one? (a one-off measurement)
+"""How many ranks move when a scene's reference is replaced by another? (a one-off measurement)
 
-    python tools/reference_check.py RESULTS_OLD RESULTS_NEW --scenes veach_ajar fog_beams --spp 512 1024
+    python tools/reference_check.py results --against veach_ajar=OTHER.exr fog_beams=OTHER2.exr \
+        --spp 512 1024
 
-``RESULTS_OLD`` and ``RESULTS_NEW`` are two finished runs of the same study whose method outputs are
-the same and whose references differ only for ``--scenes`` (e.g. 16384 against 65536 spp: run the
-study, copy its ``results/`` and rerun with a config that raises ``reference.scene_spp`` for those
-scenes; Snakemake then re-renders only their references and rescores their cases). For every metric
-in ``--metrics`` and every ``--spp`` it prints, from each run's ``metrics.csv`` and the pool of
+``results`` is a finished run; each ``--against SCENE=PATH`` names another reference of that scene
+(a merged reference EXR with ``color`` and ``variance`` layers, e.g. the 16384-spp reference of an
+earlier run while ``results`` holds a 65536-spp one). The run's method outputs of those scenes at
+``--spp`` are scored again, in this process, against the other reference (relMSE and the corrected
+relMSE, :mod:`mcbench.analysis.metrics`, as the metrics jobs compute them), and for every metric
+and spp it prints, between the run's own scores and the rescored ones, over the ranked pool of
 ``tables/ranking_relmse.csv`` (the 39 candidates and the noisy input):
 
-* per changed scene: how many of the entries change their per-case score (rank), the largest change,
-  and Kendall's tau between the two orderings;
-* for the ranking table's column at that spp (mean score over all scenes): how many entries change
-  their position in the column's order, the largest change, Kendall's tau, and the largest change of
-  a column score;
-* the old and new reference's noise floor ratio of each changed scene (best candidate's relMSE at the
-  highest spp over the reference's own estimated relMSE, ``tables/scenes.csv``).
+* per scene: how many entries change their per-case score (rank), the largest change, Kendall's tau;
+* for the ranking table's column at that spp (mean score over all scenes of the run): the same over
+  the column's order, and the largest change of a column score;
+* each reference's noise floor (:func:`mcbench.analysis.scene_summary.reference_relmse_floor`) and
+  its ratio to the best pool candidate's relMSE at each spp.
 
 Prints Markdown. Writes nothing.
 """
@@ -33,62 +33,84 @@ from scipy.stats import kendalltau, rankdata
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
+from mcbench.analysis.metrics import relmse, relmse_corrected  # noqa: E402
 from mcbench.analysis.ranking import case_scores  # noqa: E402
+from mcbench.analysis.scene_summary import reference_relmse_floor  # noqa: E402
+from mcbench.io.buffers import Denoised, RenderBuffers  # noqa: E402
+from mcbench.io.exr import read_layers  # noqa: E402
+
+METRICS = {"relmse": lambda image, ref, var: relmse(image, ref),
+           "relmse_corrected": lambda image, ref, var: relmse_corrected(image, ref, var)}
 
 
-def _pool(results: Path) -> list[str]:
-    return pd.read_csv(results / "tables" / "ranking_relmse.csv")["candidate"].astype(str).tolist()
-
-
-def _scores(results: Path, metric: str, pool: list[str]) -> pd.DataFrame:
-    metrics = pd.read_csv(results / "metrics.csv")
-    metrics = metrics[metrics["candidate"].isin(pool) & (metrics["metric"] == metric)]
-    return case_scores(metrics, metric)
-
-
-def _moves(old: pd.Series, new: pd.Series) -> tuple[int, float, float]:
-    """Entries whose rank differs, the largest rank change, Kendall's tau of the two orders."""
-    old, new = old.sort_index(), new.reindex(old.sort_index().index)
+def _moves(old: pd.Series, new: pd.Series) -> tuple[int, float, float, float]:
+    """Entries whose rank differs, the largest rank change, Kendall's tau, the largest score change."""
+    old = old.sort_index()
+    new = new.reindex(old.index)
     old_rank, new_rank = rankdata(-old.to_numpy()), rankdata(-new.to_numpy())
-    changed = int(np.sum(old_rank != new_rank))
-    largest = float(np.max(np.abs(old_rank - new_rank))) if len(old_rank) else 0.0
-    tau = float(kendalltau(old_rank, new_rank).statistic)
-    return changed, largest, tau
+    return (int(np.sum(old_rank != new_rank)), float(np.max(np.abs(old_rank - new_rank))),
+            float(kendalltau(old_rank, new_rank).statistic), float(np.max(np.abs(old.to_numpy() - new.to_numpy()))))
+
+
+def rescored(results: Path, metrics: pd.DataFrame, pool: list[str], against: dict[str, Path],
+             spps: list[int]) -> pd.DataFrame:
+    """``metrics`` with the rows of ``against``'s scenes at ``spps`` scored against those references."""
+    out = metrics.copy()
+    for scene, path in against.items():
+        layers = read_layers(str(path), ["color", "variance"])
+        for spp in spps:
+            images = {"noisy": RenderBuffers.load(results / "renders" / scene / f"spp{spp}.exr").color}
+            for name in pool:
+                if name != "noisy":
+                    images[name] = Denoised.load(results / "outputs" / scene / f"spp{spp}" / f"{name}.exr").full
+            for metric, function in METRICS.items():
+                for name, image in images.items():
+                    row = ((out["scene"] == scene) & (out["spp"] == spp) & (out["candidate"] == name)
+                           & (out["metric"] == metric))
+                    if row.sum() != 1:
+                        raise SystemExit(f"{results}/metrics.csv: no single row for {scene} {spp} {name} {metric}")
+                    out.loc[row, "value"] = function(image, layers["color"], layers["variance"])
+    return out
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("old", type=Path)
-    parser.add_argument("new", type=Path)
-    parser.add_argument("--scenes", nargs="+", required=True)
+    parser.add_argument("results", type=Path)
+    parser.add_argument("--against", nargs="+", required=True, metavar="SCENE=PATH")
     parser.add_argument("--spp", nargs="+", type=int, default=[512, 1024])
-    parser.add_argument("--metrics", nargs="+", default=["relmse", "relmse_corrected"])
     args = parser.parse_args(argv)
-    pool = _pool(args.old)
-    if sorted(pool) != sorted(_pool(args.new)):
-        raise SystemExit("the two runs rank different pools")
-    for path in (args.old, args.new):
-        scenes = pd.read_csv(path / "tables" / "scenes.csv").set_index("scene")
-        print(f"* `{path}`: " + "; ".join(
-            f"{s} reference {scenes.loc[s, 'reference_spp']} spp, floor ratio {scenes.loc[s, 'floor_ratio']:.2f}"
-            for s in args.scenes))
+    against = {item.split("=", 1)[0]: Path(item.split("=", 1)[1]) for item in args.against}
+    pool = pd.read_csv(args.results / "tables" / "ranking_relmse.csv")["candidate"].astype(str).tolist()
+    metrics = pd.read_csv(args.results / "metrics.csv")
+    metrics = metrics[metrics["candidate"].isin(pool) & metrics["metric"].isin(list(METRICS))]
+    other = rescored(args.results, metrics, pool, against, args.spp)
+
+    print("| scene | reference | floor (relMSE) | floor ratio per spp |")
+    print("|---|---|---|---|")
+    for scene, path in against.items():
+        for label, ref_path, table in (("run's", args.results / "references" / f"{scene}.exr", metrics),
+                                       ("other", path, other)):
+            layers = read_layers(str(ref_path), ["color", "variance"])
+            floor = reference_relmse_floor(layers["color"], layers["variance"])
+            ratios = []
+            for spp in args.spp:
+                rows = table[(table["scene"] == scene) & (table["spp"] == spp) & (table["metric"] == "relmse")
+                             & (table["candidate"] != "noisy")]
+                ratios.append(f"{spp}: {rows['value'].min() / floor:.1f}")
+            print(f"| {scene} | {label} (`{ref_path}`) | {floor:.3g} | {', '.join(ratios)} |")
     print()
-    print("| metric | spp | what | entries moved (of %d) | largest move | Kendall tau | largest score change |" % len(pool))
+    print(f"| metric | spp | what | entries moved (of {len(pool)}) | largest move | Kendall tau | largest score change |")
     print("|---|---|---|---|---|---|---|")
-    for metric in args.metrics:
-        old, new = _scores(args.old, metric, pool), _scores(args.new, metric, pool)
+    for metric in METRICS:
+        own, changed = case_scores(metrics, metric), case_scores(other, metric)
         for spp in args.spp:
-            for scene in args.scenes:
+            for scene in against:
                 pick = lambda s: s[(s["scene"] == scene) & (s["spp"] == spp)].set_index("candidate")["score"]
-                a, b = pick(old), pick(new)
-                changed, largest, tau = _moves(a, b)
-                print(f"| {metric} | {spp} | {scene} (case) | {changed} | {largest:g} | {tau:.3f} | "
-                      f"{float(np.max(np.abs(a.sort_index() - b.reindex(a.sort_index().index)))):g} |")
+                moved, largest, tau, score = _moves(pick(own), pick(changed))
+                print(f"| {metric} | {spp} | {scene} (case) | {moved} | {largest:g} | {tau:.3f} | {score:g} |")
             column = lambda s: s[s["spp"] == spp].groupby("candidate")["score"].mean()
-            a, b = column(old), column(new)
-            changed, largest, tau = _moves(a, b)
-            print(f"| {metric} | {spp} | table column | {changed} | {largest:g} | {tau:.3f} | "
-                  f"{float(np.max(np.abs(a.sort_index() - b.reindex(a.sort_index().index)))):.3f} |")
+            moved, largest, tau, score = _moves(column(own), column(changed))
+            print(f"| {metric} | {spp} | table column | {moved} | {largest:g} | {tau:.3f} | {score:.3f} |")
     return 0
 
 
