@@ -55,7 +55,7 @@ def test_config_yaml_sets_only_what_the_schema_does_not_default():
 
     assert list(copies(written, defaults, [])) == []
     assert resolve_config(written)["reference"]["scene_spp"] == {
-        "cornell_box": 65536, "glass_caustics": 65536, "veach_ajar": 65536, "fog_beams": 65536,
+        "cornell_box": 65536, "glass_caustics": 131072, "veach_ajar": 65536, "fog_beams": 65536,
         "envmap_objects": 32768, "fine_textures": 32768}
 
 
