@@ -227,43 +227,80 @@ def write_case_images(case_dir, *, reference, images: dict, weights: dict | None
          "images": {entry: {"<ev>": "<entry>_<tag>.jpg"}},       # reference first
          "errors": {entry: {"relmse": "<entry>_relmse.png", "flip": "<entry>_flip.png"}},
          "weights": {entry: [{"input": name, "file": "<entry>_weights<i>.png"}]}}
+
+    The same as :func:`merge_fragments` of :func:`write_entry_images` for the reference and each entry.
     """
-    case_dir = Path(case_dir)
-    reference = _check_image(REFERENCE, reference, None)
     if REFERENCE in images:
         raise BenchError(f"viewer: '{REFERENCE}' is the reference's entry name; no candidate may take it")
-    height, width = reference.shape[:2]
-    fragment = {"width": width, "height": height, "images": {}, "errors": {}, "weights": {}}
-    entries = {REFERENCE: reference, **{name: _check_image(name, image, reference.shape)
-                                        for name, image in images.items()}}
-    for name, image in entries.items():
-        files = {}
-        for ev in exposures:
-            file_name = f"{name}_{exposure_tag(ev)}.jpg"
-            write_jpeg(case_dir / file_name, display_bytes(exposed_display(image, ev=ev)))
-            files[str(int(ev))] = file_name
-        fragment["images"][name] = files
-        if name == REFERENCE:
-            continue
-        fragment["errors"][name] = {}
-        maps = ({"relmse": error_metrics.relmse_map(image, reference), "flip": flip_maps[name]}
-                if flip_maps and name in flip_maps else error_maps(image, reference))
-        for metric, values in maps.items():
-            file_name = f"{name}_{metric}.png"
-            write_indexed_png(case_dir / file_name, scale_indices(values, ERROR_SCALES[metric]), ERROR_SCALES[metric])
-            fragment["errors"][name][metric] = file_name
-    for name, layers in (weights or {}).items():
+    for name in weights or {}:
         if name not in images:
             raise BenchError(f"viewer: weight maps of '{name}', which is not an entry of the case")
+    fragments = [write_entry_images(case_dir, REFERENCE, reference, reference=reference, exposures=exposures)]
+    for name, image in images.items():
+        fragments.append(write_entry_images(case_dir, name, image, reference=reference,
+                                            weights=(weights or {}).get(name), exposures=exposures,
+                                            flip_map=(flip_maps or {}).get(name)))
+    return merge_fragments(fragments)
+
+
+def write_entry_images(folder, name: str, image, *, reference, weights: list | None = None,
+                       exposures=EXPOSURES_EV, flip_map=None) -> dict:
+    """Write one entry's viewer images into ``folder`` and return its fragment (the shape of
+    :func:`write_case_images`' for this entry alone): ``image`` (H, W, 3) tone-mapped at each
+    exposure; unless ``name`` is the reference's, its relMSE and FLIP error maps against
+    ``reference`` (``flip_map`` (H, W) when computed already) and the weight maps ``weights``
+    [(input name, (H, W, 3) layer), ...]."""
+    folder = Path(folder)
+    reference = _check_image(REFERENCE, reference, None)
+    if name == REFERENCE:
+        image = reference
+    else:
+        image = _check_image(name, image, reference.shape)
+    height, width = reference.shape[:2]
+    fragment = {"width": width, "height": height, "images": {}, "errors": {}, "weights": {}}
+    files = {}
+    for ev in exposures:
+        file_name = f"{name}_{exposure_tag(ev)}.jpg"
+        write_jpeg(folder / file_name, display_bytes(exposed_display(image, ev=ev)))
+        files[str(int(ev))] = file_name
+    fragment["images"][name] = files
+    if name == REFERENCE:
+        return fragment
+    fragment["errors"][name] = {}
+    maps = ({"relmse": error_metrics.relmse_map(image, reference), "flip": flip_map}
+            if flip_map is not None else error_maps(image, reference))
+    for metric, values in maps.items():
+        file_name = f"{name}_{metric}.png"
+        write_indexed_png(folder / file_name, scale_indices(values, ERROR_SCALES[metric]), ERROR_SCALES[metric])
+        fragment["errors"][name][metric] = file_name
+    if weights is not None:
         fragment["weights"][name] = []
-        for i, (input_name, layer) in enumerate(layers):
+        for i, (input_name, layer) in enumerate(weights):
             values = weight_map(layer)
             if values.shape != (height, width):
                 raise BenchError(f"viewer: weight map {i} of '{name}' is {values.shape}, images are {(height, width)}")
             file_name = f"{name}_weights{i}.png"
-            write_indexed_png(case_dir / file_name, scale_indices(values, WEIGHT_SCALE), WEIGHT_SCALE)
+            write_indexed_png(folder / file_name, scale_indices(values, WEIGHT_SCALE), WEIGHT_SCALE)
             fragment["weights"][name].append({"input": input_name, "file": file_name})
     return fragment
+
+
+def merge_fragments(fragments: list[dict]) -> dict:
+    """One case's fragment from its entries' (:func:`write_entry_images`), in the given order; the
+    entries must have one size and distinct names."""
+    merged = {"width": None, "height": None, "images": {}, "errors": {}, "weights": {}}
+    for fragment in fragments:
+        size = (fragment["width"], fragment["height"])
+        if merged["width"] is not None and size != (merged["width"], merged["height"]):
+            raise BenchError(f"viewer: entries of {size[0]}x{size[1]} and {merged['width']}x{merged['height']} "
+                             f"pixels in one case")
+        merged["width"], merged["height"] = size
+        for key in ("images", "errors", "weights"):
+            for name, value in fragment[key].items():
+                if name in merged[key]:
+                    raise BenchError(f"viewer: entry '{name}' twice in one case")
+                merged[key][name] = value
+    return merged
 
 
 def case_folder(scene: str, spp: int) -> str:

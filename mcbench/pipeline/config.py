@@ -194,6 +194,16 @@ def resolve_config(config: dict | None, *, source: str = "config",
     if errors:
         error = _branch_error(errors[0])
         raise ConfigError(f"{source}: {key_path(error.absolute_path)}: {_message(error)}")
+    return _fold_additions(resolved)
+
+
+def _fold_additions(resolved: dict) -> dict:
+    """``add_denoisers`` and ``add_combiners`` appended to ``denoisers`` and ``combiners`` (each
+    then empty): the resolved config holds one list of each, so a study written either way has
+    one digest and one plan."""
+    for key in ("denoisers", "combiners"):
+        resolved[key] = list(resolved[key]) + list(resolved[f"add_{key}"])
+        resolved[f"add_{key}"] = []
     return resolved
 
 

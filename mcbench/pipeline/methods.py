@@ -1,5 +1,6 @@
 """The work behind ``workflow/rules/methods.smk``: running base denoisers and combiners on one
-test case (a batch of methods per job), with their outputs, timing records and output checks.
+test case (one method per job, in a warm worker of mcbench.pipeline.pool; or several in one
+call), with their outputs, timing records and output checks.
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ import numpy as np
 from mcbench import BenchError
 from mcbench.io.buffers import Denoised, RenderBuffers
 from mcbench.io.exr import check_finite, read_metadata, write_layers
+from mcbench.io.file_cache import cached_read
 from mcbench.io.method_spec import method_spec
 from mcbench.io.tables import write_json
 
@@ -36,7 +38,7 @@ def run_method(method: str, render_path: str, output_path: str, timing_path: str
 
 def run_methods(entries: list[dict], render_path: str, *, scene: str = "", spp: int = 0,
                 threads: int = 1) -> None:
-    """Run several methods of one test case in one process, in the given order (one DAG job).
+    """Run several methods of one test case in one process, in the given order.
 
     ``entries``: dicts with ``name``, ``module``, ``params``, ``input_paths`` (the output EXRs
     of the method's inputs) and ``exr``, ``timing`` (where its output and timing record go),
@@ -50,7 +52,9 @@ def run_methods(entries: list[dict], render_path: str, *, scene: str = "", spp: 
     compilation, numba's cache loading and first-call set-up are not counted (they are paid once
     per process, whatever the image size); the first failure stops the call, naming the
     method. Methods are imported once per process (a learned method's torch import is paid once
-    per batch, not once per method).
+    per process, not once per method). The render and whole-file inputs are read through
+    :func:`mcbench.io.file_cache.cached_read`, so a warm worker (:mod:`mcbench.pipeline.pool`)
+    running the next method of the same case does not decode them again.
     """
     from mcbench.pipeline.registry import load_method, method_parameters
 
@@ -60,12 +64,15 @@ def run_methods(entries: list[dict], render_path: str, *, scene: str = "", spp: 
     if by_rows:
         buffers = _render_by_rows(render_path, render_layers(modules.values()))
     else:
-        buffers = RenderBuffers.load(render_path, layers=render_layers(modules.values()))
+        layers = render_layers(modules.values())
+        buffers = cached_read(render_path, lambda path: RenderBuffers.load(path, layers=layers),
+                              key=("render", layers))
     loaded: dict[str, Denoised] = {}
 
     def input_of(path: str) -> Denoised:
         if path not in loaded:
-            denoised = _denoised_by_rows(path) if by_rows else Denoised.load(path, extras=True)
+            denoised = (_denoised_by_rows(path) if by_rows else
+                        cached_read(path, lambda p: Denoised.load(p, extras=True), key=("denoised",)))
             if denoised.full.shape != buffers.color.shape:
                 raise BenchError(f"{path}: shape {denoised.full.shape} does not match render "
                                  f"{render_path} of shape {buffers.color.shape}")
@@ -73,7 +80,7 @@ def run_methods(entries: list[dict], render_path: str, *, scene: str = "", spp: 
         return loaded[path]
 
     height, width = buffers.shape
-    warmed: set[tuple[str, str]] = set()
+    warmed = _WARMED
     for entry in entries:
         method, module_name, params = entry["name"], entry["module"], dict(entry.get("params") or {})
         module = modules[module_name]
@@ -104,6 +111,9 @@ def run_methods(entries: list[dict], render_path: str, *, scene: str = "", spp: 
                                      "kind": spec.kind, "seconds": seconds, "width": width,
                                      "height": height, "threads": threads, "machine": _machine()})
 
+
+#: (module, parameters) already warmed up in this process (a batch, or a warm worker of mcbench.pipeline.pool)
+_WARMED: set[tuple[str, str]] = set()
 
 WARM_UP_SIZE = 32  # pixels per side of the untimed warm-up crop of run_methods
 

@@ -7,6 +7,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 import time
+from pathlib import Path
 
 
 from mcbench import NOISY, BenchError
@@ -131,5 +132,99 @@ def gather_timings(paths: list[str], output_path: str) -> pd.DataFrame:
     frame = pd.DataFrame([timing_record(p) for p in paths])
     columns = ["scene", "spp", "method", "module", "kind", "seconds", "width", "height", "threads", "machine"]
     frame = frame[[c for c in columns if c in frame.columns]].sort_values(["method", "scene", "spp"])
+    write_csv(output_path, frame)
+    return frame
+
+
+#: An entry's viewer fragment in its folder (mcbench.pipeline.metrics.evaluate_entry).
+ENTRY_RECORD = "entry.json"
+
+
+def evaluate_entry(scene: str, spp: int, entry: str, image_path: str, reference_path: str,
+                   metrics: list[str], metrics_path: str, viewer_dir: str, *,
+                   weight_inputs: list[str] = ()) -> pd.DataFrame:
+    """Errors of one entry of a test case (the noisy input ``NOISY``, read from its render, or a
+    candidate's output EXR) against the reference, and the entry's viewer images.
+
+    Writes ``metrics_path``: a tidy CSV with columns scene, spp, candidate, metric, value (one
+    row per metric of ``metrics``, in that order), and into ``viewer_dir`` the entry's images
+    (:func:`mcbench.analysis.viewer.write_entry_images`: tone-mapped at each exposure, relMSE and
+    HDR-FLIP maps, and for a candidate whose inputs ``weight_inputs`` names and whose EXR holds
+    ``weights_filtered_{i}``, its weight maps) with their fragment and CRC-32s as
+    :data:`ENTRY_RECORD`; the noisy entry's folder also holds the reference's images. The FLIP
+    map drawn is the one the ``flip`` metric's value comes from (one evaluation). The reference
+    and render are read through :func:`mcbench.io.file_cache.cached_read` (a warm worker reads
+    them once per case).
+    """
+    import pandas as pd
+
+    from mcbench.analysis.metrics import flip_with_map
+    from mcbench.analysis.viewer import REFERENCE, merge_fragments, write_entry_images
+    from mcbench.io.checksums import crc32_hex
+    from mcbench.io.file_cache import cached_read
+    from mcbench.io.tables import write_json
+
+    needs_variance = any(metric in REFERENCE_METRICS for metric in metrics)
+    names = ("color", "variance") if needs_variance else ("color",)
+
+    def read_reference(path):
+        layers = read_layers(path, list(names))
+        check_finite(path, layers)
+        check_resolution(path, layers["color"].shape)
+        return layers
+
+    reference_layers = cached_read(reference_path, read_reference, key=("reference", names))
+    reference, reference_variance = reference_layers["color"], reference_layers.get("variance")
+    weights = None
+    if entry == NOISY:
+        image = cached_read(image_path, lambda p: RenderBuffers.load(p, layers=("color",)), key=("render", ("color",))).color
+    else:
+        denoised = cached_read(image_path, lambda p: Denoised.load(p, extras=True), key=("denoised",))
+        image = denoised.full
+        extras = denoised.extras or {}
+        if weight_inputs and all(f"weights_filtered_{i}" in extras for i in range(len(weight_inputs))):
+            weights = [(name, extras[f"weights_filtered_{i}"]) for i, name in enumerate(weight_inputs)]
+    if image.shape != reference.shape:
+        raise BenchError(f"{image_path}: shape {image.shape} does not match reference "
+                         f"{reference_path} of shape {reference.shape}")
+    flip_map = flip_value = None
+    if "flip" in metrics:
+        flip_map, flip_value = flip_with_map(image, reference)
+    rows = []
+    for metric in metrics:
+        if metric == "flip":
+            value = flip_value
+        elif metric in REFERENCE_METRICS:
+            value = REFERENCE_METRICS[metric](image, reference, reference_variance)
+        else:
+            value = METRICS[metric](image, reference)
+        rows.append({"scene": scene, "spp": int(spp), "candidate": entry, "metric": metric, "value": value})
+    frame = pd.DataFrame(rows, columns=["scene", "spp", "candidate", "metric", "value"])
+    folder = Path(viewer_dir)
+    folder.mkdir(parents=True, exist_ok=True)
+    fragments = [write_entry_images(folder, REFERENCE, reference, reference=reference)] if entry == NOISY else []
+    fragments.append(write_entry_images(folder, entry, image, reference=reference, weights=weights, flip_map=flip_map))
+    fragment = merge_fragments(fragments)
+    from mcbench.analysis.viewer import case_files
+
+    checksums = {name: crc32_hex((folder / name).read_bytes()) for name in sorted(case_files(fragment))}
+    write_json(folder / ENTRY_RECORD, {"scene": scene, "spp": int(spp), "entry": entry, **fragment,
+                                       "files_crc32": checksums})
+    write_csv(metrics_path, frame)
+    return frame
+
+
+def assemble_case_metrics(paths: dict[str, str], output_path: str, *, scene: str, spp: int,
+                          metric_names: list[str]) -> pd.DataFrame:
+    """One case's metrics CSV from its entries' (``paths``: {entry: CSV of :func:`evaluate_entry`}),
+    in that order, each refused (naming its file) unless it holds exactly its entry's rows of
+    this case, one per metric of ``metric_names`` with a finite value."""
+    import pandas as pd
+
+    frames = []
+    for entry, path in paths.items():
+        frames.append(read_case_metrics(path, candidates=[entry], metric_names=metric_names,
+                                        case=(scene, int(spp))))
+    frame = pd.concat(frames, ignore_index=True)
     write_csv(output_path, frame)
     return frame

@@ -2,7 +2,7 @@
 
 :func:`plan_study` is everything ``workflow/rules/common.smk`` computes from the resolved config
 alone (the method table, the scenes and spp levels, the ranking pool and the extras, reference
-spp, batches, training seeds, the oracle's and the progressive curve's scene), with every check
+spp, training seeds, the oracle's and the progressive curve's scene), with every check
 that stops a config before any job. The Snakefile reads its names from it (``PLAN``), so a test
 calling :func:`plan_study` checks the workflow's own logic without starting Snakemake.
 
@@ -65,8 +65,8 @@ def plan_study(config: dict, *, written: dict | None = None, source: str = "conf
     Returns a dict: ``methods`` (the method table, in dependency order), ``scenes``, ``spps``
     (sorted), ``cases`` ((scene, spp) pairs), ``candidates``, ``pool_study``, ``ranked``,
     ``extras``, ``pool_note``, ``progressive`` (PD entry -> its input), ``labels``,
-    ``metrics``, ``reference_chunks``, ``reference_spp`` (per scene), ``batches``,
-    ``single_job_methods``, ``training``, ``training_overrides``, ``training_seeds``,
+    ``metrics``, ``reference_chunks``, ``reference_spp`` (per scene),
+    ``training``, ``training_overrides``, ``training_seeds``,
     ``networks``, ``combiner_training``, ``combiner_seeds``, ``oracle_scene``,
     ``oracle_downscale``, ``progressive_scene``, ``progressive_downscale``.
     """
@@ -123,16 +123,12 @@ def _plan(config: dict, is_learned) -> dict:
     _check_reference_above_spp(config, reference_spp)
     reference_spp.update({scene: None for scene in render_folders})   # made elsewhere: unknown
 
-    # Which methods share a job (config batch_methods): every method of a case in one job, in the
-    # method table's order (dependency order, checked here); else one job per method.
-    batches = {"methods": list(methods) if config["batch_methods"] else []}
+    # the method table's order is a dependency order (checked here): a combiner after its inputs
     position = {name: index for index, name in enumerate(methods)}
     for name, spec in methods.items():
         for input_name in spec["inputs"]:
             if position[input_name] > position[name]:
                 raise BenchError(f"method '{name}' takes '{input_name}', which comes after it in the method table")
-    batched = {name for names in batches.values() for name in names}
-    single_job_methods = [name for name in methods if name not in batched]
 
     training = {key: value for key, value in config["training"].items() if key not in ("networks", "combiners")}
     training_overrides = config["training"]["networks"]
@@ -164,7 +160,6 @@ def _plan(config: dict, is_learned) -> dict:
         "candidates": candidates, "pool_study": pool_study, "ranked": ranked, "extras": extras,
         "pool_note": pool_note, "progressive": progressive, "labels": labels, "metrics": list(config["metrics"]),
         "reference_chunks": reference_chunks, "reference_spp": reference_spp,
-        "batches": batches, "single_job_methods": single_job_methods,
         "training": training, "training_overrides": training_overrides, "training_seeds": training_seeds_,
         "networks": networks, "combiner_training": combiner_training, "combiner_seeds": combiner_seeds,
         "oracle_scene": oracle_scene, "oracle_downscale": oracle_downscale, "render_folders": render_folders,

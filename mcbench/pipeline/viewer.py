@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 
@@ -140,3 +141,41 @@ def write_viewer(metrics_csv: str, case_dirs: list[str], output_dir: str, *, cas
                     manifest=manifest)
     print(f"viewer: {len(cases)} cases, {directory_bytes(output_dir) / 1e6:.2f} MB in {output_dir}", flush=True)
     return manifest
+
+
+def assemble_viewer_case(scene: str, spp: int, entry_dirs: dict[str, str], case_dir: str) -> dict:
+    """One case's viewer folder from its entries' folders (``entry_dirs``: {entry: folder written
+    by :func:`mcbench.pipeline.metrics.evaluate_entry`}, the noisy entry first): every entry's
+    images hard-linked (or copied) into ``case_dir`` after checking them against their record's
+    CRC-32s, and the merged fragment with the checksums as ``case.json`` (what
+    :func:`write_viewer` reads). Refused, naming the record, when an entry's folder holds another
+    case or entry, or an image differs from its checksum."""
+    import shutil
+
+    from mcbench.analysis.viewer import CASE_RECORD, case_files, merge_fragments
+    from mcbench.pipeline.metrics import ENTRY_RECORD
+
+    fragments, checksums = [], {}
+    case_path = Path(case_dir)
+    case_path.mkdir(parents=True, exist_ok=True)
+    for entry, folder in entry_dirs.items():
+        record_path = Path(folder) / ENTRY_RECORD
+        record = read_json(record_path)
+        if (record.get("scene"), record.get("spp"), record.get("entry")) != (scene, int(spp), entry):
+            raise BenchError(f"{record_path}: holds entry {record.get('entry')!r} of case ({record.get('scene')}, "
+                             f"{record.get('spp')}), expected {entry!r} of ({scene}, {spp}); rerun the job that writes it")
+        fragment = {key: value for key, value in record.items() if key not in ("scene", "spp", "entry", FILE_CHECKSUMS)}
+        _check_case_files(Path(folder), {**fragment, FILE_CHECKSUMS: record.get(FILE_CHECKSUMS)}, record_path)
+        for name in sorted(case_files(fragment)):
+            target = case_path / name
+            if target.exists():
+                target.unlink()
+            try:
+                os.link(Path(folder) / name, target)
+            except OSError:
+                shutil.copyfile(Path(folder) / name, target)
+        fragments.append(fragment)
+        checksums.update(record[FILE_CHECKSUMS])
+    fragment = merge_fragments(fragments)
+    write_json(case_path / CASE_RECORD, {"scene": scene, "spp": int(spp), **fragment, FILE_CHECKSUMS: checksums})
+    return fragment

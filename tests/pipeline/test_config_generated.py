@@ -321,7 +321,7 @@ def valid_configs(draw, *, max_scenes: int = 4, max_spp: int = 4, max_denoisers:
     # -- the rest
     config.update(draw(st.fixed_dictionaries({}, optional={
         "variant": st.sampled_from(SCHEMA["properties"]["variant"]["enum"]), "seed": st.integers(0, 6),
-        "render_threads": st.integers(1, 64), "batch_methods": st.booleans(), "weights_dir": st.none(),
+        "render_threads": st.integers(1, 64), "weights_dir": st.none(),
         "gpus": st.integers(0, 8), "gpu_model": st.sampled_from(["", "a100", "h100", "rtx_4090"])})))
     # the curve's and the oracle's scenes default to the first scene; a progressive entry needs its
     # curve scene among the scenes (drawn from them above)
@@ -711,10 +711,8 @@ def test_snakemake_dry_run_of_generated_configs_plans_what_the_planner_says(tmp_
     assert int(counts["render_noisy"]) == len(cases) and int(counts["case_metrics"]) == len(cases)
     assert int(counts["ranking_table"]) == len(plan["metrics"]) == int(counts["extras_table"])
     assert int(counts["merge_reference"]) == len(plan["scenes"])
-    if resolved["batch_methods"]:
-        assert int(counts["run_case_methods"]) == len(cases)
-    else:
-        assert int(counts["run_method"]) == len(cases) * len(plan["candidates"])
+    assert int(counts["run_method"]) == len(cases) * len(plan["candidates"])
+    assert int(counts["evaluate_entry"]) == len(cases) * (len(plan["candidates"]) + 1)
     assert ("study_tables" in counts) == plan["pool_study"]
     assert ("progressive_tables" in counts) == bool(plan["progressive"])
 
@@ -867,7 +865,7 @@ def test_yaml_oddities_stop_naming_the_key(text, expected):
 @pytest.mark.parametrize("text, check", [
     ("spp: [0x10, 040]\n", lambda p: p["spps"] == [16, 32]),   # YAML 1.1 hex, octal
     ("spp: [1_024]\n", lambda p: p["spps"] == [1024]),
-    ("batch_methods: no\n", lambda p: p["batches"] == {"methods": []}),
+    ("add_denoisers: [jbf]\ndenoisers: [oidn]\ncombiners: []\nstudy: {pool: no}\n", lambda p: list(p["methods"]) == ["oidn", "jbf"]),
     ("resolution: ~\n", lambda p: p["oracle_downscale"] == 2),
     ("study: {ensembles: [10, 15], pool: yes}\n", lambda p: "ens10" in p["ranked"] and "ens15" in p["ranked"]),
 ])

@@ -76,7 +76,7 @@ def test_written_costs_read_back_and_the_committed_file_loads(tmp_path):
     assert (tmp_path / "c.yaml").read_text().startswith("# fitted by hand\n# for a test\n")
     for section in ("rules", "typical"):
         committed = load_job_costs(JOB_COSTS_PATH, section=section)
-        assert {"render_noisy", "render_reference_chunk", "run_method", "run_method/nfor", "run_case_methods",
+        assert {"render_noisy", "render_reference_chunk", "run_method", "run_method/nfor", "evaluate_entry",
                 "case_metrics"} <= set(committed), section
 
 
@@ -136,7 +136,7 @@ def test_paper_config_plans_under_the_slurm_profile(tmp_path):
     jobs = _planned_resources(REPO / "workflow/configs/paper.yaml", "--profile", str(REPO / "profiles/slurm"),
                               workdir=tmp_path / "plan")
     rules = {rule for rule, _ in jobs}
-    assert {"render_reference_chunk", "run_case_methods", "case_metrics"} <= rules
+    assert {"render_reference_chunk", "run_method", "evaluate_entry", "case_metrics"} <= rules
     assert sum(rule == "render_noisy" for rule, _ in jobs) == 30 * 9
     for rule, resources in jobs:
         if rule != "all":

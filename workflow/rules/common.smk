@@ -73,12 +73,21 @@ wildcard_constraints:
     metric="|".join(ALL_METRICS),
 
 
-# Which methods share a job (config batch_methods): every method of a case in one job, in the
-# method table's order (denoisers, then combiners in config order: dependency order, checked by
-# the plan); with batch_methods false, every method in a job of its own (rule run_method).
-BATCHES = PLAN["batches"]
-BATCHED = {name for names in BATCHES.values() for name in names}
-SINGLE_JOB_METHODS = PLAN["single_job_methods"]
+# The per-method and per-entry jobs run in warm worker processes (mcbench.pipeline.pool): their
+# rules' `run:` blocks call run_in_pool in Snakemake's own process, which needs Snakemake's
+# threads for `run:` jobs (force-use-threads, set by the workflow profile profiles/default;
+# without it each such job would start a whole Snakemake process: the same results, far slower).
+
+
+def run_in_pool(step, *args, log, **kwargs):
+    """Run ``step`` ("module:function") of a ``run:`` rule in a warm worker (mcbench.pipeline.pool),
+    with as many workers as the cores Snakemake was given, the job's weights folder and this
+    checkout on the workers' paths."""
+    from mcbench.pipeline.pool import run_step
+
+    run_step(step, *args, log_path=log, workers=max(1, int(workflow.cores or 1)),
+             environment={"MCBENCH_WEIGHTS_DIR": str(Path(WEIGHTS_DIR).resolve())},
+             paths=[str(Path(workflow.basedir))], **kwargs)
 
 
 def method_output(name, wildcards, kind="exr"):
@@ -86,48 +95,27 @@ def method_output(name, wildcards, kind="exr"):
     return getattr(rules.run_method.output, kind).format(scene=wildcards.scene, spp=wildcards.spp, method=name)
 
 
-def batch_outputs(batch, kind):
-    """The output patterns ({scene}, {spp} left as wildcards) of a batch's methods."""
-    return [getattr(rules.run_method.output, kind).replace("{method}", name) for name in BATCHES[batch]]
+#: A case's entries: the noisy input and every candidate (rule evaluate_entry's wildcard).
+ENTRIES = [NOISY] + CANDIDATES
 
 
-def batch_inputs(batch):
-    """Input function: outputs of the methods a batch's methods take that the batch does not make."""
-
-    def inputs(wildcards):
-        names = dict.fromkeys(i for name in BATCHES[batch] for i in METHODS[name]["inputs"])
-        return [method_output(name, wildcards) for name in names if name not in BATCHES[batch]]
-
-    return inputs
+def entry_image(wildcards):
+    """The image an entry's evaluation reads: the render for the noisy input, else the method's output."""
+    if wildcards.entry == NOISY:
+        return rules.render_noisy.output[0].format(scene=wildcards.scene, spp=wildcards.spp)
+    return method_output(wildcards.entry, wildcards)
 
 
-def batch_entries(batch):
-    """Params function: the ``mcbench.pipeline.methods.run_methods`` entries of a batch's methods in one case."""
-
-    def entries(wildcards):
-        return [{"name": name, "module": METHODS[name]["module"], "params": METHODS[name]["params"],
-                 "input_paths": [method_output(i, wildcards) for i in METHODS[name]["inputs"]],
-                 "exr": method_output(name, wildcards), "timing": method_output(name, wildcards, "timing")}
-                for name in BATCHES[batch]]
-
-    return entries
+def case_entry_metrics(wildcards):
+    """{entry: its metrics CSV} of a case, the noisy input first."""
+    return {entry: rules.evaluate_entry.output.metrics.format(scene=wildcards.scene, spp=wildcards.spp, entry=entry)
+            for entry in ENTRIES}
 
 
-def batch_weights(batch):
-    """Input function: nothing, after checking that every learned method of a batch has weights."""
-
-    def weights(wildcards):
-        for name in BATCHES[batch]:
-            check_weights(name)
-        return []
-
-    return weights
-
-
-def batch_weights_digests(batch):
-    """Params function: the SHA-256 of each learned method's weights in a batch (provenance)."""
-    return lambda wildcards: {name: weights_digest_of(METHODS[name]["module"])
-                              for name in BATCHES[batch] if METHODS[name]["learned"]}
+def case_entry_viewers(wildcards):
+    """{entry: its viewer folder} of a case, the noisy input first (its folder has the reference's images)."""
+    return {entry: rules.evaluate_entry.output.viewer.format(scene=wildcards.scene, spp=wildcards.spp, entry=entry)
+            for entry in ENTRIES}
 
 
 def reference_chunk_spp(wildcards):
@@ -316,8 +304,6 @@ def _job_size(rule_name, wildcards):
         return pixels, 1, int(wildcards.spp)
     if rule_name == "render_reference_chunk":
         return pixels, 1, reference_chunk_spp(wildcards)
-    if rule_name == "run_case_methods":
-        return pixels, len(BATCHES["methods"]), 0
     if rule_name in ("case_metrics", "viewer_case"):
         return pixels, case_entries(), 0
     if rule_name == "viewer":

@@ -1,14 +1,13 @@
-# Base denoisers and combiners. A base denoiser returns its full and half-buffer results in one
-# run; a combiner also reads its input methods' outputs; a learned method also reads its
-# weights. Every method writes its own output EXR and a timing record of its compute time.
+# Base denoisers and combiners: one job per (scene, spp, method), so Snakemake decides method by
+# method what an edit of the config makes out of date (a new method runs alone; changed params
+# rerun the method and the combiners that read it). A base denoiser returns its full and
+# half-buffer results in one run; a combiner also reads its input methods' outputs; a learned
+# method also reads its weights. Every method writes its own output EXR and a timing record of
+# its compute time.
 #
-# Jobs (config batch_methods, default true): all methods of a case share one job (rule
-# run_case_methods), run in dependency order (denoisers, then combiners in config order), so the
-# process starts, imports (torch once) and reads the render and each output once: at 128x128 a
-# job's start, imports and reads cost more than most methods' compute, and the default study
-# has one job per (scene, spp) case instead of one per method and case. batch_methods false: a
-# job per method (rule run_method, e.g. to spread methods over a cluster). `snakemake -f <output
-# EXR>` reruns the job that makes it.
+# The jobs are small (tens of milliseconds of compute at 128x128), so they run in warm worker
+# processes that import once (mcbench.pipeline.pool; rule `run:` blocks in Snakemake's process,
+# common.smk's run_in_pool), not in a process each. `snakemake -f <output EXR>` reruns one.
 
 
 rule run_method:
@@ -20,7 +19,7 @@ rule run_method:
         exr=f"{RESULTS}/outputs/{{scene}}/spp{{spp}}/{{method}}.exr",
         timing=f"{RESULTS}/outputs/{{scene}}/spp{{spp}}/{{method}}.json",
     wildcard_constraints:
-        method="|".join(SINGLE_JOB_METHODS) or "(?!)",
+        method="|".join(METHODS) or "(?!)",
     params:
         spec=lambda wildcards: METHODS[wildcards.method],
         weights_dir=WEIGHTS_DIR,
@@ -28,38 +27,9 @@ rule run_method:
     threads: 1
     resources:
         **job_resources("run_method"),
-    conda:
-        "../envs/mcbench.yaml"
     log:
-        f"{RESULTS}/logs/methods/{{scene}}_spp{{spp}}_{{method}}.log",
-    benchmark:
-        f"{RESULTS}/benchmarks/methods/{{scene}}_spp{{spp}}_{{method}}.tsv"
-    script:
-        "../scripts/run_method.py"
-
-
-if BATCHES["methods"]:
-
-    rule run_case_methods:
-        input:
-            render=rules.render_noisy.output[0],
-            inputs=batch_inputs("methods"),
-            weights=batch_weights("methods"),
-        output:
-            exr=batch_outputs("methods", "exr"),
-            timing=batch_outputs("methods", "timing"),
-        params:
-            entries=batch_entries("methods"),
-            weights_dir=WEIGHTS_DIR,
-            weights_digests=batch_weights_digests("methods"),
-        threads: 1
-        resources:
-            **job_resources("run_case_methods"),
-        conda:
-            "../envs/mcbench.yaml"
-        log:
-            f"{RESULTS}/logs/methods/{{scene}}_spp{{spp}}_methods.log",
-        benchmark:
-            f"{RESULTS}/benchmarks/batches/{{scene}}_spp{{spp}}_methods.tsv"
-        script:
-            "../scripts/run_methods.py"
+        f"{RESULTS}/logs/methods/{{scene}}/spp{{spp}}/{{method}}.log",
+    run:
+        run_in_pool("mcbench.pipeline.methods:run_method", wildcards.method, input.render, output.exr,
+                    output.timing, log=log[0], module_name=params.spec["module"], params=params.spec["params"],
+                    input_paths=list(input.inputs), scene=wildcards.scene, spp=int(wildcards.spp), threads=threads)

@@ -1,29 +1,48 @@
 # Errors of every candidate and of the noisy input against the reference, per test case.
 
 
+# One job per (scene, spp, entry) (the noisy input and every candidate): its errors and its
+# viewer images (a new method is evaluated alone; a changed output re-evaluates only itself), in
+# the warm workers of mcbench.pipeline.pool like the methods.
+rule evaluate_entry:
+    input:
+        image=entry_image,
+        reference=rules.merge_reference.output[0],
+    output:
+        metrics=f"{RESULTS}/metrics/{{scene}}/spp{{spp}}/{{entry}}.csv",
+        viewer=directory(f"{RESULTS}/viewer_entries/{{scene}}/spp{{spp}}/{{entry}}"),
+    wildcard_constraints:
+        entry="|".join([NOISY] + CANDIDATES),
+    params:
+        metrics=METRIC_NAMES,
+        weight_inputs=lambda wildcards: METHODS[wildcards.entry]["inputs"] if wildcards.entry in METHODS else [],
+    threads: 1
+    resources:
+        **job_resources("evaluate_entry"),
+    log:
+        f"{RESULTS}/logs/metrics/{{scene}}/spp{{spp}}/{{entry}}.log",
+    run:
+        run_in_pool("mcbench.pipeline.metrics:evaluate_entry", wildcards.scene, int(wildcards.spp), wildcards.entry,
+                    input.image, input.reference, list(params.metrics), output.metrics, output.viewer, log=log[0],
+                    weight_inputs=list(params.weight_inputs))
+
+
+# A case's errors in one table (its entries' rows, each checked whole).
 rule case_metrics:
     input:
-        unpack(case_outputs),
-        reference=rules.merge_reference.output[0],
-        render=rules.render_noisy.output[0],
+        unpack(case_entry_metrics),
     output:
         f"{RESULTS}/metrics/{{scene}}/spp{{spp}}.csv",
-        # every entry's HDR-FLIP map (from the same evaluation as the flip metric; the viewer's)
-        flip_maps=f"{RESULTS}/metrics/{{scene}}/spp{{spp}}_flip.exr",
     params:
-        candidates=CANDIDATES,
         metrics=METRIC_NAMES,
     threads: 1
     resources:
         **job_resources("case_metrics"),
-    conda:
-        "../envs/mcbench.yaml"
     log:
         f"{RESULTS}/logs/metrics/{{scene}}_spp{{spp}}.log",
-    benchmark:
-        f"{RESULTS}/benchmarks/metrics/{{scene}}_spp{{spp}}.tsv"
-    script:
-        "../scripts/case_metrics.py"
+    run:
+        run_in_pool("mcbench.pipeline.metrics:assemble_case_metrics", dict(input.items()), output[0],
+                    log=log[0], scene=wildcards.scene, spp=int(wildcards.spp), metric_names=list(params.metrics))
 
 
 # One table of every error; every case must hold every candidate and metric with a finite value

@@ -1,6 +1,7 @@
-# The static image viewer: one job per test case writes its images (tone-mapped at
-# each exposure, relMSE and FLIP error maps, ensemble weight maps) into a case folder, so the
-# cases run in parallel and a new case or method redoes only its own folder; `viewer` copies
+# The static image viewer: each entry's images (tone-mapped at each exposure, relMSE and FLIP
+# error maps, ensemble weight maps) are written by its evaluate_entry job (metrics.smk); one job
+# per test case links them into a case folder, so a new case or method redoes only its own
+# images; `viewer` copies
 # the page (workflow/report/viewer/) and every case folder into results/viewer with data.js,
 # the manifest holding each case's numbers from metrics.csv.
 
@@ -10,26 +11,17 @@ VIEWER_PAGE = [f"{workflow.basedir}/workflow/report/viewer/{name}" for name in (
 
 rule viewer_case:
     input:
-        unpack(case_outputs),
-        reference=rules.merge_reference.output[0],
-        render=rules.render_noisy.output[0],
-        flip_maps=rules.case_metrics.output.flip_maps,
+        unpack(case_entry_viewers),
     output:
         directory(f"{RESULTS}/viewer_cases/{{scene}}/spp{{spp}}"),
-    params:
-        candidates=CANDIDATES,
-        weight_inputs={name: spec["inputs"] for name, spec in METHODS.items() if spec["inputs"]},
     threads: 1
     resources:
         **job_resources("viewer_case"),
-    conda:
-        "../envs/mcbench.yaml"
     log:
         f"{RESULTS}/logs/viewer/{{scene}}_spp{{spp}}.log",
-    benchmark:
-        f"{RESULTS}/benchmarks/viewer/{{scene}}_spp{{spp}}.tsv"
-    script:
-        "../scripts/viewer_case.py"
+    run:
+        run_in_pool("mcbench.pipeline.viewer:assemble_viewer_case", wildcards.scene, int(wildcards.spp),
+                    dict(input.items()), output[0], log=log[0])
 
 
 rule viewer:
