@@ -91,8 +91,9 @@ def study_files(results_dir, *, workdir=".", exclude=()) -> list[str]:
     results, work = Path(results_dir).resolve(), Path(workdir).resolve()
     if not results.is_dir():
         raise BenchError(f"{results_dir}: no results folder to bundle; run the study first (snakemake)")
-    if work != results and work not in results.parents:
-        raise BenchError(f"{results_dir}: not inside the working folder {workdir}; run the export there")
+    if results.parent != work or results.name != "results":
+        raise BenchError(f"{results_dir}: a bundle holds the folder results/ of the working folder {workdir}; "
+                         f"run the export in the folder that holds results/")
     skip = {Path(p).resolve() for p in exclude}
     files = []
     for folder, dirs, names in os.walk(results):
@@ -447,9 +448,10 @@ def import_mtimes(entries: list[dict], *, now_ns: int, step_ns: int = MTIME_STEP
     """New mtimes (ns) of the imported files: ``now_ns + rank * step_ns``, ``rank`` the rank of the
     file's original mtime among the distinct original mtimes. Every file is newer than the
     checkout (made before ``now_ns``), and the order is kept exactly (equal stays equal, an
-    output stays newer than its inputs); unlike ``now + (orig - first)``, the imported files
-    end within ``step_ns`` per distinct mtime of now, not hours in the future, so that what the
-    clone's run writes next is newer than the imported files it reads."""
+    output stays newer than its inputs). Unlike ``now + (orig - first)``, which would put the
+    last files of a study that ran for hours hours into the future, the files end
+    ``step_ns`` per distinct mtime after ``now_ns`` (a second per thousand), so that what the
+    clone's next run writes is newer than the imported files it reads."""
     ranks = {mtime: rank for rank, mtime in enumerate(sorted({int(e["mtime_ns"]) for e in entries}))}
     return {e["path"]: now_ns + ranks[int(e["mtime_ns"])] * step_ns for e in entries}
 
@@ -493,7 +495,8 @@ def import_study(bundle_path, *, config: dict, workdir=".", checkout_dir=None) -
     kept); then Snakemake's metadata records are written (each atomically) and the files' mtimes
     set (:func:`import_mtimes`); the staging folder is removed. Interrupted before the moves,
     ``results/`` is untouched; after, running the import again completes it (identical files
-    are skipped), and a finished import run again changes nothing but the mtimes."""
+    are skipped), and a finished import run again changes nothing but the mtimes (which makes
+    what a run wrote since the first import older than the imported files: it reruns)."""
     work, bundle = Path(workdir), Path(bundle_path)
     staging = None
 
