@@ -1,10 +1,13 @@
 """A study bundle end to end: the session's smoke run is exported (`snakemake export_study`),
 imported into a fresh copy of the checkout elsewhere, where `snakemake -n` plans nothing; a
 config that adds one method plans that method's jobs and the tables, never a render or a run
-of an existing method alone."""
+of an existing method alone; a changed parameter of an existing method reruns it. (With the
+bundle's Snakemake records left out, the clone plans nothing for the added method: the test
+fails then.)"""
 
 from __future__ import annotations
 
+import os
 import re
 import shutil
 import subprocess
@@ -39,7 +42,7 @@ def clone_snakemake(clone: Path, config: Path, *args: str) -> subprocess.Complet
     command = [sys.executable, "-m", "snakemake", "-s", str(clone / "Snakefile"), "--directory", str(clone),
                "--configfile", str(config), "--cores", "1", *args]
     result = subprocess.run(command, capture_output=True, text=True, timeout=600, cwd=clone,
-                            env={**__import__("os").environ, "PYTHONPATH": str(clone)})
+                            env={**os.environ, "PYTHONPATH": str(clone)})
     assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
     return result
 
@@ -56,6 +59,8 @@ def planned_jobs(output: str) -> list[tuple[str, list[str]]]:
 
 
 def test_an_imported_study_plans_nothing_and_an_added_method_only_its_jobs(smoke_results, tmp_path):
+    """Also: a changed parameter of an existing method reruns it (the imported Snakemake records'
+    params trigger; without the records it would silently not)."""
     workdir, config = smoke_results
     run_snakemake(workdir, "export_study")
     bundle = workdir / "results" / "bundle" / "study.tar"
@@ -66,7 +71,7 @@ def test_an_imported_study_plans_nothing_and_an_added_method_only_its_jobs(smoke
     smoke.write_text(yaml.safe_dump(config))
     imported = subprocess.run([sys.executable, "-m", "mcbench.pipeline.bundle", "import", str(bundle),
                                "--configfile", str(smoke)], capture_output=True, text=True, cwd=clone, timeout=600,
-                              env={**__import__("os").environ, "PYTHONPATH": str(clone)})
+                              env={**os.environ, "PYTHONPATH": str(clone)})
     assert imported.returncode == 0, imported.stderr
     assert (clone / "results" / "metrics.csv").read_bytes() == (workdir / "results" / "metrics.csv").read_bytes()
 
@@ -88,3 +93,12 @@ def test_an_imported_study_plans_nothing_and_an_added_method_only_its_jobs(smoke
         if rule.startswith("run_"):
             assert any(f"/{NEW_METHOD['name']}." in f for f in outputs), (rule, outputs)
     assert {"ranking_table", "gather_metrics"} <= rules
+
+    # a changed parameter of an existing method: its runs are planned in every case
+    changed = {**config, "denoisers": [{"name": "jbf", "params": {"radius": 3}} if d == "jbf" else d
+                                       for d in config["denoisers"]]}
+    assert changed["denoisers"] != config["denoisers"]
+    (clone / "changed.yaml").write_text(yaml.safe_dump(changed))
+    jobs = planned_jobs(clone_snakemake(clone, clone / "changed.yaml", "-n").stdout)
+    rerun = {f for rule, outputs in jobs if rule.startswith("run_") for f in outputs if f.endswith("/jbf.exr")}
+    assert rerun == {f"results/outputs/{scene}/spp{spp}/jbf.exr" for scene, spp in cases}
