@@ -58,3 +58,7 @@ rule all:
         study_targets(),
         progressive_targets(),
     default_target: True
+
+
+# after `all`: rule export_study takes the outputs of `all` as its input
+include: "workflow/rules/bundle.smk"

@@ -1,0 +1,104 @@
+"""A study bundle end to end: the session's smoke run is exported (`snakemake export_study`),
+imported into a fresh copy of the checkout elsewhere, where `snakemake -n` plans nothing; a
+config that adds one method plans that method's jobs and the tables, never a render or a run
+of an existing method alone; a changed parameter of an existing method reruns it. (With the
+bundle's Snakemake records left out, the clone plans nothing for the added method: the test
+fails then.)"""
+
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import yaml
+
+from tests.conftest import REPO, run_snakemake
+
+pytestmark = pytest.mark.slow
+
+NEW_METHOD = {"name": "jbf_narrow", "method": "jbf", "params": {"radius": 3}}
+
+
+def copy_checkout(target: Path) -> Path:
+    """The checkout's files as git sees them (tracked and untracked-not-ignored), copied to
+    ``target``: a fresh clone, with this checkout's uncommitted changes."""
+    names = subprocess.run(["git", "-C", str(REPO), "ls-files", "-z", "--cached", "--others", "--exclude-standard"],
+                           capture_output=True, check=True).stdout.decode().split("\0")
+    for name in filter(None, names):
+        source = REPO / name
+        if source.is_file() and not source.is_symlink():
+            (target / name).parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(source, target / name)
+    return target
+
+
+def clone_snakemake(clone: Path, config: Path, *args: str) -> subprocess.CompletedProcess:
+    """The clone's own Snakefile in the clone (its root is the working folder)."""
+    command = [sys.executable, "-m", "snakemake", "-s", str(clone / "Snakefile"), "--directory", str(clone),
+               "--configfile", str(config), "--cores", "1", *args]
+    result = subprocess.run(command, capture_output=True, text=True, timeout=600, cwd=clone,
+                            env={**os.environ, "PYTHONPATH": str(clone)})
+    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
+    return result
+
+
+def planned_jobs(output: str) -> list[tuple[str, list[str]]]:
+    """(rule, output files) of each job a dry run plans."""
+    jobs = []
+    for block in re.split(r"\n(?=(?:local)?rule \w+:)", output):
+        match = re.match(r"(?:local)?rule (\w+):", block)
+        if match:
+            outputs = re.search(r"^\s+output: (.*)$", block, re.M)
+            jobs.append((match.group(1), outputs.group(1).split(", ") if outputs else []))
+    return jobs
+
+
+def test_an_imported_study_plans_nothing_and_an_added_method_only_its_jobs(smoke_results, tmp_path):
+    """Also: a changed parameter of an existing method reruns it (the imported Snakemake records'
+    params trigger; without the records it would silently not)."""
+    workdir, config = smoke_results
+    run_snakemake(workdir, "export_study")
+    bundle = workdir / "results" / "bundle" / "study.tar"
+    assert bundle.is_file()
+
+    clone = copy_checkout(tmp_path / "clone")
+    smoke = clone / "smoke.yaml"
+    smoke.write_text(yaml.safe_dump(config))
+    imported = subprocess.run([sys.executable, "-m", "mcbench.pipeline.bundle", "import", str(bundle),
+                               "--configfile", str(smoke)], capture_output=True, text=True, cwd=clone, timeout=600,
+                              env={**os.environ, "PYTHONPATH": str(clone)})
+    assert imported.returncode == 0, imported.stderr
+    assert (clone / "results" / "metrics.csv").read_bytes() == (workdir / "results" / "metrics.csv").read_bytes()
+
+    dry = clone_snakemake(clone, smoke, "-n")
+    assert "Nothing to be done" in dry.stdout + dry.stderr, dry.stdout[-3000:]
+
+    # one more method: its jobs and what reads them, no render, no run of existing methods alone
+    added = {**config, "denoisers": [*config["denoisers"], NEW_METHOD]}
+    (clone / "added.yaml").write_text(yaml.safe_dump(added))
+    jobs = planned_jobs(clone_snakemake(clone, clone / "added.yaml", "-n").stdout)
+    rules = {rule for rule, _ in jobs}
+    assert not [rule for rule in rules if rule.startswith("render_")], rules
+    new_outputs = {f for _, outputs in jobs for f in outputs if f.endswith(f"/{NEW_METHOD['name']}.exr")}
+    cases = [(scene, spp) for scene in config["scenes"] for spp in config["spp"]]
+    assert new_outputs == {f"results/outputs/{scene}/spp{spp}/{NEW_METHOD['name']}.exr" for scene, spp in cases}
+    for rule, outputs in jobs:
+        # a method job of the existing methods alone must not run (a per-case batch that makes the
+        # new method's output together with the others' may: config batch_methods)
+        if rule.startswith("run_"):
+            assert any(f"/{NEW_METHOD['name']}." in f for f in outputs), (rule, outputs)
+    assert {"ranking_table", "gather_metrics"} <= rules
+
+    # a changed parameter of an existing method: its runs are planned in every case
+    changed = {**config, "denoisers": [{"name": "jbf", "params": {"radius": 3}} if d == "jbf" else d
+                                       for d in config["denoisers"]]}
+    assert changed["denoisers"] != config["denoisers"]
+    (clone / "changed.yaml").write_text(yaml.safe_dump(changed))
+    jobs = planned_jobs(clone_snakemake(clone, clone / "changed.yaml", "-n").stdout)
+    rerun = {f for rule, outputs in jobs if rule.startswith("run_") for f in outputs if f.endswith("/jbf.exr")}
+    assert rerun == {f"results/outputs/{scene}/spp{spp}/jbf.exr" for scene, spp in cases}

@@ -1,0 +1,25 @@
+# The finished study as one checked archive (mcbench.pipeline.bundle, docs/bundle.md):
+# `snakemake --cores 1 export_study` (not part of `all`) writes results/bundle/study.tar, holding
+# every file of results/ but the logs, the report and earlier bundles, with the resolved config,
+# the provenance and Snakemake's metadata records. Its inputs are the outputs of rule `all`, so
+# that a bundle is of a finished study. In a clone elsewhere, in the checkout's root:
+# `python -m mcbench.pipeline.bundle import results/bundle/study.tar [--configfile CONFIG]`.
+
+
+rule export_study:
+    localrule: True
+    input:
+        rules.all.input,
+    output:
+        f"{RESULTS}/bundle/study.tar",
+    params:
+        config_digest=config_digest(config),
+    threads: 1
+    resources:
+        **job_resources("export_study"),
+    conda:
+        "../envs/mcbench.yaml"
+    log:
+        f"{RESULTS}/logs/export_study.log",
+    script:
+        "../scripts/export_study.py"
