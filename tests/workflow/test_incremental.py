@@ -1,0 +1,190 @@
+"""Each edit of the config costs what it changes, and incremental equals from scratch.
+
+A tiny study (one 16x16 scene, 4 spp, JBF, OIDN and their ensemble) is run once; each edit kind
+of the config (a new plugin method, an external program, precomputed results, a combiner over
+existing outputs, one method's params, a removed method, a new scene, a new spp level, a new
+metric) is then applied to a copy of that finished study. For each: the dry run must plan exactly
+the jobs the edit needs (the per-method, per-entry and render jobs of what changed, then the
+per-case assemblies and the tables; never another method's job), and after the incremental run
+every table (mcbench.analysis.run_comparison: metrics.csv and every table, timing left out)
+must equal that of a from-scratch run of the edited config.
+"""
+
+from __future__ import annotations
+
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import yaml
+
+from mcbench.analysis.run_comparison import compare_runs
+from tests.conftest import REPO, run_snakemake
+
+pytestmark = pytest.mark.slow
+
+SCENE, SPP = "cornell_box", 4
+BASE = {
+    "variant": "auto", "seed": 0, "render_threads": 1, "resolution": [16, 16],
+    "scenes": [SCENE], "spp": [SPP], "reference": {"spp": 64, "chunks": 1},
+    "denoisers": ["jbf", "oidn"],
+    "combiners": [{"name": "ens", "method": "ensemble", "inputs": ["jbf", "oidn"]}],
+    "study": {"pool": False}, "metrics": ["relmse", "smape"],
+    "oracle": {"repetitions": 2, "spp": 4, "denoisers": ["oidn", "jbf"]},
+}
+#: Rules that only assemble or tabulate finished results (each reruns when a result it reads changed).
+TABLE_RULES = {"case_metrics", "viewer_case", "gather_metrics", "gather_timings", "ranking_table", "extras_table",
+               "scene_table", "gallery", "error_curves", "speed_error", "viewer", "provenance_manifest", "all",
+               "comparison_onehot", "comparison_ablations", "comparison_ranking", "study_tables", "study_figures",
+               "progressive_tables"}
+#: A program that "denoises" by copying its input (the README's external-program contract).
+COPY_PROGRAM = ["sh", "-c", "cp {input_dir}/color.exr {output_dir}/{name}.exr && "
+                "cp {input_dir}/colorA.exr {output_dir}/{name}A.exr && cp {input_dir}/colorB.exr {output_dir}/{name}B.exr"]
+
+
+def planned_jobs(workdir: Path) -> list[tuple[str, dict]]:
+    """(rule, wildcards) of every job a dry run in ``workdir`` plans."""
+    command = [sys.executable, "-m", "snakemake", "-s", str(REPO / "Snakefile"), "-n", "--nolock",
+               "--directory", str(workdir), "--configfile", str(workdir / "config.yaml")]
+    result = subprocess.run(command, capture_output=True, text=True, timeout=600)
+    text = result.stdout + result.stderr
+    assert result.returncode == 0, text[-3000:]
+    jobs, rule = [], None
+    for line in text.splitlines():
+        match = re.match(r"^(?:local)?rule (\w+):", line)
+        if match:
+            if rule is not None:
+                jobs.append((rule, {}))
+            rule = match.group(1)
+        elif rule is not None and line.strip().startswith("wildcards:"):
+            pairs = line.split(":", 1)[1].split(",")
+            jobs.append((rule, dict(pair.strip().split("=", 1) for pair in pairs)))
+            rule = None
+    if rule is not None:
+        jobs.append((rule, {}))
+    return jobs
+
+
+def work_jobs(jobs) -> set[tuple[str, str]]:
+    """The planned jobs that compute (not assemble or tabulate): (rule, what), what being the
+    method, entry or case of the job."""
+    work = set()
+    for rule, wildcards in jobs:
+        if rule in TABLE_RULES:
+            continue
+        what = wildcards.get("method") or wildcards.get("entry") or "/".join(
+            f"{key}={value}" for key, value in sorted(wildcards.items()))
+        if rule in ("run_method", "evaluate_entry"):
+            what = f"{wildcards['scene']}/{wildcards['spp']}/{what}"
+        work.add((rule, what))
+    return work
+
+
+def write_config(workdir: Path, config: dict) -> None:
+    workdir.mkdir(parents=True, exist_ok=True)
+    (workdir / "config.yaml").write_text(yaml.safe_dump(config))
+
+
+@pytest.fixture(scope="module")
+def finished(tmp_path_factory) -> Path:
+    """The tiny study, finished."""
+    workdir = tmp_path_factory.mktemp("incremental_base")
+    write_config(workdir, BASE)
+    run_snakemake(workdir)
+    return workdir
+
+
+def precomputed_dir(finished: Path, target: Path) -> str:
+    """Files of a 'precomputed' method: JBF's results of the finished study, in the authors' naming."""
+    from mcbench.io.buffers import Denoised
+    from mcbench.io.case_folders import write_image
+
+    output = Denoised.load(str(finished / f"results/outputs/{SCENE}/spp{SPP}/jbf.exr"))
+    folder = target / SCENE / f"spp{SPP}" / "pre"
+    folder.mkdir(parents=True)
+    for suffix, image in (("", output.full), ("A", output.a), ("B", output.b)):
+        write_image(folder / f"pre{suffix}.exr", image)
+    return str(target)
+
+
+def cases(scenes, spps, names):
+    return {(rule, f"{scene}/{spp}/{name}") for scene in scenes for spp in spps for name in names
+            for rule in (["run_method"] if name != "noisy" else []) + ["evaluate_entry"]}
+
+
+def edit_plugin(config, finished, tmp):
+    config["add_denoisers"] = [{"name": "jbf_wide", "method": "jbf", "label": "JBF wide", "params": {"radius": 9}}]
+    return cases([SCENE], [SPP], ["jbf_wide"])
+
+
+def edit_external(config, finished, tmp):
+    config["add_denoisers"] = [{"name": "copy", "method": "external", "label": "Copy",
+                                "params": {"command": COPY_PROGRAM}}]
+    return cases([SCENE], [SPP], ["copy"])
+
+
+def edit_precomputed(config, finished, tmp):
+    config["add_denoisers"] = [{"name": "pre", "method": "precomputed", "label": "Precomputed",
+                                "params": {"dir": precomputed_dir(finished, tmp / "precomputed")}}]
+    return cases([SCENE], [SPP], ["pre"])
+
+
+def edit_combiner(config, finished, tmp):
+    config["add_combiners"] = [{"name": "ens_exact", "method": "ensemble", "inputs": ["jbf", "oidn"],
+                                "label": "Ensemble exact", "params": {"solver": "exact"}}]
+    return cases([SCENE], [SPP], ["ens_exact"])
+
+
+def edit_params(config, finished, tmp):
+    config["denoisers"] = [{"name": "jbf", "method": "jbf", "params": {"sigma_color": 0.8}}, "oidn"]
+    return cases([SCENE], [SPP], ["jbf", "ens"])          # JBF and the ensemble that reads it
+
+
+def edit_remove(config, finished, tmp):
+    config["combiners"] = []
+    return set()                                          # tables only
+
+
+def edit_scene(config, finished, tmp):
+    config["scenes"] = [SCENE, "glass_caustics"]
+    new = {("render_noisy", f"scene=glass_caustics/spp={SPP}"), ("merge_reference", "scene=glass_caustics"),
+           ("render_reference_chunk", "chunk=0/scene=glass_caustics")}
+    return new | cases(["glass_caustics"], [SPP], ["jbf", "oidn", "ens", "noisy"])
+
+
+def edit_spp(config, finished, tmp):
+    config["spp"] = [SPP, 8]
+    return {("render_noisy", f"scene={SCENE}/spp=8")} | cases([SCENE], [8], ["jbf", "oidn", "ens", "noisy"])
+
+
+def edit_metric(config, finished, tmp):
+    config["metrics"] = ["relmse", "smape", "dssim"]
+    return {("evaluate_entry", f"{SCENE}/{SPP}/{name}") for name in ("jbf", "oidn", "ens", "noisy")}
+
+
+EDITS = {"plugin": edit_plugin, "external": edit_external, "precomputed": edit_precomputed,
+         "combiner": edit_combiner, "params": edit_params, "remove": edit_remove, "scene": edit_scene,
+         "spp": edit_spp, "metric": edit_metric}
+
+
+@pytest.mark.parametrize("kind", list(EDITS))
+def test_an_edit_runs_only_what_it_changes_and_equals_a_run_from_scratch(finished, tmp_path, kind):
+    incremental = tmp_path / "incremental"
+    shutil.copytree(finished, incremental, symlinks=True)     # mtimes and Snakemake's records kept
+    config = yaml.safe_load((finished / "config.yaml").read_text())
+    expected = EDITS[kind](config, finished, tmp_path)
+    write_config(incremental, config)
+    jobs = planned_jobs(incremental)
+    assert work_jobs(jobs) == expected, sorted(work_jobs(jobs) ^ expected)
+    if kind in ("remove", "metric"):     # nothing new to assemble per case beyond what changed
+        assert {rule for rule, _ in jobs} - TABLE_RULES <= {"evaluate_entry"}
+    run_snakemake(incremental)
+    assert "Nothing to be done" in run_snakemake(incremental, "-n").stdout + run_snakemake(incremental, "-n").stderr
+    scratch = tmp_path / "scratch"
+    write_config(scratch, config)
+    run_snakemake(scratch)
+    differences = compare_runs(incremental / "results", scratch / "results")
+    assert not differences, differences
