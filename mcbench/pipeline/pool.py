@@ -27,6 +27,7 @@ runs.
 
 from __future__ import annotations
 
+import atexit
 import concurrent.futures
 import importlib
 import multiprocessing
@@ -111,9 +112,24 @@ def run_step(step: str, *args, log_path: str | None, workers: int, threads: int 
 
 
 def shutdown_pool() -> None:
-    """Stop the workers (they also stop when the process exits)."""
+    """Stop the workers and the forkserver they were forked from, waiting for both.
+
+    Called at exit: the forkserver reaps the workers and is reaped here, so their CPU time counts
+    in this process's children (``time``, ``getrusage(RUSAGE_CHILDREN)``, Snakemake's benchmark
+    of a job that runs Snakemake) instead of vanishing with an orphaned forkserver."""
     global _pool
     with _lock:
         if _pool is not None:
             _pool.shutdown(wait=True)
             _pool = None
+        from multiprocessing import forkserver
+
+        server = getattr(forkserver, "_forkserver", None)
+        if server is not None and getattr(server, "_forkserver_pid", None) is not None:
+            try:
+                server._stop()             # closes its pipe and waits for it (no public API does)
+            except OSError:
+                pass                       # its socket already removed: it is going or gone
+
+
+atexit.register(shutdown_pool)
