@@ -140,31 +140,42 @@ def gather_timings(paths: list[str], output_path: str) -> pd.DataFrame:
 ENTRY_RECORD = "entry.json"
 
 
-def evaluate_entry(scene: str, spp: int, entry: str, image_path: str, reference_path: str,
-                   metrics: list[str], metrics_path: str, viewer_dir: str, *,
-                   weight_inputs: list[str] = ()) -> pd.DataFrame:
-    """Errors of one entry of a test case (the noisy input ``NOISY``, read from its render, or a
-    candidate's output EXR) against the reference, and the entry's viewer images.
+def evaluate_entries(items: list[dict], reference_path: str, *, scene: str, spp: int,
+                     metrics: list[str]) -> None:
+    """Evaluate entries of one test case against its reference: per item of ``items`` (dicts
+    with ``entry``, ``image``, ``metrics``, ``viewer``, ``weight_inputs``), the files asked for
+    (a path, or None): :func:`evaluate_entry`'s metrics CSV and/or viewer folder."""
+    for item in items:
+        evaluate_entry(scene, spp, item["entry"], item["image"], reference_path, metrics,
+                       metrics_path=item.get("metrics"), viewer_dir=item.get("viewer"),
+                       weight_inputs=item.get("weight_inputs") or ())
 
-    Writes ``metrics_path``: a tidy CSV with columns scene, spp, candidate, metric, value (one
-    row per metric of ``metrics``, in that order), and into ``viewer_dir`` the entry's images
-    (:func:`mcbench.analysis.viewer.write_entry_images`: tone-mapped at each exposure, relMSE and
-    HDR-FLIP maps, and for a candidate whose inputs ``weight_inputs`` names and whose EXR holds
-    ``weights_filtered_{i}``, its weight maps) with their fragment and CRC-32s as
-    :data:`ENTRY_RECORD`; the noisy entry's folder also holds the reference's images. The FLIP
-    map drawn is the one the ``flip`` metric's value comes from (one evaluation). The reference
-    and render are read through :func:`mcbench.io.file_cache.cached_read` (a warm worker reads
-    them once per case).
+
+def evaluate_entry(scene: str, spp: int, entry: str, image_path: str, reference_path: str,
+                   metrics: list[str], *, metrics_path: str | None = None, viewer_dir: str | None = None,
+                   weight_inputs: list[str] = ()) -> pd.DataFrame | None:
+    """Errors of one entry of a test case (the noisy input ``NOISY``, read from its render, or a
+    candidate's output EXR) against the reference, and/or the entry's viewer images.
+
+    With ``metrics_path``: a tidy CSV with columns scene, spp, candidate, metric, value (one row
+    per metric of ``metrics``, in that order; returned). With ``viewer_dir``: the entry's images
+    (:func:`mcbench.analysis.viewer.write_entry_images`: tone-mapped at each exposure, relMSE
+    and HDR-FLIP maps, and for a candidate whose inputs ``weight_inputs`` names and whose EXR
+    holds ``weights_filtered_{i}``, its weight maps) with their fragment and CRC-32s as
+    :data:`ENTRY_RECORD`; the noisy entry's folder also holds the reference's images. Written
+    together, the FLIP map drawn is the one the ``flip`` metric's value comes from (one
+    evaluation). The reference and the image are read through
+    :func:`mcbench.io.file_cache.cached_read` (a warm worker reads them once per case).
     """
     import pandas as pd
 
     from mcbench.analysis.metrics import flip_with_map
-    from mcbench.analysis.viewer import REFERENCE, merge_fragments, write_entry_images
+    from mcbench.analysis.viewer import REFERENCE, case_files, merge_fragments, write_entry_images
     from mcbench.io.checksums import crc32_hex
     from mcbench.io.file_cache import cached_read
     from mcbench.io.tables import write_json
 
-    needs_variance = any(metric in REFERENCE_METRICS for metric in metrics)
+    needs_variance = metrics_path is not None and any(metric in REFERENCE_METRICS for metric in metrics)
     names = ("color", "variance") if needs_variance else ("color",)
 
     def read_reference(path):
@@ -188,29 +199,31 @@ def evaluate_entry(scene: str, spp: int, entry: str, image_path: str, reference_
         raise BenchError(f"{image_path}: shape {image.shape} does not match reference "
                          f"{reference_path} of shape {reference.shape}")
     flip_map = flip_value = None
-    if "flip" in metrics:
+    if (metrics_path is not None and "flip" in metrics) or viewer_dir is not None:
         flip_map, flip_value = flip_with_map(image, reference)
-    rows = []
-    for metric in metrics:
-        if metric == "flip":
-            value = flip_value
-        elif metric in REFERENCE_METRICS:
-            value = REFERENCE_METRICS[metric](image, reference, reference_variance)
-        else:
-            value = METRICS[metric](image, reference)
-        rows.append({"scene": scene, "spp": int(spp), "candidate": entry, "metric": metric, "value": value})
-    frame = pd.DataFrame(rows, columns=["scene", "spp", "candidate", "metric", "value"])
-    folder = Path(viewer_dir)
-    folder.mkdir(parents=True, exist_ok=True)
-    fragments = [write_entry_images(folder, REFERENCE, reference, reference=reference)] if entry == NOISY else []
-    fragments.append(write_entry_images(folder, entry, image, reference=reference, weights=weights, flip_map=flip_map))
-    fragment = merge_fragments(fragments)
-    from mcbench.analysis.viewer import case_files
-
-    checksums = {name: crc32_hex((folder / name).read_bytes()) for name in sorted(case_files(fragment))}
-    write_json(folder / ENTRY_RECORD, {"scene": scene, "spp": int(spp), "entry": entry, **fragment,
-                                       "files_crc32": checksums})
-    write_csv(metrics_path, frame)
+    frame = None
+    if metrics_path is not None:
+        rows = []
+        for metric in metrics:
+            if metric == "flip":
+                value = flip_value
+            elif metric in REFERENCE_METRICS:
+                value = REFERENCE_METRICS[metric](image, reference, reference_variance)
+            else:
+                value = METRICS[metric](image, reference)
+            rows.append({"scene": scene, "spp": int(spp), "candidate": entry, "metric": metric, "value": value})
+        frame = pd.DataFrame(rows, columns=["scene", "spp", "candidate", "metric", "value"])
+        write_csv(metrics_path, frame)
+    if viewer_dir is not None:
+        folder = Path(viewer_dir)
+        folder.mkdir(parents=True, exist_ok=True)
+        fragments = [write_entry_images(folder, REFERENCE, reference, reference=reference)] if entry == NOISY else []
+        fragments.append(write_entry_images(folder, entry, image, reference=reference, weights=weights,
+                                            flip_map=flip_map))
+        fragment = merge_fragments(fragments)
+        checksums = {name: crc32_hex((folder / name).read_bytes()) for name in sorted(case_files(fragment))}
+        write_json(folder / ENTRY_RECORD, {"scene": scene, "spp": int(spp), "entry": entry, **fragment,
+                                           "files_crc32": checksums})
     return frame
 
 

@@ -4,6 +4,9 @@
 
 import copy
 import functools
+import hashlib
+import json
+import os
 import sys
 
 from snakemake.logging import logger
@@ -22,6 +25,7 @@ from mcbench.pipeline.resources import JobCost, estimate_job, job_request, load_
 from mcbench.io.method_spec import method_spec  # noqa: E402
 from mcbench.io.weights import COMMITTED_WEIGHTS, is_learned_method  # noqa: E402
 from mcbench.pipeline.registry import available_scenes, config_method_table, load_method, load_scene  # noqa: E402
+from mcbench.pipeline.jobs import batch_name, missing_batches, spec_text, write_if_changed  # noqa: E402
 
 
 # The whole configuration: the config file (config.yaml or the --configfile) plus the schema's
@@ -90,32 +94,133 @@ def run_in_pool(step, *args, log, **kwargs):
              paths=[str(Path(workflow.basedir))], **kwargs)
 
 
+# Per-method and per-entry files, and the jobs that make them (mcbench.pipeline.jobs): a file that
+# exists belongs to its per-file rule (run_method, entry_metrics, entry_viewer), which Snakemake
+# reruns when it finds the file out of date; the files that do not exist yet are made by one batch
+# job per case (from scratch: every method of the case in one job). Neither rule has params: a
+# method's parameters are its spec file (results/specs/methods/<name>.json, rewritten only when the
+# spec changes, so its mtime says when), the metric list is in the metrics files' folder name; both
+# have the same `run:` code (one rule definition in a loop), so Snakemake records the same for a
+# file whichever made it. The workflow profile leaves out Snakemake's `input` rerun trigger (a
+# batch's input list is not a per-file rule's): every rule whose input list can change without
+# its files' mtimes carries that list in its params.
+METHOD_EXR = f"{RESULTS}/outputs/{{scene}}/spp{{spp}}/{{method}}.exr"
+METHOD_TIMING = f"{RESULTS}/outputs/{{scene}}/spp{{spp}}/{{method}}.json"
+SPEC_FILE = f"{RESULTS}/specs/methods/{{method}}.json"
+METRIC_SET = "m" + hashlib.sha256(json.dumps(METRIC_NAMES).encode()).hexdigest()[:10]
+ENTRY_METRICS = f"{RESULTS}/metrics/{{scene}}/spp{{spp}}/{METRIC_SET}/{{entry}}.csv"
+ENTRY_VIEWER = f"{RESULTS}/viewer_entries/{{scene}}/spp{{spp}}/{{entry}}"
+#: A case's entries: the noisy input and every candidate.
+ENTRIES = [NOISY] + CANDIDATES
+CASES = [(scene, int(spp)) for scene in SCENES for spp in SPPS]
+
+
+def _path(pattern, scene, spp, **names):
+    return pattern.format(scene=scene, spp=spp, **names)
+
+
 def method_output(name, wildcards, kind="exr"):
     """Output path (``exr`` or ``timing``) of method ``name`` in the case of ``wildcards``."""
-    return getattr(rules.run_method.output, kind).format(scene=wildcards.scene, spp=wildcards.spp, method=name)
+    return _path(METHOD_EXR if kind == "exr" else METHOD_TIMING, wildcards.scene, wildcards.spp, method=name)
 
 
-#: A case's entries: the noisy input and every candidate (rule evaluate_entry's wildcard).
-ENTRIES = [NOISY] + CANDIDATES
+def method_spec_file(name):
+    return SPEC_FILE.format(method=name)
 
 
-def entry_image(wildcards):
+def _method_spec(name):
+    spec = METHODS[name]
+    return {"module": spec["module"], "params": spec["params"], "inputs": spec["inputs"],
+            "weights_sha256": weights_digest_of(spec["module"]) if spec["learned"] else ""}
+
+
+def _method_exists(scene, spp, name):
+    return all(os.path.exists(_path(p, scene, spp, method=name)) for p in (METHOD_EXR, METHOD_TIMING))
+
+
+def _entry_item_exists(scene, spp, item):
+    entry, product = item.rsplit(":", 1)
+    return os.path.exists(_path(ENTRY_METRICS if product == "metrics" else ENTRY_VIEWER, scene, spp, entry=entry))
+
+
+def _constraints(batch):
+    return {"scene": "|".join(batch["scenes"]), "spp": "|".join(str(s) for s in batch["spps"])}
+
+
+def _batch_method_inputs(names):
+    def inputs(wildcards):
+        wanted = dict.fromkeys(i for name in names for i in METHODS[name]["inputs"] if i not in names)
+        return [method_output(name, wildcards) for name in wanted]
+
+    return inputs
+
+
+def _check_all_weights(names):
+    def weights(wildcards):
+        for name in names:
+            check_weights(name)
+        return []
+
+    return weights
+
+
+
+
+def method_entries(rule_name, wildcards):
+    """The ``mcbench.pipeline.methods.run_methods`` entries of a method job in one case."""
+    names = METHOD_JOB_OF[rule_name]["methods"] or [wildcards.method]
+    return [{"name": name, "module": METHODS[name]["module"], "params": METHODS[name]["params"],
+             "input_paths": [method_output(i, wildcards) for i in METHODS[name]["inputs"]],
+             "exr": method_output(name, wildcards), "timing": method_output(name, wildcards, "timing")}
+            for name in names]
+
+
+def entry_image(entry, wildcards):
     """The image an entry's evaluation reads: the render for the noisy input, else the method's output."""
-    if wildcards.entry == NOISY:
+    if entry == NOISY:
         return rules.render_noisy.output[0].format(scene=wildcards.scene, spp=wildcards.spp)
-    return method_output(wildcards.entry, wildcards)
+    return method_output(entry, wildcards)
+
+
+def _eval_images(items):
+    def images(wildcards):
+        entries = [wildcards.entry] if items is None else list(dict.fromkeys(i.rsplit(":", 1)[0] for i in items))
+        return [entry_image(entry, wildcards) for entry in entries]
+
+    return images
+
+
+def _eval_outputs(items):
+    metrics = [ENTRY_METRICS.replace("{entry}", i.rsplit(":", 1)[0]) for i in items if i.endswith(":metrics")]
+    viewers = [directory(ENTRY_VIEWER.replace("{entry}", i.rsplit(":", 1)[0])) for i in items if i.endswith(":viewer")]
+    return {**({"metrics": metrics} if metrics else {}), **({"viewer": viewers} if viewers else {})}
+
+
+
+
+def evaluation_items(rule_name, wildcards):
+    """The ``mcbench.pipeline.metrics.evaluate_entries`` items of an evaluation job in one case."""
+    job = EVAL_JOB_OF[rule_name]
+    items = job["items"] or [f"{wildcards.entry}:{'metrics' if rule_name == 'entry_metrics' else 'viewer'}"]
+    by_entry = {}
+    for item in items:
+        entry, product = item.rsplit(":", 1)
+        record = by_entry.setdefault(entry, {"entry": entry, "image": entry_image(entry, wildcards), "metrics": None,
+                                             "viewer": None, "weight_inputs": list(METHODS[entry]["inputs"])
+                                             if entry in METHODS else []})
+        record[product] = _path(ENTRY_METRICS if product == "metrics" else ENTRY_VIEWER, wildcards.scene,
+                                wildcards.spp, entry=entry)
+    return list(by_entry.values())
 
 
 def case_entry_metrics(wildcards):
     """{entry: its metrics CSV} of a case, the noisy input first."""
-    return {entry: rules.evaluate_entry.output.metrics.format(scene=wildcards.scene, spp=wildcards.spp, entry=entry)
-            for entry in ENTRIES}
+    return {entry: _path(ENTRY_METRICS, wildcards.scene, wildcards.spp, entry=entry) for entry in ENTRIES}
 
 
 def case_entry_viewers(wildcards):
     """{entry: its viewer folder} of a case, the noisy input first (its folder has the reference's images)."""
-    return {entry: rules.evaluate_entry.output.viewer.format(scene=wildcards.scene, spp=wildcards.spp, entry=entry)
-            for entry in ENTRIES}
+    return {entry: _path(ENTRY_VIEWER, wildcards.scene, wildcards.spp, entry=entry) for entry in ENTRIES}
 
 
 def reference_chunk_spp(wildcards):
@@ -124,9 +229,7 @@ def reference_chunk_spp(wildcards):
 
 def method_inputs(wildcards):
     """Outputs of the methods a combiner takes (empty for a base denoiser)."""
-    spec = METHODS[wildcards.method]
-    return [rules.run_method.output.exr.format(scene=wildcards.scene, spp=wildcards.spp, method=name)
-            for name in spec["inputs"]]
+    return [method_output(name, wildcards) for name in METHODS[wildcards.method]["inputs"]]
 
 
 def weights_file(network):
@@ -206,12 +309,11 @@ def correlated_files(base):
 
 
 def case_outputs(wildcards):
-    return {name: rules.run_method.output.exr.format(scene=wildcards.scene, spp=wildcards.spp, method=name)
-            for name in CANDIDATES}
+    return {name: method_output(name, wildcards) for name in CANDIDATES}
 
 
 def all_timing_records(wildcards=None):
-    return expand(rules.run_method.output.timing, scene=SCENES, spp=SPPS, method=CANDIDATES)
+    return expand(METHOD_TIMING, scene=SCENES, spp=SPPS, method=CANDIDATES)
 
 
 def all_case_metrics(wildcards=None):
@@ -311,10 +413,11 @@ def _job_size(rule_name, wildcards):
     return pixels, 1, 0
 
 
-def job_resources(rule_name):
+def job_resources(rule_name, *, batch=1):
     """The ``resources:`` of the rule's jobs: mem_mb and runtime from its fitted cost (a method's
     or a network's own, e.g. run_method/nfor or train_network/kpcn, where measured; the floors
-    for a rule without records), times the attempt; ``gpu`` for the rules that can use one."""
+    for a rule without records), times the attempt; ``gpu`` for the rules that can use one.
+    ``batch``: a batch job making that many of the rule's files asks for that many times the time."""
 
     def request(wildcards, attempt):
         method, network = getattr(wildcards, "method", None), getattr(wildcards, "network", None)
@@ -322,8 +425,9 @@ def job_resources(rule_name):
                f"{rule_name}/{network}" if network else None)
         cost = JOB_COSTS.get(own) or JOB_COSTS.get(rule_name, JobCost())
         pixels, entries, spp = _job_size(rule_name, wildcards)
-        return {key: value * attempt for key, value in
-                job_request(*estimate_job(cost, pixels=pixels, entries=entries, spp=spp)).items()}
+        request = job_request(*estimate_job(cost, pixels=pixels, entries=entries, spp=spp))
+        request["runtime"] *= batch
+        return {key: value * attempt for key, value in request.items()}
 
     resources = {"mem_mb": lambda wildcards, attempt: request(wildcards, attempt)["mem_mb"],
                  "runtime": lambda wildcards, attempt: request(wildcards, attempt)["runtime"]}
@@ -356,3 +460,42 @@ def progressive_targets(wildcards=None):
     if not PROGRESSIVE:
         return []
     return [*rules.progressive_tables.output, *expand(rules.progressive_curve.output, scene=PROGRESSIVE_SCENE)]
+
+
+# The method and evaluation jobs (methods.smk, metrics.smk): the per-file rules, then one batch rule
+# per group of cases lacking the same files (mcbench.pipeline.jobs.missing_batches). The methods'
+# spec files are written here, before Snakemake looks at any mtime, and only when a spec changed.
+for _name in METHODS:
+    write_if_changed(method_spec_file(_name), spec_text(_method_spec(_name)))
+
+METHOD_JOBS = [{"rule": "run_method", "methods": None, "exr": METHOD_EXR, "timing": METHOD_TIMING,
+                "inputs": method_inputs, "specs": lambda wildcards: [method_spec_file(wildcards.method)],
+                "weights": method_weights, "constraints": {"method": "|".join(METHODS) or "(?!)"},
+                "log": f"{RESULTS}/logs/methods/{{scene}}/spp{{spp}}/{{method}}.log", "batch": 1}]
+for _batch in missing_batches(CASES, list(METHODS), _method_exists):
+    _names = _batch["items"]
+    METHOD_JOBS.append({
+        "rule": batch_name("run_methods", _batch), "methods": _names,
+        "exr": [METHOD_EXR.replace("{method}", n) for n in _names],
+        "timing": [METHOD_TIMING.replace("{method}", n) for n in _names],
+        "inputs": _batch_method_inputs(_names), "specs": [method_spec_file(n) for n in _names],
+        "weights": _check_all_weights(_names), "constraints": _constraints(_batch),
+        "log": f"{RESULTS}/logs/methods/{{scene}}/spp{{spp}}/{batch_name('run_methods', _batch)}.log",
+        "batch": len(_names)})
+METHOD_JOB_OF = {job["rule"]: job for job in METHOD_JOBS}
+
+_ENTRY = {"entry": "|".join(ENTRIES)}
+EVAL_JOBS = [
+    {"rule": "entry_metrics", "items": None, "outputs": {"metrics": ENTRY_METRICS}, "images": _eval_images(None),
+     "constraints": _ENTRY, "log": f"{RESULTS}/logs/metrics/{{scene}}/spp{{spp}}/{{entry}}.log", "batch": 1},
+    {"rule": "entry_viewer", "items": None, "outputs": {"viewer": directory(ENTRY_VIEWER)}, "images": _eval_images(None),
+     "constraints": _ENTRY, "log": f"{RESULTS}/logs/viewer/{{scene}}/spp{{spp}}/{{entry}}.log", "batch": 1}]
+_ITEMS = [f"{entry}:{product}" for entry in ENTRIES for product in ("metrics", "viewer")]
+for _batch in missing_batches(CASES, _ITEMS, _entry_item_exists):
+    EVAL_JOBS.append({
+        "rule": batch_name("evaluate_entries", _batch), "items": _batch["items"],
+        "outputs": _eval_outputs(_batch["items"]), "images": _eval_images(_batch["items"]),
+        "constraints": _constraints(_batch),
+        "log": f"{RESULTS}/logs/metrics/{{scene}}/spp{{spp}}/{batch_name('evaluate_entries', _batch)}.log",
+        "batch": len(_batch["items"])})
+EVAL_JOB_OF = {job["rule"]: job for job in EVAL_JOBS}

@@ -1,30 +1,36 @@
 # Errors of every candidate and of the noisy input against the reference, per test case.
 
 
-# One job per (scene, spp, entry) (the noisy input and every candidate): its errors and its
-# viewer images (a new method is evaluated alone; a changed output re-evaluates only itself), in
-# the warm workers of mcbench.pipeline.pool like the methods.
-rule evaluate_entry:
-    input:
-        image=entry_image,
-        reference=rules.merge_reference.output[0],
-    output:
-        metrics=f"{RESULTS}/metrics/{{scene}}/spp{{spp}}/{{entry}}.csv",
-        viewer=directory(f"{RESULTS}/viewer_entries/{{scene}}/spp{{spp}}/{{entry}}"),
-    wildcard_constraints:
-        entry="|".join([NOISY] + CANDIDATES),
-    params:
-        metrics=METRIC_NAMES,
-        weight_inputs=lambda wildcards: METHODS[wildcards.entry]["inputs"] if wildcards.entry in METHODS else [],
-    threads: 1
-    resources:
-        **job_resources("evaluate_entry"),
-    log:
-        f"{RESULTS}/logs/metrics/{{scene}}/spp{{spp}}/{{entry}}.log",
-    run:
-        run_in_pool("mcbench.pipeline.metrics:evaluate_entry", wildcards.scene, int(wildcards.spp), wildcards.entry,
-                    input.image, input.reference, list(params.metrics), output.metrics, output.viewer, log=log[0],
-                    weight_inputs=list(params.weight_inputs))
+# Each entry of a case (the noisy input and every candidate) is evaluated into two files: its
+# errors (metrics/<scene>/spp<N>/<metric set>/<entry>.csv; the folder names the metric list, so a
+# new metric list is new files) and its viewer images (viewer_entries/<scene>/spp<N>/<entry>/).
+# As for the methods: an existing file belongs to entry_metrics or entry_viewer (rerun when
+# Snakemake finds it out of date), the missing ones to one batch job per case; one definition,
+# in the warm workers of mcbench.pipeline.pool.
+for job in EVAL_JOBS:
+
+    rule:
+        name:
+            job["rule"]
+        input:
+            images=job["images"],
+            reference=rules.merge_reference.output[0],
+        output:
+            **job["outputs"],
+        wildcard_constraints:
+            **job["constraints"],
+        threads: 1
+        resources:
+            **job_resources("evaluate_entry", batch=job["batch"]),
+        log:
+            job["log"],
+        run:
+            run_in_pool("mcbench.pipeline.metrics:evaluate_entries", evaluation_items(rule, wildcards), input.reference,
+                        log=log[0], scene=wildcards.scene, spp=int(wildcards.spp), metrics=METRIC_NAMES)
+
+    if job["items"]:  # a missing file: its batch, not the per-file rules
+        workflow.ruleorder(job["rule"], "entry_metrics")
+        workflow.ruleorder(job["rule"], "entry_viewer")
 
 
 # A case's errors in one table (its entries' rows, each checked whole).
@@ -35,6 +41,7 @@ rule case_metrics:
         f"{RESULTS}/metrics/{{scene}}/spp{{spp}}.csv",
     params:
         metrics=METRIC_NAMES,
+        entries=ENTRIES,
     threads: 1
     resources:
         **job_resources("case_metrics"),
@@ -86,6 +93,9 @@ rule gather_timings:
             subcategory="Timings",
             labels={"table": "timings.csv", "rows": "scene, spp, method"},
         ),
+    params:
+        candidates=CANDIDATES,
+        cases=[{"scene": scene, "spp": spp} for scene in SCENES for spp in SPPS],
     threads: 1
     resources:
         **job_resources("gather_timings"),

@@ -50,6 +50,10 @@ rule merge_reference:
         reference_inputs,
     output:
         f"{RESULTS}/references/{{scene}}.exr",
+    params:
+        chunks=REFERENCE_CHUNKS,
+        spp=lambda wildcards: REFERENCE_SPP[wildcards.scene],
+        folder=lambda wildcards: str(RENDER_FOLDERS.get(wildcards.scene) or ""),
     threads: 1
     resources:
         **job_resources("merge_reference"),

@@ -1,5 +1,5 @@
 # The static image viewer: each entry's images (tone-mapped at each exposure, relMSE and FLIP
-# error maps, ensemble weight maps) are written by its evaluate_entry job (metrics.smk); one job
+# error maps, ensemble weight maps) are written by its evaluation (metrics.smk); one job
 # per test case links them into a case folder, so a new case or method redoes only its own
 # images; `viewer` copies
 # the page (workflow/report/viewer/) and every case folder into results/viewer with data.js,
@@ -14,6 +14,8 @@ rule viewer_case:
         unpack(case_entry_viewers),
     output:
         directory(f"{RESULTS}/viewer_cases/{{scene}}/spp{{spp}}"),
+    params:
+        entries=ENTRIES,
     threads: 1
     resources:
         **job_resources("viewer_case"),
