@@ -636,8 +636,8 @@ BREAKAGES = {
         {"workflow/scripts/figures.py": "from mcbench.analysis.figures import error_curves\n"},
         9, ["workflow/scripts/figures.py", "imports mcbench.analysis.figures"]),
     "script importing a plugin": (
-        {"workflow/scripts/run_method.py": "import methods\n"},
-        9, ["workflow/scripts/run_method.py", "imports methods"]),
+        {"workflow/scripts/gather_timings.py": "import methods\n"},
+        9, ["workflow/scripts/gather_timings.py", "imports methods"]),
 }
 
 

@@ -45,41 +45,49 @@ COPY_PROGRAM = ["sh", "-c", "cp {input_dir}/color.exr {output_dir}/{name}.exr &&
                 "cp {input_dir}/colorA.exr {output_dir}/{name}A.exr && cp {input_dir}/colorB.exr {output_dir}/{name}B.exr"]
 
 
-def planned_jobs(workdir: Path) -> list[tuple[str, dict]]:
-    """(rule, wildcards) of every job a dry run in ``workdir`` plans."""
+def planned_jobs(workdir: Path) -> list[tuple[str, dict, list[str]]]:
+    """(rule, wildcards, outputs) of every job a dry run in ``workdir`` plans."""
     command = [sys.executable, "-m", "snakemake", "-s", str(REPO / "Snakefile"), "-n", "--nolock",
                "--directory", str(workdir), "--configfile", str(workdir / "config.yaml")]
     result = subprocess.run(command, capture_output=True, text=True, timeout=600)
     text = result.stdout + result.stderr
     assert result.returncode == 0, text[-3000:]
-    jobs, rule = [], None
-    for line in text.splitlines():
-        match = re.match(r"^(?:local)?rule (\w+):", line)
-        if match:
-            if rule is not None:
-                jobs.append((rule, {}))
-            rule = match.group(1)
-        elif rule is not None and line.strip().startswith("wildcards:"):
-            pairs = line.split(":", 1)[1].split(",")
-            jobs.append((rule, dict(pair.strip().split("=", 1) for pair in pairs)))
-            rule = None
-    if rule is not None:
-        jobs.append((rule, {}))
+    jobs = []
+    for block in re.split(r"\n(?=(?:local)?rule \w+:)", text):
+        match = re.match(r"(?:local)?rule (\w+):", block)
+        if not match:
+            continue
+        wildcards, outputs = {}, []
+        for line in block.splitlines():
+            line = line.strip()
+            if line.startswith("wildcards:"):
+                wildcards = dict(pair.strip().split("=", 1) for pair in line.split(":", 1)[1].split(","))
+            elif line.startswith("output:"):
+                outputs = [p.strip() for p in line.split(":", 1)[1].split(",")]
+        jobs.append((match.group(1), wildcards, outputs))
     return jobs
 
 
+#: What a per-method or per-entry file is: (kind, "scene/spp/name").
+FILE_KINDS = [("method", re.compile(r"results/outputs/(\w+)/spp(\d+)/(\w+)\.exr$")),
+              ("metrics", re.compile(r"results/metrics/(\w+)/spp(\d+)/\w+/(\w+)\.csv$")),
+              ("viewer", re.compile(r"results/viewer_entries/(\w+)/spp(\d+)/(\w+)$"))]
+
+
 def work_jobs(jobs) -> set[tuple[str, str]]:
-    """The planned jobs that compute (not assemble or tabulate): (rule, what), what being the
-    method, entry or case of the job."""
+    """What the planned jobs compute (not assemble or tabulate): ("method" | "metrics" | "viewer",
+    "scene/spp/name") for each method output and entry evaluation planned, whichever job makes it
+    (a case's batch or a per-file rule), and (rule, "key=value/...") for every other job."""
     work = set()
-    for rule, wildcards in jobs:
+    for rule, wildcards, outputs in jobs:
         if rule in TABLE_RULES:
             continue
-        what = wildcards.get("method") or wildcards.get("entry") or "/".join(
-            f"{key}={value}" for key, value in sorted(wildcards.items()))
-        if rule in ("run_method", "evaluate_entry"):
-            what = f"{wildcards['scene']}/{wildcards['spp']}/{what}"
-        work.add((rule, what))
+        kinds = [(kind, "/".join(m.groups())) for path in outputs for kind, pattern in FILE_KINDS
+                 if (m := pattern.search(path))]
+        if kinds:
+            work.update(kinds)
+        else:
+            work.add((rule, "/".join(f"{key}={value}" for key, value in sorted(wildcards.items()))))
     return work
 
 
@@ -111,8 +119,9 @@ def precomputed_dir(finished: Path, target: Path) -> str:
 
 
 def cases(scenes, spps, names):
-    return {(rule, f"{scene}/{spp}/{name}") for scene in scenes for spp in spps for name in names
-            for rule in (["run_method"] if name != "noisy" else []) + ["evaluate_entry"]}
+    """A method's output and evaluation (metrics, viewer images) in each case; only the evaluation for 'noisy'."""
+    return {(kind, f"{scene}/{spp}/{name}") for scene in scenes for spp in spps for name in names
+            for kind in (["method"] if name != "noisy" else []) + ["metrics", "viewer"]}
 
 
 def edit_plugin(config, finished, tmp):
@@ -162,7 +171,7 @@ def edit_spp(config, finished, tmp):
 
 def edit_metric(config, finished, tmp):
     config["metrics"] = ["relmse", "smape", "dssim"]
-    return {("evaluate_entry", f"{SCENE}/{SPP}/{name}") for name in ("jbf", "oidn", "ens", "noisy")}
+    return {("metrics", f"{SCENE}/{SPP}/{name}") for name in ("jbf", "oidn", "ens", "noisy")}
 
 
 EDITS = {"plugin": edit_plugin, "external": edit_external, "precomputed": edit_precomputed,
@@ -179,8 +188,14 @@ def test_an_edit_runs_only_what_it_changes_and_equals_a_run_from_scratch(finishe
     write_config(incremental, config)
     jobs = planned_jobs(incremental)
     assert work_jobs(jobs) == expected, sorted(work_jobs(jobs) ^ expected)
-    if kind in ("remove", "metric"):     # nothing new to assemble per case beyond what changed
-        assert {rule for rule, _ in jobs} - TABLE_RULES <= {"evaluate_entry"}
+    # a new file is made by its case's batch job (one a case: one process call for all of them),
+    # an existing out-of-date one by its own per-file rule
+    batched = [rule.startswith(("run_methods_", "evaluate_entries_")) for rule, _, outputs in jobs
+               if any(pattern.search(path) for path in outputs for _, pattern in FILE_KINDS)]
+    if kind == "params":
+        assert not any(batched)
+    elif kind != "remove":
+        assert all(batched) and len(batched) == 2 - (kind == "metric")   # methods, evaluations: one job each
     run_snakemake(incremental)
     assert "Nothing to be done" in run_snakemake(incremental, "-n").stdout + run_snakemake(incremental, "-n").stderr
     scratch = tmp_path / "scratch"
