@@ -97,7 +97,7 @@ def run_in_pool(step, *args, log, **kwargs):
 # Per-method and per-entry files, and the jobs that make them (mcbench.pipeline.jobs): a file that
 # exists belongs to its per-file rule (run_method, entry_metrics, entry_viewer), which Snakemake
 # reruns when it finds the file out of date; the files that do not exist yet are made by one batch
-# job per case (from scratch: every method of the case in one job). Neither rule has params: a
+# job per case (from scratch: every method of the case in one job). Neither kind has params: a
 # method's parameters are its spec file (results/specs/methods/<name>.json, rewritten only when the
 # spec changes, so its mtime says when), the metric list is in the metrics files' folder name; both
 # have the same `run:` code (one rule definition in a loop), so Snakemake records the same for a
@@ -107,7 +107,7 @@ def run_in_pool(step, *args, log, **kwargs):
 METHOD_EXR = f"{RESULTS}/outputs/{{scene}}/spp{{spp}}/{{method}}.exr"
 METHOD_TIMING = f"{RESULTS}/outputs/{{scene}}/spp{{spp}}/{{method}}.json"
 SPEC_FILE = f"{RESULTS}/specs/methods/{{method}}.json"
-METRIC_SET = "m" + hashlib.sha256(json.dumps(METRIC_NAMES).encode()).hexdigest()[:10]
+METRIC_SET = f"m{hashlib.sha256(json.dumps(METRIC_NAMES).encode()).hexdigest()[:10]}"
 ENTRY_METRICS = f"{RESULTS}/metrics/{{scene}}/spp{{spp}}/{METRIC_SET}/{{entry}}.csv"
 ENTRY_VIEWER = f"{RESULTS}/viewer_entries/{{scene}}/spp{{spp}}/{{entry}}"
 #: A case's entries: the noisy input and every candidate.
@@ -117,6 +117,13 @@ CASES = [(scene, int(spp)) for scene in SCENES for spp in SPPS]
 
 def _path(pattern, scene, spp, **names):
     return pattern.format(scene=scene, spp=spp, **names)
+
+
+def run_case_assembly(step, input, output, wildcards, log, **kwargs):
+    """A per-case assembly (case_metrics, viewer_case) in the pool: ``step(inputs by name, output,
+    scene=, spp=, **kwargs)``."""
+    run_in_pool(step, dict(input.items()), output[0], log=log[0], scene=wildcards.scene, spp=int(wildcards.spp),
+                **kwargs)
 
 
 def method_output(name, wildcards, kind="exr"):

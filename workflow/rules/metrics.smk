@@ -48,8 +48,8 @@ rule case_metrics:
     log:
         f"{RESULTS}/logs/metrics/{{scene}}_spp{{spp}}.log",
     run:
-        run_in_pool("mcbench.pipeline.metrics:assemble_case_metrics", dict(input.items()), output[0],
-                    log=log[0], scene=wildcards.scene, spp=int(wildcards.spp), metric_names=list(params.metrics))
+        run_case_assembly("mcbench.pipeline.metrics:assemble_case_metrics", input, output, wildcards, log,
+                          metric_names=list(params.metrics))
 
 
 # One table of every error; every case must hold every candidate and metric with a finite value

@@ -22,8 +22,7 @@ rule viewer_case:
     log:
         f"{RESULTS}/logs/viewer/{{scene}}_spp{{spp}}.log",
     run:
-        run_in_pool("mcbench.pipeline.viewer:assemble_viewer_case", wildcards.scene, int(wildcards.spp),
-                    dict(input.items()), output[0], log=log[0])
+        run_case_assembly("mcbench.pipeline.viewer:assemble_viewer_case", input, output, wildcards, log)
 
 
 rule viewer:
