@@ -130,6 +130,7 @@ def edit_plugin(config, finished, tmp):
 
 
 def edit_external(config, finished, tmp):
+    # "copy" is also a reserved name of Snakemake's input lists: method names must never be used as such
     config["add_denoisers"] = [{"name": "copy", "method": "external", "label": "Copy",
                                 "params": {"command": COPY_PROGRAM}}]
     return cases([SCENE], [SPP], ["copy"])

@@ -119,11 +119,12 @@ def _path(pattern, scene, spp, **names):
     return pattern.format(scene=scene, spp=spp, **names)
 
 
-def run_case_assembly(step, input, output, wildcards, log, **kwargs):
-    """A per-case assembly (case_metrics, viewer_case) in the pool: ``step(inputs by name, output,
-    scene=, spp=, **kwargs)``."""
-    run_in_pool(step, dict(input.items()), output[0], log=log[0], scene=wildcards.scene, spp=int(wildcards.spp),
-                **kwargs)
+def run_case_assembly(step, input, output, params, wildcards, log, **kwargs):
+    """A per-case assembly (case_metrics, viewer_case) in the pool: ``step({entry: input file},
+    output, scene=, spp=, **kwargs)``, the inputs in the order of ``params.entries`` (method
+    names are never Snakemake input names: some, e.g. 'copy', are reserved there)."""
+    run_in_pool(step, dict(zip(params.entries, input)), output[0], log=log[0], scene=wildcards.scene,
+                spp=int(wildcards.spp), **kwargs)
 
 
 def method_output(name, wildcards, kind="exr"):
@@ -221,13 +222,13 @@ def evaluation_items(rule_name, wildcards):
 
 
 def case_entry_metrics(wildcards):
-    """{entry: its metrics CSV} of a case, the noisy input first."""
-    return {entry: _path(ENTRY_METRICS, wildcards.scene, wildcards.spp, entry=entry) for entry in ENTRIES}
+    """The metrics CSVs of a case's entries, in the order of ENTRIES (the noisy input first)."""
+    return [_path(ENTRY_METRICS, wildcards.scene, wildcards.spp, entry=entry) for entry in ENTRIES]
 
 
 def case_entry_viewers(wildcards):
-    """{entry: its viewer folder} of a case, the noisy input first (its folder has the reference's images)."""
-    return {entry: _path(ENTRY_VIEWER, wildcards.scene, wildcards.spp, entry=entry) for entry in ENTRIES}
+    """The viewer folders of a case's entries, in the order of ENTRIES (the noisy input's has the reference's images)."""
+    return [_path(ENTRY_VIEWER, wildcards.scene, wildcards.spp, entry=entry) for entry in ENTRIES]
 
 
 def reference_chunk_spp(wildcards):
@@ -316,7 +317,8 @@ def correlated_files(base):
 
 
 def case_outputs(wildcards):
-    return {name: method_output(name, wildcards) for name in CANDIDATES}
+    """The output EXRs of a case's candidates, in the order of CANDIDATES."""
+    return [method_output(name, wildcards) for name in CANDIDATES]
 
 
 def all_timing_records(wildcards=None):

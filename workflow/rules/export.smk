@@ -5,7 +5,7 @@
 
 rule export_case:
     input:
-        unpack(case_outputs),
+        candidates=case_outputs,
         render=rules.render_noisy.output[0],
         reference=rules.merge_reference.output[0],
     output:

@@ -36,7 +36,7 @@ for job in EVAL_JOBS:
 # A case's errors in one table (its entries' rows, each checked whole).
 rule case_metrics:
     input:
-        unpack(case_entry_metrics),
+        case_entry_metrics,
     output:
         f"{RESULTS}/metrics/{{scene}}/spp{{spp}}.csv",
     params:
@@ -48,7 +48,7 @@ rule case_metrics:
     log:
         f"{RESULTS}/logs/metrics/{{scene}}_spp{{spp}}.log",
     run:
-        run_case_assembly("mcbench.pipeline.metrics:assemble_case_metrics", input, output, wildcards, log,
+        run_case_assembly("mcbench.pipeline.metrics:assemble_case_metrics", input, output, params, wildcards, log,
                           metric_names=list(params.metrics))
 
 

@@ -11,7 +11,7 @@ VIEWER_PAGE = [f"{workflow.basedir}/workflow/report/viewer/{name}" for name in (
 
 rule viewer_case:
     input:
-        unpack(case_entry_viewers),
+        case_entry_viewers,
     output:
         directory(f"{RESULTS}/viewer_cases/{{scene}}/spp{{spp}}"),
     params:
@@ -22,7 +22,7 @@ rule viewer_case:
     log:
         f"{RESULTS}/logs/viewer/{{scene}}_spp{{spp}}.log",
     run:
-        run_case_assembly("mcbench.pipeline.viewer:assemble_viewer_case", input, output, wildcards, log)
+        run_case_assembly("mcbench.pipeline.viewer:assemble_viewer_case", input, output, params, wildcards, log)
 
 
 rule viewer:
