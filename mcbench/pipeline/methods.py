@@ -36,6 +36,21 @@ def run_method(method: str, render_path: str, output_path: str, timing_path: str
                 render_path, scene=scene, spp=spp, threads=threads)
 
 
+def run_case_items(entries: list[dict], evaluations: list[dict], *, scene: str, spp: int, threads: int = 1,
+                   metrics: list[str] = ()) -> None:
+    """What one case job makes (workflow/rules/methods.smk): the methods of ``entries``
+    (:func:`run_methods`, with the case's render), then the evaluations of ``evaluations``
+    (:func:`mcbench.pipeline.metrics.evaluate_entries` with ``metrics``, against the case's
+    reference). ``entries`` and ``evaluations`` carry their own paths; the render and reference
+    paths come with them (``render``, ``reference`` keys of the first)."""
+    if entries:
+        run_methods(entries, entries[0]["render"], scene=scene, spp=spp, threads=threads)
+    if evaluations:
+        from mcbench.pipeline.metrics import evaluate_entries
+
+        evaluate_entries(evaluations, evaluations[0]["reference"], scene=scene, spp=spp, metrics=list(metrics))
+
+
 def run_methods(entries: list[dict], render_path: str, *, scene: str = "", spp: int = 0,
                 threads: int = 1) -> None:
     """Run several methods of one test case in one process, in the given order.

@@ -191,12 +191,12 @@ def test_an_edit_runs_only_what_it_changes_and_equals_a_run_from_scratch(finishe
     assert work_jobs(jobs) == expected, sorted(work_jobs(jobs) ^ expected)
     # a new file is made by its case's batch job (one a case: one process call for all of them),
     # an existing out-of-date one by its own per-file rule
-    batched = [rule.startswith(("run_methods_", "evaluate_entries_")) for rule, _, outputs in jobs
+    batched = [rule.startswith("case_batch_") for rule, _, outputs in jobs
                if any(pattern.search(path) for path in outputs for _, pattern in FILE_KINDS)]
     if kind == "params":
         assert not any(batched)
     elif kind != "remove":
-        assert all(batched) and len(batched) == 2 - (kind == "metric")   # methods, evaluations: one job each
+        assert batched == [True]              # the one new case's, or each case's new files: one job
     run_snakemake(incremental)
     assert "Nothing to be done" in run_snakemake(incremental, "-n").stdout + run_snakemake(incremental, "-n").stderr
     scratch = tmp_path / "scratch"

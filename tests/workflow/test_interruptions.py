@@ -54,8 +54,8 @@ KILL_POINTS = 10
 #: next (two per stage); one whose jobs do not start within :data:`STAGE_WAIT` s (done already) is
 #: killed at a random moment instead.
 STAGES = [("render", ("render_reference_chunk", "render_noisy")),
-          ("method", (r"run_methods?\w*",)),          # a case's batch (run_methods_<key>) or run_method
-          ("metrics", (r"evaluate_entries\w*", "entry_metrics", "case_metrics", "gather_metrics", "gather_timings")),
+          ("method", (r"case_batch_\w+", "run_method")),     # a case's batch of missing files, or one method
+          ("metrics", ("entry_metrics", "case_metrics", "gather_metrics", "gather_timings")),
           ("report", ("viewer_case", "viewer", "gallery", "study_figures", "error_curves")),
           ("table", ("ranking_table", "extras_table", "study_tables", "scene_table"))]
 STAGE_WAIT = 25.0

@@ -146,7 +146,10 @@ def _method_exists(scene, spp, name):
     return all(os.path.exists(_path(p, scene, spp, method=name)) for p in (METHOD_EXR, METHOD_TIMING))
 
 
-def _entry_item_exists(scene, spp, item):
+def _case_item_exists(scene, spp, item):
+    """Whether a case's item exists: a method's output (and timing record), or ``entry:metrics``/``entry:viewer``."""
+    if ":" not in item:
+        return _method_exists(scene, spp, item)
     entry, product = item.rsplit(":", 1)
     return os.path.exists(_path(ENTRY_METRICS if product == "metrics" else ENTRY_VIEWER, scene, spp, entry=entry))
 
@@ -155,10 +158,14 @@ def _constraints(batch):
     return {"scene": "|".join(batch["scenes"]), "spp": "|".join(str(s) for s in batch["spps"])}
 
 
-def _batch_method_inputs(names):
+def _batch_inputs(items):
+    """Input function of a case batch: the method outputs its methods and evaluations read that it does not make."""
+    made = {i for i in items if ":" not in i}
+
     def inputs(wildcards):
-        wanted = dict.fromkeys(i for name in names for i in METHODS[name]["inputs"] if i not in names)
-        return [method_output(name, wildcards) for name in wanted]
+        wanted = [i for name in made for i in METHODS[name]["inputs"]]
+        wanted += [i.rsplit(":", 1)[0] for i in items if ":" in i]
+        return [method_output(name, wildcards) for name in dict.fromkeys(wanted) if name in METHODS and name not in made]
 
     return inputs
 
@@ -174,28 +181,11 @@ def _check_all_weights(names):
 
 
 
-def method_entries(rule_name, wildcards):
-    """The ``mcbench.pipeline.methods.run_methods`` entries of a method job in one case."""
-    names = METHOD_JOB_OF[rule_name]["methods"] or [wildcards.method]
-    return [{"name": name, "module": METHODS[name]["module"], "params": METHODS[name]["params"],
-             "input_paths": [method_output(i, wildcards) for i in METHODS[name]["inputs"]],
-             "exr": method_output(name, wildcards), "timing": method_output(name, wildcards, "timing")}
-            for name in names]
-
-
 def entry_image(entry, wildcards):
     """The image an entry's evaluation reads: the render for the noisy input, else the method's output."""
     if entry == NOISY:
         return rules.render_noisy.output[0].format(scene=wildcards.scene, spp=wildcards.spp)
     return method_output(entry, wildcards)
-
-
-def _eval_images(items):
-    def images(wildcards):
-        entries = [wildcards.entry] if items is None else list(dict.fromkeys(i.rsplit(":", 1)[0] for i in items))
-        return [entry_image(entry, wildcards) for entry in entries]
-
-    return images
 
 
 def _eval_outputs(items):
@@ -206,19 +196,32 @@ def _eval_outputs(items):
 
 
 
-def evaluation_items(rule_name, wildcards):
-    """The ``mcbench.pipeline.metrics.evaluate_entries`` items of an evaluation job in one case."""
-    job = EVAL_JOB_OF[rule_name]
-    items = job["items"] or [f"{wildcards.entry}:{'metrics' if rule_name == 'entry_metrics' else 'viewer'}"]
+def case_items(rule_name, wildcards):
+    """What a case job (common.smk CASE_JOBS) makes in one case: ``(method entries, evaluation
+    items)`` for ``mcbench.pipeline.methods.run_case_items``."""
+    if rule_name == "run_method":
+        items = [wildcards.method]
+    elif rule_name in ("entry_metrics", "entry_viewer"):
+        items = [f"{wildcards.entry}:{rule_name.removeprefix('entry_')}"]
+    else:
+        items = CASE_JOB_OF[rule_name]["items"]
+    render = _path(_RENDER, wildcards.scene, wildcards.spp)
+    reference = _REFERENCE.format(scene=wildcards.scene)
+    entries = [{"name": name, "module": METHODS[name]["module"], "params": METHODS[name]["params"],
+                "input_paths": [method_output(i, wildcards) for i in METHODS[name]["inputs"]],
+                "exr": method_output(name, wildcards), "timing": method_output(name, wildcards, "timing"),
+                "render": render}
+               for name in items if ":" not in name]
     by_entry = {}
-    for item in items:
+    for item in (i for i in items if ":" in i):
         entry, product = item.rsplit(":", 1)
         record = by_entry.setdefault(entry, {"entry": entry, "image": entry_image(entry, wildcards), "metrics": None,
+                                             "reference": reference,
                                              "viewer": None, "weight_inputs": list(METHODS[entry]["inputs"])
                                              if entry in METHODS else []})
         record[product] = _path(ENTRY_METRICS if product == "metrics" else ENTRY_VIEWER, wildcards.scene,
                                 wildcards.spp, entry=entry)
-    return list(by_entry.values())
+    return entries, list(by_entry.values())
 
 
 def case_entry_metrics(wildcards):
@@ -477,34 +480,37 @@ def progressive_targets(wildcards=None):
 for _name in METHODS:
     write_if_changed(method_spec_file(_name), spec_text(_method_spec(_name)))
 
-METHOD_JOBS = [{"rule": "run_method", "methods": None, "exr": METHOD_EXR, "timing": METHOD_TIMING,
-                "inputs": method_inputs, "specs": lambda wildcards: [method_spec_file(wildcards.method)],
-                "weights": method_weights, "constraints": {"method": "|".join(METHODS) or "(?!)"},
-                "log": f"{RESULTS}/logs/methods/{{scene}}/spp{{spp}}/{{method}}.log", "batch": 1}]
-for _batch in missing_batches(CASES, list(METHODS), _method_exists):
-    _names = _batch["items"]
-    METHOD_JOBS.append({
-        "rule": batch_name("run_methods", _batch), "methods": _names,
-        "exr": [METHOD_EXR.replace("{method}", n) for n in _names],
-        "timing": [METHOD_TIMING.replace("{method}", n) for n in _names],
-        "inputs": _batch_method_inputs(_names), "specs": [method_spec_file(n) for n in _names],
-        "weights": _check_all_weights(_names), "constraints": _constraints(_batch),
-        "log": f"{RESULTS}/logs/methods/{{scene}}/spp{{spp}}/{batch_name('run_methods', _batch)}.log",
-        "batch": len(_names)})
-METHOD_JOB_OF = {job["rule"]: job for job in METHOD_JOBS}
-
+_REFERENCE = f"{RESULTS}/references/{{scene}}.exr"
+_RENDER = f"{RESULTS}/renders/{{scene}}/spp{{spp}}.exr"
 _ENTRY = {"entry": "|".join(ENTRIES)}
-EVAL_JOBS = [
-    {"rule": "entry_metrics", "items": None, "outputs": {"metrics": ENTRY_METRICS}, "images": _eval_images(None),
-     "constraints": _ENTRY, "log": f"{RESULTS}/logs/metrics/{{scene}}/spp{{spp}}/{{entry}}.log", "batch": 1},
-    {"rule": "entry_viewer", "items": None, "outputs": {"viewer": directory(ENTRY_VIEWER)}, "images": _eval_images(None),
-     "constraints": _ENTRY, "log": f"{RESULTS}/logs/viewer/{{scene}}/spp{{spp}}/{{entry}}.log", "batch": 1}]
-_ITEMS = [f"{entry}:{product}" for entry in ENTRIES for product in ("metrics", "viewer")]
-for _batch in missing_batches(CASES, _ITEMS, _entry_item_exists):
-    EVAL_JOBS.append({
-        "rule": batch_name("evaluate_entries", _batch), "items": _batch["items"],
-        "outputs": _eval_outputs(_batch["items"]), "images": _eval_images(_batch["items"]),
+CASE_JOBS = [
+    {"rule": "run_method", "outputs": {"exr": METHOD_EXR, "timing": METHOD_TIMING},
+     "inputs": {"render": _RENDER, "inputs": method_inputs, "spec": lambda wildcards: [method_spec_file(wildcards.method)],
+                "weights": method_weights},
+     "constraints": {"method": "|".join(METHODS) or "(?!)"}, "resources": job_resources("run_method"),
+     "log": f"{RESULTS}/logs/methods/{{scene}}/spp{{spp}}/{{method}}.log"},
+    {"rule": "entry_metrics", "outputs": {"metrics": ENTRY_METRICS},
+     "inputs": {"image": lambda wildcards: entry_image(wildcards.entry, wildcards), "reference": _REFERENCE},
+     "constraints": _ENTRY, "resources": job_resources("evaluate_entry"),
+     "log": f"{RESULTS}/logs/metrics/{{scene}}/spp{{spp}}/{{entry}}.log"},
+    {"rule": "entry_viewer", "outputs": {"viewer": directory(ENTRY_VIEWER)},
+     "inputs": {"image": lambda wildcards: entry_image(wildcards.entry, wildcards), "reference": _REFERENCE},
+     "constraints": _ENTRY, "resources": job_resources("evaluate_entry"),
+     "log": f"{RESULTS}/logs/viewer/{{scene}}/spp{{spp}}/{{entry}}.log"},
+]
+_ITEMS = list(METHODS) + [f"{entry}:{product}" for entry in ENTRIES for product in ("metrics", "viewer")]
+for _batch in missing_batches(CASES, _ITEMS, _case_item_exists):
+    _name = batch_name("case_batch", _batch)
+    _methods = [i for i in _batch["items"] if ":" not in i]
+    _evaluations = [i for i in _batch["items"] if ":" in i]
+    CASE_JOBS.append({
+        "rule": _name, "items": _batch["items"],
+        "outputs": {**({"exr": [METHOD_EXR.replace("{method}", n) for n in _methods],
+                        "timing": [METHOD_TIMING.replace("{method}", n) for n in _methods]} if _methods else {}),
+                    **_eval_outputs(_evaluations)},
+        "inputs": {"render": _RENDER, "inputs": _batch_inputs(_batch["items"]), "weights": _check_all_weights(_methods),
+                   **({"reference": _REFERENCE} if _evaluations else {})},
         "constraints": _constraints(_batch),
-        "log": f"{RESULTS}/logs/metrics/{{scene}}/spp{{spp}}/{batch_name('evaluate_entries', _batch)}.log",
-        "batch": len(_batch["items"])})
-EVAL_JOB_OF = {job["rule"]: job for job in EVAL_JOBS}
+        "resources": job_resources("run_method", batch=len(_methods) + len(_evaluations)),
+        "log": f"{RESULTS}/logs/cases/{{scene}}/spp{{spp}}/{_name}.log"})
+CASE_JOB_OF = {job["rule"]: job for job in CASE_JOBS}

@@ -1,38 +1,6 @@
 # Errors of every candidate and of the noisy input against the reference, per test case.
 
 
-# Each entry of a case (the noisy input and every candidate) is evaluated into two files: its
-# errors (metrics/<scene>/spp<N>/<metric set>/<entry>.csv; the folder names the metric list, so a
-# new metric list is new files) and its viewer images (viewer_entries/<scene>/spp<N>/<entry>/).
-# As for the methods: an existing file belongs to entry_metrics or entry_viewer (rerun when
-# Snakemake finds it out of date), the missing ones to one batch job per case; one definition,
-# in the warm workers of mcbench.pipeline.pool.
-for job in EVAL_JOBS:
-
-    rule:
-        name:
-            job["rule"]
-        input:
-            images=job["images"],
-            reference=rules.merge_reference.output[0],
-        output:
-            **job["outputs"],
-        wildcard_constraints:
-            **job["constraints"],
-        threads: 1
-        resources:
-            **job_resources("evaluate_entry", batch=job["batch"]),
-        log:
-            job["log"],
-        run:
-            run_in_pool("mcbench.pipeline.metrics:evaluate_entries", evaluation_items(rule, wildcards), input.reference,
-                        log=log[0], scene=wildcards.scene, spp=int(wildcards.spp), metrics=METRIC_NAMES)
-
-    if job["items"]:  # a missing file: its batch, not the per-file rules
-        workflow.ruleorder(job["rule"], "entry_metrics")
-        workflow.ruleorder(job["rule"], "entry_viewer")
-
-
 # A case's errors in one table (its entries' rows, each checked whole).
 rule case_metrics:
     input:
