@@ -36,8 +36,8 @@ MEASURED_RENDER_THREADS = 1
 def planned_jobs(config: dict) -> list[dict]:
     """One dict per job: rule, pixels, entries, spp, threads."""
     methods = config_method_table(config, is_learned=is_learned_method)
-    batched = list(methods) if config["batch_methods"] else []      # run_case_methods (methods.smk)
-    singles = [n for n in methods if n not in set(batched)]
+    # from scratch each case's methods and evaluations run in one batch job (methods.smk); its
+    # cost is the sum of its methods' (run_method/<module>) and its entries' evaluations
     chunks = config["reference"]["chunks"]
     jobs = []
     for scene in config["scenes"]:
@@ -50,10 +50,8 @@ def planned_jobs(config: dict) -> list[dict]:
             jobs.append({"rule": "render_noisy", "pixels": pixels, "entries": 1, "spp": spp,
                          "threads": MEASURED_RENDER_THREADS})
             jobs += [{"rule": "run_method", "module": methods[name]["module"], "pixels": pixels, "entries": 1,
-                      "spp": 0, "threads": 1} for name in singles]
-            if batched:
-                jobs.append({"rule": "run_case_methods", "pixels": pixels, "entries": len(batched), "spp": 0,
-                             "threads": 1})
+                      "spp": 0, "threads": 1} for name in methods]
+            jobs += [{"rule": "evaluate_entry", "pixels": pixels, "entries": 1, "spp": 0, "threads": 1}] * (len(methods) + 1)
             for rule in ("case_metrics", "viewer_case"):
                 jobs.append({"rule": rule, "pixels": pixels, "entries": len(methods) + 1, "spp": 0, "threads": 1})
     oracle_scene = config["oracle"]["scene"] or config["scenes"][0]

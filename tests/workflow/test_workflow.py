@@ -517,9 +517,9 @@ def test_timings_hold_one_positive_row_per_method_run(smoke_run, results, timing
     assert (timings["seconds"] > 0).all() and np.isfinite(timings["seconds"]).all(), timings[timings["seconds"] <= 0]
     assert (timings[["width", "height"]] == 32).all().all()
     assert list(keys) == sorted(keys, key=lambda k: (k[2], k[0], k[1]))   # sorted by method, scene, spp
-    # one job per method and case (rule run_method), each with its log
-    logs = sorted((results / "logs/methods").rglob("*.log"))
-    assert len(logs) == len(keys), len(logs)
+    # from scratch, one batch job per case made every method and evaluation of the case, with its log
+    logs = sorted((results / "logs/cases").rglob("case_batch_*.log"))
+    assert len(logs) == 3 * 2, logs
 
 
 # --- the report's figures (results/figures) -------------------------------------------------
@@ -730,7 +730,7 @@ def test_train_rule_trains_missing_weights_and_the_main_job_never_retrains(tmp_p
     for crop in (workdir / "results/training").glob("*.exr"):
         os.utime(crop, (time.time() + 60, time.time() + 60))
     text = "".join(snakemake(workdir, "-n").stdout.splitlines(keepends=True))
-    assert "train_network" not in text and "run_method" in text
+    assert "train_network" not in text and ("run_method" in text or "case_batch_" in text)
     snakemake(workdir, "results/outputs/cornell_box/spp4/wskpn.exr")
     timing = json.loads((workdir / "results/outputs/cornell_box/spp4/wskpn.json").read_text())
     assert timing["method"] == "wskpn" and timing["seconds"] > 0
@@ -738,13 +738,13 @@ def test_train_rule_trains_missing_weights_and_the_main_job_never_retrains(tmp_p
     # and an explicit train_<name> with the weights present has nothing to do.
     shutil.rmtree(workdir / "results/training")
     text = snakemake(workdir, "-n").stdout
-    assert "training_example" not in text and "train_network" not in text and "run_method" in text
+    assert "training_example" not in text and "train_network" not in text and ("run_method" in text or "case_batch_" in text)
     assert "train_network" not in snakemake(workdir, "-n", "train_wskpn").stdout
     # New weights rerun the method (their digest is a parameter), still without training.
     torch.save(blob | {"state_dict": {k: v + 0.01 if v.is_floating_point() else v
                                       for k, v in blob["state_dict"].items()}}, weights / "wskpn.pt")
     text = snakemake(workdir, "-n", "results/outputs/cornell_box/spp4/wskpn.exr").stdout
-    assert "run_method" in text and "train_network" not in text
+    assert ("run_method" in text or "case_batch_" in text) and "train_network" not in text
     # Without weights the main job stops, naming the folder (it never plans training itself);
     # train_<name> plans the training again.
     (weights / "wskpn.pt").unlink()
@@ -815,20 +815,22 @@ def test_the_manifest_is_planned_after_the_tables_and_read_by_the_summary_alone(
     assert _job_counts(result)["provenance_manifest"] == 1
 
 
-def test_every_method_and_entry_of_a_case_has_a_job_of_its_own(tmp_path):
-    """One run_method job per (case, method) and one evaluate_entry job per (case, entry: the noisy
-    input and every method), so that Snakemake decides method by method what is out of date."""
+def test_from_scratch_each_case_is_one_batch_job_making_every_method_and_evaluation(tmp_path):
+    """From scratch (nothing exists), one case_batch job per case makes every method output and
+    every entry's metrics and viewer images of that case (mcbench.pipeline.jobs); no per-file job."""
     config = write_config(tmp_path, study={"pool": False})   # the config's methods only
     result = _dry_run(tmp_path, "--configfile", str(tmp_path / "config.yaml"))
     counts, cases = _job_counts(result), len(config["scenes"]) * len(config["spp"])
     methods = config["denoisers"] + [c["name"] for c in config["combiners"]]
-    assert counts["run_method"] == cases * len(methods)
-    assert counts["evaluate_entry"] == cases * (len(methods) + 1)
+    batches = {rule: n for rule, n in counts.items() if rule.startswith("case_batch_")}
+    assert list(batches.values()) == [cases], counts
+    assert not {"run_method", "entry_metrics", "entry_viewer"} & set(counts)
     assert counts["case_metrics"] == counts["viewer_case"] == cases
     outputs = {line.strip() for line in (result.stdout + result.stderr).splitlines() if line.strip().startswith("output:")}
     planned = {p for line in outputs for p in line.removeprefix("output:").replace(",", " ").split()}
     for name in methods:
         assert f"results/outputs/cornell_box/spp4/{name}.exr" in planned
+        assert f"results/viewer_entries/cornell_box/spp4/{name}" in planned
 
 
 def test_a_config_naming_only_scenes_runs(tmp_path):
