@@ -62,8 +62,8 @@ def timed(command: list[str], *, cwd: Path) -> tuple[float, float, str]:
     return wall, cpu, text
 
 
-def snakemake(workdir: Path, configfile: Path, *args: str) -> list[str]:
-    return [sys.executable, "-m", "snakemake", "-s", str(REPO / "Snakefile"), "--directory", str(workdir),
+def snakemake(workdir: Path, configfile: Path, *args: str, checkout: Path = REPO) -> list[str]:
+    return [sys.executable, "-m", "snakemake", "-s", str(checkout / "Snakefile"), "--directory", str(workdir),
             "--configfile", str(configfile), *args]
 
 
@@ -122,7 +122,7 @@ def main(argv=None) -> None:
                            "--configfile", "study_config.yaml"]
             wall, cpu, _ = timed(env_command, cwd=clone)
             row("import into a fresh clone", wall, cpu)
-            _, _, text = timed(snakemake(clone, clone / "study_config.yaml", "-n"), cwd=clone)
+            _, _, text = timed(snakemake(clone, clone / "study_config.yaml", "-n", checkout=clone), cwd=clone)
             row("snakemake -n in the clone", 0.0, 0.0, extra="nothing to be done" if "Nothing to be done" in text
                 else "PLANS JOBS")
     header = ["| step | wall s | CPU s | CPU / from-scratch CPU | jobs planned | | load (1 min) |",
