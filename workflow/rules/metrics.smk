@@ -10,6 +10,9 @@ rule case_metrics:
     params:
         metrics=METRIC_NAMES,
         entries=ENTRIES,
+    # a case's assembly runs as soon as its case is done (before the next case's batch), so
+    # that finished cases' assemblies do not pile up among the jobs the scheduler weighs
+    priority: 10
     threads: 1
     resources:
         **job_resources("case_metrics"),

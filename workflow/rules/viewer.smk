@@ -16,6 +16,9 @@ rule viewer_case:
         directory(f"{RESULTS}/viewer_cases/{{scene}}/spp{{spp}}"),
     params:
         entries=ENTRIES,
+    # a case's assembly runs as soon as its case is done (before the next case's batch), so
+    # that finished cases' assemblies do not pile up among the jobs the scheduler weighs
+    priority: 10
     threads: 1
     resources:
         **job_resources("viewer_case"),
