@@ -136,7 +136,8 @@ def test_paper_config_plans_under_the_slurm_profile(tmp_path):
     jobs = _planned_resources(REPO / "workflow/configs/paper.yaml", "--profile", str(REPO / "profiles/slurm"),
                               workdir=tmp_path / "plan")
     rules = {rule for rule, _ in jobs}
-    assert {"render_reference_chunk", "case_metrics"} <= rules and any(r.startswith("case_batch_") for r in rules)
+    # (the case assemblies are grouped per case by the profile: their resources print as a group's)
+    assert "render_reference_chunk" in rules and any(r.startswith("case_batch_") for r in rules)
     assert sum(rule == "render_noisy" for rule, _ in jobs) == 30 * 9
     for rule, resources in jobs:
         if rule != "all":
