@@ -429,7 +429,8 @@ def job_resources(rule_name, *, batch=1):
     """The ``resources:`` of the rule's jobs: mem_mb and runtime from its fitted cost (a method's
     or a network's own, e.g. run_method/nfor or train_network/kpcn, where measured; the floors
     for a rule without records), times the attempt; ``gpu`` for the rules that can use one.
-    ``batch``: a batch job making that many of the rule's files asks for that many times the time."""
+    ``batch``: a batch job making that many of the rule's files asks for that many times the
+    estimated time (its margin and floor applied once)."""
 
     def request(wildcards, attempt):
         method, network = getattr(wildcards, "method", None), getattr(wildcards, "network", None)
@@ -437,8 +438,8 @@ def job_resources(rule_name, *, batch=1):
                f"{rule_name}/{network}" if network else None)
         cost = JOB_COSTS.get(own) or JOB_COSTS.get(rule_name, JobCost())
         pixels, entries, spp = _job_size(rule_name, wildcards)
-        request = job_request(*estimate_job(cost, pixels=pixels, entries=entries, spp=spp))
-        request["runtime"] *= batch
+        seconds, rss_mb = estimate_job(cost, pixels=pixels, entries=entries, spp=spp)
+        request = job_request(seconds * batch, rss_mb)           # the floors once, not once per item
         return {key: value * attempt for key, value in request.items()}
 
     resources = {"mem_mb": lambda wildcards, attempt: request(wildcards, attempt)["mem_mb"],
