@@ -44,6 +44,7 @@ from base64 import urlsafe_b64encode
 from pathlib import Path, PurePosixPath
 
 from mcbench import BenchError
+from mcbench.io.tables import write_atomically
 from mcbench.pipeline.config import config_digest, key_path, read_config_file
 
 __all__ = ["BUNDLE_VERSION", "MANIFEST_NAME", "CASE_KEYS", "MTIME_STEP_NS", "is_temporary", "study_files",
@@ -224,13 +225,9 @@ def export_study(results_dir, bundle_path, *, config: dict, workdir=".", checkou
     manifest = _bundle_manifest(entries, config=config, records=read_snakemake_records(rels, workdir=workdir),
                                 provenance=provenance, roots=_roots(checkout_dir, workdir))
     data = json.dumps(manifest, indent=1, sort_keys=True).encode()
-    try:
-        bundle_path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{bundle_path.name}.", suffix=".tmp", dir=bundle_path.parent)
-    except OSError as exc:
-        raise BenchError(f"{bundle_path}: cannot write ({exc.strerror or exc})") from exc
-    try:
-        with os.fdopen(fd, "wb") as raw, tarfile.open(fileobj=raw, mode="w", format=tarfile.PAX_FORMAT) as tar:
+
+    def write_tar(tmp):
+        with open(tmp, "wb") as raw, tarfile.open(fileobj=raw, mode="w", format=tarfile.PAX_FORMAT) as tar:
             tar.addfile(_tar_info(MANIFEST_NAME, len(data), time.time_ns()), io.BytesIO(data))
             for entry in entries:
                 with open(Path(workdir) / entry["path"], "rb") as handle:
@@ -241,13 +238,8 @@ def export_study(results_dir, bundle_path, *, config: dict, workdir=".", checkou
                                          f"export again when no run writes to results/")
             raw.flush()
             os.fsync(raw.fileno())
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, bundle_path)
-    except BaseException as exc:
-        Path(tmp).unlink(missing_ok=True)
-        if isinstance(exc, OSError):
-            raise BenchError(f"{bundle_path}: cannot write ({exc.strerror or exc})") from exc
-        raise
+
+    write_atomically(bundle_path, write_tar)
     return manifest
 
 
