@@ -14,6 +14,13 @@ batch's file exactly as if the per-file rule had made it.
 
 :func:`missing_batches` groups the cases by the set of items they lack, and splits each group
 so that its cases are a product of scenes and spp levels (a rule's wildcard constraints).
+
+A batch depends on what existed when the workflow was parsed, but its job may run in a process
+that parses the workflow again later (a SLURM job, a ``run:`` job spawned without
+``--force-use-threads``), when other jobs have made more files and the batches differ. So the
+main process records each batch it defines (:func:`batch_text`, under ``results/specs/batches/``)
+and a process started for target jobs defines the batch rules it is asked for from those records
+(:func:`target_batch_names`, :func:`read_batch`), not from the files it finds.
 """
 
 from __future__ import annotations
@@ -24,7 +31,8 @@ import os
 from collections import defaultdict
 from pathlib import Path
 
-__all__ = ["missing_batches", "batch_name", "write_if_changed", "spec_text"]
+__all__ = ["missing_batches", "batch_name", "batch_text", "read_batch", "target_batch_names", "write_if_changed",
+           "spec_text"]
 
 
 def missing_batches(cases: list[tuple[str, int]], items: list[str], exists) -> list[dict]:
@@ -58,6 +66,50 @@ def batch_name(prefix: str, batch: dict) -> str:
     finds its rule again by name)."""
     key = json.dumps([batch["items"], batch["scenes"], batch["spps"]])
     return f"{prefix}_{hashlib.sha256(key.encode()).hexdigest()[:12]}"
+
+
+def batch_text(batch: dict) -> str:
+    """The canonical JSON record of ``batch`` (items, scenes, spps), as :func:`read_batch` reads it."""
+    return json.dumps({"items": list(batch["items"]), "scenes": list(batch["scenes"]),
+                       "spps": [int(s) for s in batch["spps"]]}, indent=1) + "\n"
+
+
+def read_batch(path: str | os.PathLike, name: str, prefix: str) -> dict:
+    """The batch recorded in ``path`` for the rule ``name``; ``ValueError`` naming the file when
+    it is missing, unreadable, or does not hash to ``name`` (a record from another batch)."""
+    path = Path(path)
+    try:
+        batch = json.loads(path.read_text())
+        items, scenes, spps = batch["items"], batch["scenes"], [int(s) for s in batch["spps"]]
+    except (OSError, ValueError, KeyError, TypeError) as error:
+        raise ValueError(f"{path}: the record of batch rule {name!r} cannot be read ({error}); it is written "
+                         "by the main Snakemake process that schedules the batch: run snakemake again") from None
+    batch = {"items": items, "scenes": scenes, "spps": spps}
+    if batch_name(prefix, batch) != name:
+        raise ValueError(f"{path}: this record is not batch rule {name!r} (it hashes to "
+                         f"{batch_name(prefix, batch)!r}); run snakemake again")
+    return batch
+
+
+def target_batch_names(argv: list[str], prefix: str) -> list[str]:
+    """The batch rules among the target jobs on a Snakemake command line (``--target-jobs
+    RULE:WILDCARDS ...``, how Snakemake starts a process that runs jobs scheduled elsewhere: a
+    cluster job, a spawned ``run:`` job), in their order, each once. Snakemake parses the
+    workflow before it hands its settings to the workflow, so the command line is what a
+    Snakefile can read while it is parsed."""
+    targets, taking = [], False
+    for arg in argv:
+        if arg.startswith("--target-jobs="):
+            targets.append(arg.split("=", 1)[1])
+            taking = True
+        elif arg == "--target-jobs":
+            taking = True
+        elif arg.startswith("-"):
+            taking = False
+        elif taking:
+            targets.append(arg)
+    names = [t.strip("'\"").split(":", 1)[0] for t in targets]
+    return list(dict.fromkeys(n for n in names if n.startswith(prefix + "_")))
 
 
 def spec_text(spec: dict) -> str:

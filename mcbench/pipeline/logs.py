@@ -17,7 +17,11 @@ from mcbench.pipeline.threads import thread_report
 
 def run_logged(log_path: str | None, step, *args, **kwargs):
     """Call ``step(*args, **kwargs)`` with fds 1 and 2 redirected to ``log_path``; the log ends with
-    the job's thread use (:func:`mcbench.pipeline.threads.thread_report`)."""
+    the job's thread use (:func:`mcbench.pipeline.threads.thread_report`).
+
+    On failure the error line goes to the terminal first, then the traceback to the log. When the
+    log itself cannot be written (a full disk), the terminal line says so, naming the log and the
+    reason, and the step still fails: nothing is lost but the traceback."""
     if not log_path:
         return step(*args, **kwargs)
     Path(log_path).parent.mkdir(parents=True, exist_ok=True)
@@ -25,7 +29,8 @@ def run_logged(log_path: str | None, step, *args, **kwargs):
     sys.stderr.flush()
     saved_err = os.dup(2)
     saved_out = os.dup(1)
-    with open(log_path, "w") as log:
+    log = open(log_path, "w")
+    try:
         os.dup2(log.fileno(), 1)
         os.dup2(log.fileno(), 2)
         try:
@@ -33,14 +38,41 @@ def run_logged(log_path: str | None, step, *args, **kwargs):
             print(thread_report(), flush=True)
             return result
         except BaseException as exc:
-            traceback.print_exc()
-            sys.stderr.flush()
-            os.write(saved_err, f"ERROR: {exc}\n(full traceback in {log_path})\n".encode())
+            unwritable = _write_error(log)
+            if unwritable is None:
+                try:
+                    for stream in (sys.stdout, sys.stderr):
+                        stream.flush()
+                    traceback.print_exc(file=log)
+                    log.flush()
+                except OSError as error:
+                    unwritable = error.strerror or str(error)
+            where = (f"{log_path}: cannot write the log ({unwritable})" if unwritable
+                     else f"(full traceback in {log_path})")
+            os.write(saved_err, f"ERROR: {exc}\n{where}\n".encode())
             raise SystemExit(1) from None
         finally:
-            sys.stdout.flush()
-            sys.stderr.flush()
+            for stream in (sys.stdout, sys.stderr):
+                try:
+                    stream.flush()
+                except OSError:
+                    pass
             os.dup2(saved_out, 1)
             os.dup2(saved_err, 2)
             os.close(saved_out)
             os.close(saved_err)
+    finally:
+        try:
+            log.close()
+        except OSError:
+            pass                           # reported above when it mattered: the step failed
+
+
+def _write_error(log) -> str | None:
+    """Whether the open ``log`` still takes a write: None, or the reason it does not."""
+    try:
+        log.write("\n")
+        log.flush()
+    except OSError as error:
+        return error.strerror or str(error)
+    return None

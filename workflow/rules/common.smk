@@ -25,7 +25,8 @@ from mcbench.pipeline.resources import JobCost, estimate_job, job_request, load_
 from mcbench.io.method_spec import method_spec  # noqa: E402
 from mcbench.io.weights import COMMITTED_WEIGHTS, is_learned_method  # noqa: E402
 from mcbench.pipeline.registry import available_scenes, config_method_table, load_method, load_scene  # noqa: E402
-from mcbench.pipeline.jobs import batch_name, missing_batches, spec_text, write_if_changed  # noqa: E402
+from mcbench.pipeline.jobs import (  # noqa: E402
+    batch_name, batch_text, missing_batches, read_batch, spec_text, target_batch_names, write_if_changed)
 
 
 # The whole configuration: the config file (config.yaml or the --configfile) plus the schema's
@@ -107,6 +108,7 @@ def run_in_pool(step, *args, log, **kwargs):
 METHOD_EXR = f"{RESULTS}/outputs/{{scene}}/spp{{spp}}/{{method}}.exr"
 METHOD_TIMING = f"{RESULTS}/outputs/{{scene}}/spp{{spp}}/{{method}}.json"
 SPEC_FILE = f"{RESULTS}/specs/methods/{{method}}.json"
+BATCH_FILE = f"{RESULTS}/specs/batches/{{name}}.json"
 METRIC_SET = f"m{hashlib.sha256(json.dumps(METRIC_NAMES).encode()).hexdigest()[:10]}"
 ENTRY_METRICS = f"{RESULTS}/metrics/{{scene}}/spp{{spp}}/{METRIC_SET}/{{entry}}.csv"
 ENTRY_VIEWER = f"{RESULTS}/viewer_entries/{{scene}}/spp{{spp}}/{{entry}}"
@@ -500,7 +502,16 @@ CASE_JOBS = [
      "log": f"{RESULTS}/logs/viewer/{{scene}}/spp{{spp}}/{{entry}}.log"},
 ]
 _ITEMS = list(METHODS) + [f"{entry}:{product}" for entry in ENTRIES for product in ("metrics", "viewer")]
-for _batch in missing_batches(CASES, _ITEMS, _case_item_exists):
+# A process started for target jobs (a SLURM job, a spawned run: job) defines the batches it is
+# asked for from the main process's records, not from the files it finds (mcbench.pipeline.jobs).
+_TARGET_BATCHES = target_batch_names(sys.argv, "case_batch") if not workflow.is_main_process else []
+if _TARGET_BATCHES:
+    _BATCHES = [read_batch(BATCH_FILE.format(name=n), n, "case_batch") for n in _TARGET_BATCHES]
+else:
+    _BATCHES = missing_batches(CASES, _ITEMS, _case_item_exists)
+    for _batch in _BATCHES:
+        write_if_changed(BATCH_FILE.format(name=batch_name("case_batch", _batch)), batch_text(_batch))
+for _batch in _BATCHES:
     _name = batch_name("case_batch", _batch)
     _methods = [i for i in _batch["items"] if ":" not in i]
     _evaluations = [i for i in _batch["items"] if ":" in i]
