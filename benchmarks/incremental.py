@@ -9,6 +9,8 @@ children), beside the machine's load:
    base denoiser (JBF with a wider window, ``jbf_wide``) to the study: ``add_denoisers`` in a
    copy of the study's config, the jobs the dry run plans, then the run;
 2. removing them again (the study's own config: only the tables rerun);
+   with ``--metric NAME`` also adding a metric to the study's list (each entry's kept values
+   are reused: only NAME is computed, then the case assemblies and tables) and removing it;
 3. ``--bundle``: ``snakemake --cores 1 export_study`` (time, archive size), then the import of
    that archive into a fresh ``git clone`` of this checkout (time), its ``snakemake -n``
    (must plan nothing), and the clone removed.
@@ -82,6 +84,7 @@ def main(argv=None) -> None:
     parser.add_argument("--scratch-cpu", type=float, help="CPU seconds of the study run from scratch")
     parser.add_argument("--cores", type=int, default=2)
     parser.add_argument("--bundle", action="store_true", help="also export, import and dry-run a clone")
+    parser.add_argument("--metric", help="also add this metric to the study's list, then remove it")
     parser.add_argument("--out", type=Path)
     args = parser.parse_args(argv)
     workdir = args.workdir.resolve()
@@ -109,6 +112,18 @@ def main(argv=None) -> None:
         row(f"add {what}", wall, cpu, f"{sum(counts.values())} ({jobs})")
         wall, cpu, _ = timed(snakemake(workdir, configfile, "--cores", str(args.cores)), cwd=workdir)
         row(f"remove it again (tables only)", wall, cpu)
+        edited.unlink()
+    if args.metric:
+        metrics = list(base.get("metrics") or [])
+        if args.metric in metrics:
+            raise SystemExit(f"--metric {args.metric}: the study already has it ({metrics})")
+        edited = workdir / ".incremental_metric.yaml"
+        edited.write_text(yaml.safe_dump(dict(base, metrics=metrics + [args.metric])))
+        _, _, plan = timed(snakemake(workdir, edited, "-n"), cwd=workdir)
+        wall, cpu, _ = timed(snakemake(workdir, edited, "--cores", str(args.cores)), cwd=workdir)
+        row(f"add the metric {args.metric}", wall, cpu, str(sum(job_counts(plan).values())))
+        wall, cpu, _ = timed(snakemake(workdir, configfile, "--cores", str(args.cores)), cwd=workdir)
+        row("remove it again (values kept: no metric computed)", wall, cpu)
         edited.unlink()
     if args.bundle:
         archive = workdir / "results/bundle/study.tar"

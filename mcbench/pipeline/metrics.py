@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
+import functools
 import time
 from pathlib import Path
 
@@ -143,17 +144,17 @@ ENTRY_RECORD = "entry.json"
 def evaluate_entries(items: list[dict], reference_path: str, *, scene: str, spp: int,
                      metrics: list[str]) -> None:
     """Evaluate entries of one test case against its reference: per item of ``items`` (dicts
-    with ``entry``, ``image``, ``metrics``, ``viewer``, ``weight_inputs``), the files asked for
+    with ``entry``, ``image``, ``metrics``, ``viewer``, ``weight_inputs``, ``values``), the files asked for
     (a path, or None): :func:`evaluate_entry`'s metrics CSV and/or viewer folder."""
     for item in items:
         evaluate_entry(scene, spp, item["entry"], item["image"], reference_path, metrics,
                        metrics_path=item.get("metrics"), viewer_dir=item.get("viewer"),
-                       weight_inputs=item.get("weight_inputs") or ())
+                       weight_inputs=item.get("weight_inputs") or (), values_path=item.get("values"))
 
 
 def evaluate_entry(scene: str, spp: int, entry: str, image_path: str, reference_path: str,
                    metrics: list[str], *, metrics_path: str | None = None, viewer_dir: str | None = None,
-                   weight_inputs: list[str] = ()) -> pd.DataFrame | None:
+                   weight_inputs: list[str] = (), values_path: str | None = None) -> pd.DataFrame | None:
     """Errors of one entry of a test case (the noisy input ``NOISY``, read from its render, or a
     candidate's output EXR) against the reference, and/or the entry's viewer images.
 
@@ -166,6 +167,11 @@ def evaluate_entry(scene: str, spp: int, entry: str, image_path: str, reference_
     together, the FLIP map drawn is the one the ``flip`` metric's value comes from (one
     evaluation). The reference and the image are read through
     :func:`mcbench.io.file_cache.cached_read` (a warm worker reads them once per case).
+
+    With ``values_path``: the entry's metric values already computed for these very files (any
+    metric list) are kept there (:func:`read_metric_values`), so a metric added to the config is
+    the only one computed; a value is reused only when the image's and the reference's SHA-256
+    and the metric code's digest (:func:`metric_code_digest`) are those it was computed from.
     """
     import pandas as pd
 
@@ -198,22 +204,33 @@ def evaluate_entry(scene: str, spp: int, entry: str, image_path: str, reference_
     if image.shape != reference.shape:
         raise BenchError(f"{image_path}: shape {image.shape} does not match reference "
                          f"{reference_path} of shape {reference.shape}")
+    known, sources = {}, None
+    if metrics_path is not None and values_path is not None:
+        sources = {"image_sha256": cached_read(image_path, file_sha256, key=("sha256",)),
+                   "reference_sha256": cached_read(reference_path, file_sha256, key=("sha256",)),
+                   "code": metric_code_digest()}
+        known = read_metric_values(values_path, sources)
     flip_map = flip_value = None
-    if (metrics_path is not None and "flip" in metrics) or viewer_dir is not None:
+    if (metrics_path is not None and "flip" in metrics and "flip" not in known) or viewer_dir is not None:
         flip_map, flip_value = flip_with_map(image, reference)
     frame = None
     if metrics_path is not None:
-        rows = []
+        rows, values = [], dict(known)
         for metric in metrics:
-            if metric == "flip":
+            if metric in known:
+                value = known[metric]
+            elif metric == "flip":
                 value = flip_value
             elif metric in REFERENCE_METRICS:
                 value = REFERENCE_METRICS[metric](image, reference, reference_variance)
             else:
                 value = METRICS[metric](image, reference)
+            values[metric] = float(value)
             rows.append({"scene": scene, "spp": int(spp), "candidate": entry, "metric": metric, "value": value})
         frame = pd.DataFrame(rows, columns=["scene", "spp", "candidate", "metric", "value"])
         write_csv(metrics_path, frame)
+        if values_path is not None and values != known:
+            write_json(values_path, {**sources, "values": values})
     if viewer_dir is not None:
         folder = Path(viewer_dir)
         folder.mkdir(parents=True, exist_ok=True)
@@ -225,6 +242,57 @@ def evaluate_entry(scene: str, spp: int, entry: str, image_path: str, reference_
         write_json(folder / ENTRY_RECORD, {"scene": scene, "spp": int(spp), "entry": entry, **fragment,
                                            "files_crc32": checksums})
     return frame
+
+
+def file_sha256(path: str | Path) -> str:
+    """The SHA-256 of a file's bytes (hex)."""
+    import hashlib
+
+    digest = hashlib.sha256()
+    with open(path, "rb") as handle:
+        for block in iter(lambda: handle.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+@functools.lru_cache(maxsize=None)
+def metric_code_digest() -> str:
+    """A digest of what computes the metric values: the source of :mod:`mcbench.analysis.metrics`
+    and the versions of NumPy, scikit-image and flip-evaluator. A kept value computed by other
+    code is not reused (:func:`read_metric_values`)."""
+    import hashlib
+    from importlib import metadata
+
+    import mcbench.analysis.metrics as metrics_module
+
+    versions = []
+    for package in ("numpy", "scikit-image", "flip-evaluator"):
+        try:
+            versions.append(f"{package}=={metadata.version(package)}")
+        except metadata.PackageNotFoundError:
+            versions.append(f"{package}==none")
+    source = Path(metrics_module.__file__).read_bytes()
+    return hashlib.sha256(source + "\n".join(versions).encode()).hexdigest()[:16]
+
+
+def read_metric_values(path: str | Path, sources: dict) -> dict[str, float]:
+    """The metric values kept in ``path`` ({metric: value}) when they were computed from
+    ``sources`` (the image's and reference's SHA-256, the metric code's digest), else none: a
+    missing, damaged or stale record is recomputed, never trusted (a wrong number would reach
+    the tables)."""
+    import math
+
+    try:
+        record = read_json(path)
+    except (OSError, ValueError, BenchError):
+        return {}
+    if not isinstance(record, dict) or any(record.get(key) != value for key, value in sources.items()):
+        return {}
+    values = record.get("values")
+    if not isinstance(values, dict):
+        return {}
+    return {str(metric): float(value) for metric, value in values.items()
+            if isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)}
 
 
 def assemble_case_metrics(paths: dict[str, str], output_path: str, *, scene: str, spp: int,

@@ -256,3 +256,54 @@ def test_a_job_of_row_reading_methods_never_reads_an_input_whole(case_files, tmp
     layers = read_layers(output)
     for name, value in expected.layers().items():
         np.testing.assert_array_equal(layers[name], value)
+
+
+def test_an_added_metric_is_the_only_one_computed_and_a_changed_file_recomputes_all(case_files, tmp_path,
+                                                                                 monkeypatch):
+    """evaluate_entry with a values record: the metric list [relmse] then [relmse, smape, dssim]
+    computes relMSE once and each added metric once, with the values of a from-scratch
+    evaluation; a rewritten image, a record of other metric code, or a damaged record recompute."""
+    from mcbench.analysis import metrics as metric_functions
+    from mcbench.io.file_cache import clear_cache
+
+    render, reference = case_files
+    output, _ = run("jbf", render, tmp_path, module_name="jbf")
+    calls = []
+    for name in ("relmse", "smape", "dssim"):
+        function = metric_functions.METRICS[name]
+        monkeypatch.setitem(metric_functions.METRICS, name,
+                            lambda image, ref, _f=function, _n=name: calls.append(_n) or _f(image, ref))
+    values = tmp_path / "values" / "jbf.json"
+
+    def evaluate(metric_list, folder):
+        return metrics.evaluate_entry(SCENE, SPP, "jbf", str(output), str(reference), metric_list,
+                                      metrics_path=str(tmp_path / folder / "jbf.csv"), values_path=str(values))
+
+    first = evaluate(["relmse"], "one")
+    second = evaluate(["relmse", "smape", "dssim"], "two")
+    assert calls == ["relmse", "smape", "dssim"]                 # relMSE not computed again
+    scratch = metrics.evaluate_entry(SCENE, SPP, "jbf", str(output), str(reference), ["relmse", "smape", "dssim"],
+                                     metrics_path=str(tmp_path / "scratch.csv"))
+    pd.testing.assert_frame_equal(second, scratch)
+    assert second.value.iloc[0] == first.value.iloc[0]
+    calls.clear()
+    evaluate(["dssim", "relmse"], "three")
+    assert calls == []                                           # every value known
+
+    layers = read_layers(output)                                 # the method reran: another image
+    write_layers(output, {name: layer * 1.5 for name, layer in layers.items()}, metadata=read_metadata(output))
+    clear_cache()
+    changed = evaluate(["relmse", "smape"], "four")
+    assert calls == ["relmse", "smape"]
+    assert changed.value.iloc[0] != second.value.iloc[0]
+
+    calls.clear()
+    monkeypatch.setattr(metrics, "metric_code_digest", lambda: "other metric code")
+    evaluate(["relmse"], "five")
+    assert calls == ["relmse"]
+    monkeypatch.undo()
+    calls.clear()
+    values.write_text("{damaged")
+    frame = metrics.evaluate_entry(SCENE, SPP, "jbf", str(output), str(reference), ["relmse"],
+                                   metrics_path=str(tmp_path / "six.csv"), values_path=str(values))
+    assert frame.value.iloc[0] == changed.value.iloc[0]

@@ -12,6 +12,7 @@ must equal that of a from-scratch run of the edited config.
 
 from __future__ import annotations
 
+import json
 import re
 import shutil
 import subprocess
@@ -204,6 +205,14 @@ def test_an_edit_runs_only_what_it_changes_and_equals_a_run_from_scratch(finishe
     elif kind != "remove":
         assert batched == [True]              # the one new case's, or each case's new files: one job
     run_snakemake(incremental)
+    if kind == "metric":                      # the entries' kept values: the two known, the added one
+        records = sorted((incremental / "results" / "metrics").glob("*/spp*/values/*.json"))
+        assert len(records) == len(expected), records
+        for record in records:
+            before = json.loads((finished / record.relative_to(incremental)).read_text())["values"]
+            after = json.loads(record.read_text())["values"]
+            assert set(before) == {"relmse", "smape"} and set(after) == {"relmse", "smape", "dssim"}, record
+            assert {name: after[name] for name in before} == before, record
     assert "Nothing to be done" in run_snakemake(incremental, "-n").stdout + run_snakemake(incremental, "-n").stderr
     scratch = tmp_path / "scratch"
     write_config(scratch, config)

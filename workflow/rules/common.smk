@@ -111,6 +111,9 @@ SPEC_FILE = f"{RESULTS}/specs/methods/{{method}}.json"
 BATCH_FILE = f"{RESULTS}/specs/batches/{{name}}.json"
 METRIC_SET = f"m{hashlib.sha256(json.dumps(METRIC_NAMES).encode()).hexdigest()[:10]}"
 ENTRY_METRICS = f"{RESULTS}/metrics/{{scene}}/spp{{spp}}/{METRIC_SET}/{{entry}}.csv"
+# The metric values of an entry kept across metric lists (an added metric is the only one computed;
+# mcbench.pipeline.metrics.read_metric_values): not a rule's output, a record the evaluation reuses.
+ENTRY_VALUES = f"{RESULTS}/metrics/{{scene}}/spp{{spp}}/values/{{entry}}.json"
 ENTRY_VIEWER = f"{RESULTS}/viewer_entries/{{scene}}/spp{{spp}}/{{entry}}"
 #: A case's entries: the noisy input and every candidate.
 ENTRIES = [NOISY] + CANDIDATES
@@ -223,6 +226,8 @@ def case_items(rule_name, wildcards):
                                              if entry in METHODS else []})
         record[product] = _path(ENTRY_METRICS if product == "metrics" else ENTRY_VIEWER, wildcards.scene,
                                 wildcards.spp, entry=entry)
+        if product == "metrics":
+            record["values"] = _path(ENTRY_VALUES, wildcards.scene, wildcards.spp, entry=entry)
     return entries, list(by_entry.values())
 
 
