@@ -14,6 +14,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pandas as pd
 import pytest
 import yaml
 
@@ -93,6 +94,23 @@ def test_an_imported_study_plans_nothing_and_an_added_method_only_its_jobs(smoke
         if rule.startswith("run_"):
             assert any(f"/{NEW_METHOD['name']}." in f for f in outputs), (rule, outputs)
     assert {"ranking_table", "gather_metrics"} <= rules
+
+    # run it: the clone's tables are the exporter's plus the new method's rows
+    clone_snakemake(clone, clone / "added.yaml", "--cores", "2")
+    exported, ranked = workdir / "results", clone / "results"
+    before, after = (pd.read_csv(root / "metrics.csv") for root in (exported, ranked))
+    new_rows = after.candidate == NEW_METHOD["name"]
+    pd.testing.assert_frame_equal(after[~new_rows].reset_index(drop=True), before)
+    assert sorted(zip(after[new_rows].scene, after[new_rows].spp, after[new_rows].metric)) == sorted(
+        (scene, spp, metric) for scene, spp in cases for metric in config["metrics"])
+    for metric in config["metrics"]:
+        table = f"tables/ranking_{metric}.csv"                  # the pool: the new base is not in it
+        assert (ranked / table).read_bytes() == (exported / table).read_bytes(), table
+        extras_before, extras_after = (pd.read_csv(root / f"tables/extras_{metric}.csv") for root in (exported, ranked))
+        key = extras_after.columns[0]
+        assert set(extras_after[key]) - set(extras_before[key]) == {NEW_METHOD["name"]}, metric
+        kept = extras_after[extras_after[key] != NEW_METHOD["name"]].reset_index(drop=True)
+        pd.testing.assert_frame_equal(kept, extras_before, check_dtype=False)
 
     # a changed parameter of an existing method: its runs are planned in every case
     changed = {**config, "denoisers": [{"name": "jbf", "params": {"radius": 3}} if d == "jbf" else d
