@@ -45,6 +45,7 @@ from pathlib import Path, PurePosixPath
 
 from mcbench import BenchError
 from mcbench.io.tables import write_atomically
+from mcbench.io.weights import file_sha256
 from mcbench.pipeline.config import config_digest, key_path, read_config_file
 
 __all__ = ["BUNDLE_VERSION", "MANIFEST_NAME", "CASE_KEYS", "MTIME_STEP_NS", "is_temporary", "study_files",
@@ -114,19 +115,11 @@ def study_files(results_dir, *, workdir=".", exclude=()) -> list[str]:
     return sorted(files)
 
 
-def _sha256_file(path) -> str:
-    digest = hashlib.sha256()
-    with open(path, "rb") as handle:
-        while chunk := handle.read(_CHUNK):
-            digest.update(chunk)
-    return digest.hexdigest()
-
-
 def file_entry(rel: str, *, workdir=".") -> dict:
     """``{path, size, sha256, mtime_ns}`` of file ``rel`` (relative to ``workdir``)."""
     path = Path(workdir) / rel
     info = path.stat()
-    return {"path": rel, "size": info.st_size, "sha256": _sha256_file(path), "mtime_ns": info.st_mtime_ns}
+    return {"path": rel, "size": info.st_size, "sha256": file_sha256(path), "mtime_ns": info.st_mtime_ns}
 
 
 def snakemake_record_path(metadata_dir, key: str, *, max_len: int | None = None) -> Path:
@@ -529,7 +522,7 @@ def _check_destinations(entries: list[dict], work: Path, *, bundle) -> None:
     for entry in entries:
         target = work / entry["path"]
         if target.is_dir() or (target.exists() and (target.stat().st_size != entry["size"]
-                                                      or _sha256_file(target) != entry["sha256"])):
+                                                      or file_sha256(target) != entry["sha256"])):
             raise BenchError(f"{bundle}: {target} exists with other content than the bundle's; the import "
                              f"would replace a result: move it away (or import into a fresh clone) and import again")
 

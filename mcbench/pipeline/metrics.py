@@ -206,6 +206,8 @@ def evaluate_entry(scene: str, spp: int, entry: str, image_path: str, reference_
                          f"{reference_path} of shape {reference.shape}")
     known, sources = {}, None
     if metrics_path is not None and values_path is not None:
+        from mcbench.io.weights import file_sha256
+
         sources = {"image_sha256": cached_read(image_path, file_sha256, key=("sha256",)),
                    "reference_sha256": cached_read(reference_path, file_sha256, key=("sha256",)),
                    "code": metric_code_digest()}
@@ -242,17 +244,6 @@ def evaluate_entry(scene: str, spp: int, entry: str, image_path: str, reference_
         write_json(folder / ENTRY_RECORD, {"scene": scene, "spp": int(spp), "entry": entry, **fragment,
                                            "files_crc32": checksums})
     return frame
-
-
-def file_sha256(path: str | Path) -> str:
-    """The SHA-256 of a file's bytes (hex)."""
-    import hashlib
-
-    digest = hashlib.sha256()
-    with open(path, "rb") as handle:
-        for block in iter(lambda: handle.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()
 
 
 @functools.lru_cache(maxsize=None)
