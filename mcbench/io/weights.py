@@ -88,6 +88,32 @@ def safe_failure_reason(error: BaseException) -> str:
     return type(error).__name__ + (f": {' '.join(kept)}" if kept else "")
 
 
+def trained_features(record: str | Path) -> str:
+    """The feature convention (:data:`mcbench.render.renderer.FEATURE_CONVENTIONS`) a network's
+    training record says its crops were rendered with (``data.features``); ``first_hit`` for a
+    record without it (trained before the key existed, on first-hit features) or a missing record."""
+    import json
+
+    try:
+        data = json.loads(Path(record).read_text()).get("data", {})
+    except FileNotFoundError:
+        return "first_hit"
+    except (OSError, ValueError) as exc:
+        raise BenchError(f"{record}: cannot read the training record ({exc})") from exc
+    return str(data.get("features", "first_hit")) if isinstance(data, dict) else "first_hit"
+
+
+def check_trained_features(record: str | Path, features: str, *, name: str) -> None:
+    """Raise :class:`BenchError` when the weights of learned method ``name`` (training record
+    ``record``) were trained on features of another convention than ``features`` (config key
+    ``features``): a network fed features it was not trained on gives numbers no table should hold."""
+    trained = trained_features(record)
+    if trained != features:
+        raise BenchError(f"{record}: the weights of {name} were trained on '{trained}' features, the config "
+                         f"key 'features' is '{features}'; retrain them under the same features "
+                         f"(`snakemake --cores 2 train_{name}` with an empty weights_dir) or set features: {trained}")
+
+
 def file_sha256(path: str | Path) -> str:
     """The SHA-256 of a file's bytes, as 64 hex digits (read in 1 MiB blocks)."""
     import hashlib

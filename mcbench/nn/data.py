@@ -359,6 +359,10 @@ def assemble_items(crops: Iterable[tuple[dict, dict, str, dict[str, tuple[dict, 
         elif crop_levels != levels:
             raise BenchError(f"{source}: crops have different spp levels ({levels} vs {crop_levels}); "
                              f"render the training data with one setting")
+        elif meta.get("features", "first_hit") != first.get("features", "first_hit"):
+            raise BenchError(f"{source}: crop features '{meta.get('features', 'first_hit')}' differ from the "
+                             f"first crop's '{first.get('features', 'first_hit')}'; render the training data "
+                             f"under one feature convention")
         crop_names = _check_layers(layers, layout, "crop", source)
         base_names = {}
         for base in bases:
@@ -389,7 +393,9 @@ def assemble_items(crops: Iterable[tuple[dict, dict, str, dict[str, tuple[dict, 
     spp = np.array([[level, level / 2, level / 2] for level in levels], dtype=np.float64)
     info = {"spp_levels": levels, "crop_size": store.width,
             "crops_per_scene": max(seeds.count(s) for s in seeds),
-            **{key: str(first[key]) for key in ("resolution", "target_spp", "variant", "mitsuba") if key in first}}
+            **{key: str(first[key]) for key in ("resolution", "target_spp", "variant", "mitsuba") if key in first},
+            # crops rendered before the key existed have first-hit features
+            "features": str(first.get("features", "first_hit"))}
     return CropSet(store, index, target_index, np.array(pairs, dtype=np.int64).reshape(-1, 2), spp,
                    np.array([seeds[crop] for crop, _ in pairs]), info, dict(keys))
 

@@ -82,7 +82,8 @@ def _combiner_weights(result: Denoised, count: int) -> np.ndarray:
 
 def run_oracle_study(scene: str, reference_path: str, *, table_csv: str, table_md: str, weights_png: str,
                      denoisers: list[str], repetitions: int, spp: int, downscale: int, resolution=None,
-                     variant: str = "auto", seed: int = 0, threads: int | None = None) -> pd.DataFrame:
+                     variant: str = "auto", seed: int = 0, threads: int | None = None,
+                     features: str = "first_hit") -> pd.DataFrame:
     """Run the oracle study of one scene and write its table (CSV and Markdown) and weight maps (PNG).
 
     ``denoisers``: base denoiser modules of ``methods/`` (default parameters); ``repetitions``
@@ -91,6 +92,7 @@ def run_oracle_study(scene: str, reference_path: str, *, table_csv: str, table_m
     ``reference_path`` must have the harness's resolution). Returns the table: one row per panel
     a-i (``panel``, ``statistics``, ``weights``, ``relmse``, ``dssim``) then the held-out noisy
     render and each base denoiser (panel ``-``), errors against the block-averaged reference.
+    ``features``: the renders' feature convention (config key ``features``).
     """
     from mcbench.pipeline.registry import load_method
     from mcbench.render.renderer import render_dict_buffers
@@ -124,7 +126,7 @@ def run_oracle_study(scene: str, reference_path: str, *, table_csv: str, table_m
     for r in range(repetitions + 1):
         layers, _ = render_dict_buffers(
             desc, spp, lambda half, j, p, r=r: oracle_render_seed(r, half, bin=j, pass_index=p, base_seed=seed),
-            key=f"oracle:{scene}", variant=variant)
+            key=f"oracle:{scene}", variant=variant, features=features)
         buffers = RenderBuffers(layers=layers, spp=spp, source=f"oracle render {r} of '{scene}'")
         outputs = [base.denoise(buffers) for base in bases]
         if r < repetitions:

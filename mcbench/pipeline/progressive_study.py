@@ -238,7 +238,7 @@ def curve_figure(table: pd.DataFrame, path: str, *, entries: list[str], labels: 
 def run_consistency_curve(scene: str, reference_path: str, *, table_csv: str, table_md: str, figure_png: str,
                           spp_levels: list[int], base: str = "oidn", divergence: str = "oidn",
                           downscale: int = 2, resolution=None, variant: str = "auto", seed: int = 0,
-                          threads: int | None = None) -> pd.DataFrame:
+                          threads: int | None = None, features: str = "first_hit") -> pd.DataFrame:
     """Render ``scene`` at every level of ``spp_levels`` and write the consistency curve's table
     (CSV and Markdown) and figure (PNG).
 
@@ -248,7 +248,8 @@ def run_consistency_curve(scene: str, reference_path: str, *, table_csv: str, ta
     own), divided by ``downscale``; the reference at ``reference_path`` must have the harness's
     resolution. Returns the table: one row per (spp, entry) with columns ``spp``, ``entry``,
     ``label``, ``relmse``, ``relmse_corrected`` (only when the reference has a variance layer),
-    ``smape``, ``seconds``; entries :func:`entry_names` (module docstring).
+    ``smape``, ``seconds``; entries :func:`entry_names` (module docstring). ``features``: the
+    renders' feature convention (config key ``features``).
     """
     from mcbench import NOISY_LABEL
     from mcbench.pipeline.registry import load_method, single_image_function
@@ -297,7 +298,7 @@ def run_consistency_curve(scene: str, reference_path: str, *, table_csv: str, ta
         layers, _ = render_dict_buffers(
             desc, spp, lambda half, j, p, index=index: progressive_curve_seed(index, half, bin=j, pass_index=p,
                                                                               base_seed=seed),
-            key=key, variant=variant)
+            key=key, variant=variant, features=features)
         buffers = RenderBuffers(layers=layers, spp=spp, source=f"progressive curve render of '{scene}' at {spp} spp")
         spent = {entries[0]: time.perf_counter() - clock}
         if index == 0:      # warm-up, untimed: imports, PD's weights, OIDN's device (outputs are deterministic)

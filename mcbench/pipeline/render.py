@@ -37,9 +37,10 @@ def _import_case(scene: str, folder: RenderFolder, spp: int, output_path: str, r
 
 
 def render_noisy(scene: str, spp: int, output_path: str, *, resolution=None, variant: str = "auto",
-                 seed: int = 0, threads: int | None = None) -> None:
+                 seed: int = 0, threads: int | None = None, features: str = "first_hit") -> None:
     """Render the full image and the two half buffers of one (scene, spp) to a multi-layer EXR (or
-    import the case of a scene of renders made elsewhere)."""
+    import the case of a scene of renders made elsewhere); ``features``: where the features are
+    recorded (:data:`mcbench.render.renderer.FEATURE_CONVENTIONS`, config key ``features``)."""
     from mcbench.pipeline.registry import load_scene
 
     module = load_scene(scene)
@@ -49,19 +50,21 @@ def render_noisy(scene: str, spp: int, output_path: str, *, resolution=None, var
     from mcbench.render.renderer import render_buffers
 
     layers, metadata = render_buffers(module, spp, resolution=resolution_pair(resolution),
-                                      variant=variant, seed=seed, threads=threads)
+                                      variant=variant, seed=seed, threads=threads, features=features)
     check_finite(f"{output_path} (render of scene '{scene}' at {spp} spp)", layers)
     write_layers(output_path, layers, metadata=metadata)
 
 
 def render_reference_chunk(scene: str, spp: int, chunk: int, output_path: str, *, resolution=None,
-                           variant: str = "auto", seed: int = 0, threads: int | None = None) -> None:
-    """Render one chunk of a reference with its own seeds (never overlapping the noisy renders)."""
+                           variant: str = "auto", seed: int = 0, threads: int | None = None,
+                           features: str = "first_hit") -> None:
+    """Render one chunk of a reference with its own seeds (never overlapping the noisy renders),
+    its features in convention ``features``."""
     from mcbench.render.renderer import render_reference_chunk as render_chunk
     from mcbench.pipeline.registry import load_scene
 
     layers, metadata = render_chunk(load_scene(scene), spp, chunk, resolution=resolution_pair(resolution),
-                                    variant=variant, seed=seed, threads=threads)
+                                    variant=variant, seed=seed, threads=threads, features=features)
     check_finite(f"{output_path} (reference chunk {chunk} of scene '{scene}')", layers)
     write_layers(output_path, layers, metadata=metadata)
 

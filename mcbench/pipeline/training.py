@@ -16,14 +16,16 @@ from mcbench.pipeline.render import resolution_pair
 
 
 def write_training_example(seed: int, output_paths: list[str], *, spp_levels, target_spp: int, resolution,
-                           crop_size: int, variant: str = "auto", threads: int | None = None) -> None:
-    """Render training scene ``seed`` (mcbench.training_data) and write one EXR per crop."""
+                           crop_size: int, variant: str = "auto", threads: int | None = None,
+                           features: str = "first_hit") -> None:
+    """Render training scene ``seed`` (mcbench.training_data) and write one EXR per crop; its
+    features in convention ``features`` (config key ``features``)."""
     from mcbench.training_data import training_example
     from mcbench.render.variants import set_threads
 
     set_threads(threads)
     crops = training_example(seed, list(spp_levels), target_spp, resolution_pair(resolution), crop_size,
-                             len(output_paths), variant=variant)
+                             len(output_paths), variant=variant, features=features)
     for path, (layers, metadata) in zip(output_paths, crops):
         check_finite(f"{path} (training scene {seed})", layers)
         write_layers(path, layers, metadata=metadata)

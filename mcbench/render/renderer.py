@@ -22,6 +22,16 @@ features: adding channels to its film changes the order in which the film sums a
 (1-ulp differences at more than 2 spp per pass), a separate pass leaves it bit-identical.
 Reference chunks and :func:`render_scene_sums` have no feature pass.
 
+Features (config key ``features``, :data:`FEATURE_CONVENTIONS`): with ``first_hit`` albedo, normal
+and depth come from the colour pass's ``aov`` integrator (the camera ray's first surface) and
+position and visibility from the feature pass above. With ``tungsten`` the feature pass is
+``moment(mcbench_path_features)`` (:mod:`mcbench.render.path_features`): every feature recorded
+at the first vertex whose sampled BSDF lobe is not a delta lobe, as the paper's renderer records
+them, and averaged over the samples that recorded it (:func:`weighted_mean_variance`); the colour
+pass is the same bit for bit in both conventions. A reference chunk of the ``tungsten`` convention
+records its features in one feature pass of :data:`REFERENCE_FEATURE_SPP` samples
+(:func:`render_reference_chunk`).
+
 Each buffer or chunk is split into passes of at most :data:`MAX_WAVEFRONT` samples
 (:func:`passes_for`); every pass has its own 32-bit seed, laid out in :mod:`mcbench.render.seeds`
 (which also maps a seed to the one handed to Mitsuba in scalar variants).
@@ -64,7 +74,8 @@ from mcbench.render.xml_scenes import XmlScene, load_xml_scene
 __all__ = ["RenderError", "MAX_WAVEFRONT", "passes_for", "load_scene_dict", "forget_scene",
            "render_scene_sums", "render_dict_buffers", "render_buffers", "render_reference_chunk",
            "merge_reference_chunks", "moments_to_mean_variance", "buffers_from_moment_sums",
-           "buffers_from_bin_sums",
+           "buffers_from_bin_sums", "weighted_mean_variance", "check_features",
+           "FEATURE_CONVENTIONS", "DEFAULT_FEATURES", "REFERENCE_FEATURE_SPP",
            "film_size"]
 
 MAX_WAVEFRONT = 2 ** 22          # samples per mi.render call in vectorised variants (W*H*spp_pass)
@@ -93,6 +104,26 @@ FEATURE_CHANNELS = {
                    (f"m2_nested.{VISIBILITY_CHILD}.{VISIBILITY_AOV}",)),
 }
 FEATURES = ("albedo", "normal", "depth")          # the features of a reference chunk
+
+#: Where a render's features are recorded (config key ``features``; module docstring, "Features"):
+#: ``tungsten`` at the first non-specular vertex of the path, as the paper's renderer records them
+#: (:mod:`mcbench.render.path_features`); ``first_hit`` at the camera ray's first surface (Mitsuba's
+#: ``aov`` integrator in the colour pass, position and visibility from the first-hit feature pass).
+FEATURE_CONVENTIONS = ("tungsten", "first_hit")
+#: Samples of a Tungsten-convention reference chunk's feature pass (:func:`render_reference_chunk`).
+REFERENCE_FEATURE_SPP = 256
+#: The convention of a render that does not say (the learned methods' committed weights were
+#: trained on these; :func:`render_buffers` and the config default).
+DEFAULT_FEATURES = "first_hit"
+# The path-feature pass's film channels (mcbench.render.path_features.AOVS): quantity -> m1, m2 names;
+# ``q_count`` is the per-sample weight (1 where the sample recorded q) of a weighted quantity q.
+_PATH_QUANTITIES = {"albedo": ("albedo", "RGB"), "albedo_count": ("albedo", "W"),
+                    "normal": ("normal", "XYZ"), "depth": ("depth", "T"), "depth_count": ("depth", "W"),
+                    "position": ("position", "XYZ"), "position_count": ("position", "W"),
+                    "visibility": ("visibility", "V")}
+PATH_FEATURE_CHANNELS = {
+    quantity: (tuple(f"nested.{name}.{c}" for c in channels), tuple(f"m2_nested.{name}.{c}" for c in channels))
+    for quantity, (name, channels) in _PATH_QUANTITIES.items()}
 
 SeedOfPass = Callable[[int], int]            # pass index -> 32-bit seed
 SeedOfBinPass = Callable[[int, int, int], int]   # (half 0 = A / 1 = B, bin 0/1, pass index) -> seed
@@ -204,12 +235,12 @@ def forget_scene(key: str) -> None:
 # --------------------------------------------------------------------------- moment sums
 
 def _channel_indices(scene_object, channels: dict = CHANNELS,
-                     count: int = 31) -> dict[str, tuple[list[int], list[int]]]:
+                     count: int | None = 31) -> dict[str, tuple[list[int], list[int]]]:
     """Indices of the m1 and m2 channels of each quantity of ``channels`` in the film developed
-    last (the colour pass: :data:`CHANNELS`, 31 channels; the feature pass:
-    :data:`FEATURE_CHANNELS`, 25), by name."""
+    last (the colour pass: :data:`CHANNELS`, 31 channels; a feature pass: :data:`FEATURE_CHANNELS`
+    or :data:`PATH_FEATURE_CHANNELS`, any count), by name."""
     names = [field.name for field in scene_object.sensors()[0].film().bitmap().struct_()]
-    if names[:3] != ["R", "G", "B"] or len(names) != count:
+    if names[:3] != ["R", "G", "B"] or (count is not None and len(names) != count):
         raise RenderError(f"unexpected film channels {names}")
     try:
         return {q: ([names.index(c) for c in m1], [names.index(c) for c in m2])
@@ -229,28 +260,55 @@ def _render_pass(scene_object, spp: int, seed: int, integrator=None) -> np.ndarr
 _feature_integrators: dict = {}
 
 
-def _feature_integrator(variant: str):
-    """The integrator of the feature pass (module docstring), one per variant:
-    ``moment(aov(position, visibility))``, with the colour pass's block size in scalar variants (the
-    same block size gives the same per-block seeds, hence the same camera rays)."""
+def check_features(features: str, label: str = "features") -> str:
+    """``features`` if it is one of :data:`FEATURE_CONVENTIONS`, else a ``ValueError`` naming ``label``."""
+    if features not in FEATURE_CONVENTIONS:
+        raise ValueError(f"config key '{label}': '{features}' is not a feature convention; "
+                         f"use one of {', '.join(FEATURE_CONVENTIONS)}")
+    return features
+
+
+def _max_vertices(integrator) -> int:
+    """The most surface vertices a Tungsten-convention feature path examines: the scene
+    integrator's ``max_depth`` when it sets one (> 0), else Tungsten's default 64."""
+    from mcbench.render.path_features import DEFAULT_MAX_VERTICES
+
+    depth = integrator.get("max_depth", -1) if isinstance(integrator, dict) else -1
+    return int(depth) if int(depth) > 0 else DEFAULT_MAX_VERTICES
+
+
+def _feature_integrator(variant: str, features: str = "first_hit", max_vertices: int = 64):
+    """The integrator of the feature pass (module docstring), one per variant and convention:
+    ``moment(aov(position, visibility))`` for ``first_hit``, ``moment(mcbench_path_features)`` for
+    ``tungsten``; with the colour pass's block size in scalar variants (the same block size gives
+    the same per-block seeds, hence the same camera rays)."""
     import mitsuba as mi
 
-    if variant not in _feature_integrators:
-        desc = {"type": "moment", "nested": {"type": "aov", "aovs": FEATURE_AOVS,
-                                             VISIBILITY_CHILD: {"type": register_visibility()}}}
+    key = (variant, features, max_vertices if features == "tungsten" else None)
+    if key not in _feature_integrators:
+        if features == "tungsten":
+            from mcbench.render.path_features import register as register_path_features
+
+            desc = {"type": "moment", "nested": {"type": register_path_features(), "max_vertices": max_vertices}}
+        else:
+            desc = {"type": "moment", "nested": {"type": "aov", "aovs": FEATURE_AOVS,
+                                                 VISIBILITY_CHILD: {"type": register_visibility()}}}
         if variant.startswith("scalar"):
             desc["block_size"] = SCALAR_BLOCK_SIZE
-        _feature_integrators[variant] = mi.load_dict(desc)
-    return _feature_integrators[variant]
+        _feature_integrators[key] = mi.load_dict(desc)
+    return _feature_integrators[key]
 
 
 def _moment_sums(label: str, scene_object, spp: int, seed_of: SeedOfPass, variant: str,
                  width: int, height: int, label_spp: int,
-                 progress: str | None = None, features: bool = False) -> tuple[dict[str, tuple], list[int]]:
+                 progress: str | None = None, features: str | None = None,
+                 max_vertices: int = 64) -> tuple[dict[str, tuple], list[int]]:
     """Render ``spp`` samples in the passes of :func:`passes_for`, pass ``p`` seeded with
     ``seed_of(p)``; per quantity float64 sums (S1, S2), each (H, W, C), and the seeds used.
-    ``features``: each pass is followed by its feature pass (same spp and seed, the quantities of
-    :data:`FEATURE_CHANNELS`).
+    ``features`` (a convention of :data:`FEATURE_CONVENTIONS`, or ``None`` for none): each pass is
+    followed by its feature pass (same spp and seed): ``first_hit`` adds the quantities of
+    :data:`FEATURE_CHANNELS`; ``tungsten`` those of :data:`PATH_FEATURE_CHANNELS`, which replace the
+    colour pass's albedo, normal and depth (their ``*_count`` sums: the samples that recorded them).
     With ``progress`` (a label), prints a :func:`mcbench.progress.progress_line` after each pass
     (passes done, elapsed time, ETA from the samples done so far)."""
     pass_spp = passes_for(spp, width, height, variant)
@@ -266,15 +324,11 @@ def _moment_sums(label: str, scene_object, spp: int, seed_of: SeedOfPass, varian
             raise RenderError(f"scene '{label}' at {label_spp} spp: Mitsuba produced NaN/Inf in "
                               f"{bad} pixel(s) (pass seed {seed}, variant {variant})")
         quantities = [(image, index)]
-        if features:
-            feature_image = _render_pass(scene_object, spp, mitsuba_seed(seed, variant, width, height),
-                                         _feature_integrator(variant))
-            feature_index = _channel_indices(scene_object, FEATURE_CHANNELS, 25)
-            if not np.all(np.isfinite(feature_image)):
-                bad = int((~np.isfinite(feature_image)).any(axis=2).sum())
-                raise RenderError(f"scene '{label}' at {label_spp} spp: the feature pass produced NaN/Inf in "
-                                  f"{bad} pixel(s) (pass seed {seed}, variant {variant})")
-            quantities.append((feature_image, feature_index))
+        if features is not None:
+            feature_image, feature_index = _feature_pass(label, label_spp, scene_object, spp, seed, variant,
+                                                         width, height, features, max_vertices)
+            quantities = [(image, {q: v for q, v in index.items() if q not in feature_index}),
+                          (feature_image, feature_index)]
         for pass_image, pass_index in quantities:
             for quantity, (m1, m2) in pass_index.items():
                 s1, s2 = pass_image[..., m1] * spp, pass_image[..., m2] * spp
@@ -288,6 +342,23 @@ def _moment_sums(label: str, scene_object, spp: int, seed_of: SeedOfPass, varian
             print(progress_line(progress, f"pass {done}/{len(pass_spp)} ({samples}/{sum(pass_spp)} spp)",
                                 elapsed, eta_seconds(elapsed, samples, sum(pass_spp))), flush=True)
     return sums, seeds
+
+
+def _feature_pass(label: str, label_spp: int, scene_object, spp: int, seed: int, variant: str, width: int,
+                  height: int, features: str, max_vertices: int) -> tuple[np.ndarray, dict]:
+    """One feature pass (module docstring) of ``spp`` samples with pass seed ``seed``: the developed
+    film (H, W, channels) and the indices of its quantities (:data:`FEATURE_CHANNELS` for
+    ``first_hit``, :data:`PATH_FEATURE_CHANNELS` for ``tungsten``); NaN/Inf stops with a
+    :class:`RenderError` naming ``label`` at ``label_spp``."""
+    image = _render_pass(scene_object, spp, mitsuba_seed(seed, variant, width, height),
+                         _feature_integrator(variant, features, max_vertices))
+    index = _channel_indices(scene_object, FEATURE_CHANNELS if features == "first_hit" else PATH_FEATURE_CHANNELS,
+                             None)
+    if not np.all(np.isfinite(image)):
+        bad = int((~np.isfinite(image)).any(axis=2).sum())
+        raise RenderError(f"scene '{label}' at {label_spp} spp: the feature pass produced NaN/Inf in "
+                          f"{bad} pixel(s) (pass seed {seed}, variant {variant})")
+    return image, index
 
 
 def render_scene_sums(desc: dict, spp: int, seed_of: SeedOfPass, *, key: str,
@@ -306,11 +377,12 @@ def render_scene_sums(desc: dict, spp: int, seed_of: SeedOfPass, *, key: str,
 
 
 def _half_buffers(label: str, scene_object, spp: int, seed_of: SeedOfBinPass, variant: str,
-                  width: int, height: int) -> tuple[dict[str, np.ndarray], list[int], list[int]]:
+                  width: int, height: int, features: str, max_vertices: int
+                  ) -> tuple[dict[str, np.ndarray], list[int], list[int]]:
     """Layers of :data:`ALL_LAYERS` from half buffers A and B of ``spp/2`` samples each (plus
     :data:`mcbench.io.buffers.BIN_LAYERS` when ``spp`` is a multiple of 4: each half is then rendered as two bins of
     ``spp/4`` samples, bin ``j`` of half ``h`` seeded ``seed_of(h, j, p)``), and the seeds of A and
-    of B."""
+    of B; features of convention ``features`` (:data:`FEATURE_CONVENTIONS`)."""
     half_spp = spp // 2
     binned = half_spp % 2 == 0
     sums, seeds = {}, {0: [], 1: []}
@@ -318,15 +390,19 @@ def _half_buffers(label: str, scene_object, spp: int, seed_of: SeedOfBinPass, va
         for j in ((0, 1) if binned else (0,)):
             sums[2 * half + j], bin_seeds = _moment_sums(
                 label, scene_object, half_spp // 2 if binned else half_spp,
-                lambda p, half=half, j=j: seed_of(half, j, p), variant, width, height, spp, features=True)
+                lambda p, half=half, j=j: seed_of(half, j, p), variant, width, height, spp,
+                features=features, max_vertices=max_vertices)
             seeds[half] += bin_seeds
+    clip = features == "first_hit"
     if binned:
-        return buffers_from_bin_sums([sums[k] for k in range(BINS)], half_spp // 2), seeds[0], seeds[1]
-    return buffers_from_moment_sums(sums[0], sums[2], half_spp), seeds[0], seeds[1]
+        return (buffers_from_bin_sums([sums[k] for k in range(BINS)], half_spp // 2, clip_albedo=clip),
+                seeds[0], seeds[1])
+    return buffers_from_moment_sums(sums[0], sums[2], half_spp, clip_albedo=clip), seeds[0], seeds[1]
 
 
 def render_dict_buffers(desc: dict, spp: int, seed_of: SeedOfHalfPass, *, key: str,
-                        variant: str = "auto") -> tuple[dict[str, np.ndarray], list[int]]:
+                        variant: str = "auto", features: str = DEFAULT_FEATURES
+                        ) -> tuple[dict[str, np.ndarray], list[int]]:
     """Noisy buffers of scene dict ``desc`` with the conventions of :func:`render_buffers`.
 
     ``spp``: even total spp (``spp/2`` per half buffer); ``seed_of(half, bin, pass_index)`` gives
@@ -334,11 +410,13 @@ def render_dict_buffers(desc: dict, spp: int, seed_of: SeedOfHalfPass, *, key: s
     multiple of 4); ``key`` names the scene in errors and in the scene cache
     (:func:`forget_scene`). Returns the float32 layers of :data:`ALL_LAYERS` and, for spp a
     multiple of 4, :data:`mcbench.io.buffers.BIN_LAYERS` (see :func:`buffers_from_bin_sums`), and the seeds used
-    (A's, then B's).
+    (A's, then B's). ``features``: where the features are recorded (:data:`FEATURE_CONVENTIONS`).
     """
     spp = _even_spp(spp, key)
-    scene_object, _, variant, width, height = _loaded_dict(desc, key, variant)
-    layers, seeds_a, seeds_b = _half_buffers(key, scene_object, spp, seed_of, variant, width, height)
+    features = check_features(features)
+    scene_object, integrator, variant, width, height = _loaded_dict(desc, key, variant)
+    layers, seeds_a, seeds_b = _half_buffers(key, scene_object, spp, seed_of, variant, width, height,
+                                             features, _max_vertices(integrator))
     return layers, seeds_a + seeds_b
 
 
@@ -391,8 +469,8 @@ def _loaded_module(module: ModuleType, width: int, height: int, variant: str):
 
 
 def render_buffers(scene_module: ModuleType, spp: int, *, resolution: tuple[int, int] | None = None,
-                   variant: str = "auto", seed: int = 0, threads: int | None = None
-                   ) -> tuple[dict[str, np.ndarray], dict[str, str]]:
+                   variant: str = "auto", seed: int = 0, threads: int | None = None,
+                   features: str = DEFAULT_FEATURES) -> tuple[dict[str, np.ndarray], dict[str, str]]:
     """Render the two independent half buffers A and B (spp/2 samples each) of a test scene.
 
     ``scene_module``: the scene module (``scenes.load_scene(name)``; its name is the module's last
@@ -406,12 +484,14 @@ def render_buffers(scene_module: ModuleType, spp: int, *, resolution: tuple[int,
     ``normal*``, ``position*`` (H, W, 3), ``depth*``, ``visibility*`` (H, W) and their
     ``*_variance`` layers (position and visibility from the feature pass); the full-image
     versions are ``(A + B) / 2`` and the variances from the pooled moments of all spp samples.
-    Metadata (strings): scene, spp, variant, seed, seeds_a, seeds_b, mitsuba, seconds,
-    resolution (``WxH``), integrator, passes.
+    ``features``: where albedo, normal, depth, position and visibility are recorded
+    (:data:`FEATURE_CONVENTIONS`). Metadata (strings): scene, spp, variant, seed, seeds_a, seeds_b,
+    mitsuba, seconds, resolution (``WxH``), integrator, passes, features.
     """
     module = scene_module
     name = _scene_name(module)
     spp = _even_spp(spp, name)
+    features = check_features(features)
     width, height = _size(module, resolution)
     variant = pick_variant(variant)
     set_threads(threads)
@@ -420,31 +500,37 @@ def render_buffers(scene_module: ModuleType, spp: int, *, resolution: tuple[int,
     layers, seeds_a, seeds_b = _half_buffers(
         name, scene_object, spp,
         lambda half, j, p: render_seed("noisy", spp=spp, half=half, bin=j, pass_index=p, base_seed=seed),
-        variant, width, height)
+        variant, width, height, features, _max_vertices(integrator))
     seconds = time.perf_counter() - start
     metadata = {
         "scene": name, "spp": str(spp), "variant": variant, "seed": str(seed),
         "seeds_a": ",".join(map(str, seeds_a)), "seeds_b": ",".join(map(str, seeds_b)),
         "mitsuba": _mitsuba_version(), "seconds": f"{seconds:.3f}",
         "resolution": f"{width}x{height}", "integrator": _describe(integrator),
-        "passes": str(len(seeds_a)),
+        "passes": str(len(seeds_a)), "features": features,
     }
     return layers, metadata
 
 
 def render_reference_chunk(scene_module: ModuleType, spp: int, chunk: int, *,
                            resolution: tuple[int, int] | None = None, variant: str = "auto",
-                           seed: int = 0, threads: int | None = None
+                           seed: int = 0, threads: int | None = None, features: str = DEFAULT_FEATURES
                            ) -> tuple[dict[str, np.ndarray], dict[str, str]]:
     """Render chunk ``chunk`` (0-based) of a reference of the scene module ``scene_module``: ``spp``
     samples with seeds disjoint from every noisy render and every other chunk.
 
     Layers (float32): ``color`` (H, W, 3) sample mean, ``color_m2`` (H, W, 3) mean of squared
-    samples, ``albedo``, ``normal`` (H, W, 3) and ``depth`` (H, W) sample means. Metadata
-    (strings): scene, spp, chunk, variant, seed, seeds, mitsuba, seconds, resolution, integrator.
+    samples, ``albedo``, ``normal`` (H, W, 3) and ``depth`` (H, W) sample means (``features``:
+    ``first_hit`` from the colour pass, all ``spp`` samples; ``tungsten`` from one path-feature pass
+    of ``min(spp, REFERENCE_FEATURE_SPP)`` samples seeded as the chunk's first pass, each the mean
+    over the samples that recorded it: no step of the study reads a reference's features, they are
+    kept for display and export, and a feature pass beside every colour pass would add its cost to
+    the study's most expensive renders). Metadata (strings): scene, spp, chunk, variant, seed, seeds,
+    mitsuba, seconds, resolution, integrator, features, feature_spp (the samples behind the features).
     """
     module = scene_module
     name = _scene_name(module)
+    features = check_features(features)
     if not isinstance(spp, (int, np.integer)) or spp < 1:
         raise BenchError(f"config key 'reference.spp': scene '{name}' needs spp >= 1, got {spp}")
     spp, chunk = int(spp), int(chunk)
@@ -453,28 +539,55 @@ def render_reference_chunk(scene_module: ModuleType, spp: int, chunk: int, *,
     set_threads(threads)
     start = time.perf_counter()
     scene_object, integrator = _loaded_module(module, width, height, variant)
+    seed_of = lambda p: render_seed("reference", chunk=chunk, pass_index=p, base_seed=seed)  # noqa: E731
     sums, seeds = _moment_sums(
-        name, scene_object, spp,
-        lambda p: render_seed("reference", chunk=chunk, pass_index=p, base_seed=seed),
+        name, scene_object, spp, seed_of,
         variant, width, height, spp, progress=f"reference {name} chunk {chunk} ({width}x{height}, {variant})")
     layers = {"color": sums["color"][0] / spp, "color_m2": sums["color"][1] / spp}
+    feature_spp = spp
+    if features == "tungsten":
+        feature_spp = min(spp, REFERENCE_FEATURE_SPP)
+        image, index = _feature_pass(name, spp, scene_object, feature_spp, seed_of(0), variant, width, height,
+                                     features, _max_vertices(integrator))
+        sums = {quantity: (image[..., m1] * feature_spp, image[..., m2] * feature_spp)
+                for quantity, (m1, m2) in index.items()}
     for quantity in FEATURES:
-        layers[quantity] = _squeeze(sums[quantity][0] / spp)
+        count = sums[f"{quantity}_count"][0] if f"{quantity}_count" in sums else feature_spp
+        layers[quantity] = _squeeze(weighted_mean_variance(*sums[quantity], count)[0])
     layers = {k: np.ascontiguousarray(v, dtype=np.float32) for k, v in layers.items()}
     metadata = {
         "scene": name, "spp": str(spp), "chunk": str(chunk), "variant": variant,
         "seed": str(seed), "seeds": ",".join(map(str, seeds)), "mitsuba": _mitsuba_version(),
         "seconds": f"{time.perf_counter() - start:.3f}", "resolution": f"{width}x{height}",
-        "integrator": _describe(integrator),
+        "integrator": _describe(integrator), "features": features, "feature_spp": str(feature_spp),
     }
     return layers, metadata
+
+
+def weighted_mean_variance(s1: np.ndarray, s2: np.ndarray, count) -> tuple[np.ndarray, np.ndarray]:
+    """Mean and variance of the mean over the samples that recorded a value.
+
+    ``s1``, ``s2``: float64 (H, W, C) sums of ``w f`` and ``w f^2`` over a pixel's samples, with
+    weights ``w`` in {0, 1} (:mod:`mcbench.render.path_features`); ``count``: the sum of the
+    weights, (H, W, 1) or a number (every sample recorded). Returns float64 arrays of ``s1``'s shape:
+    ``mean = s1 / n`` and ``(s2 / n - mean^2) / (n - 1)`` clamped at 0 with ``n`` the count (Tungsten's
+    per-pixel sample count, ``OutputBuffer::addSample``); 0 where no sample recorded (mean and
+    variance) and a variance of 0 where only one did (no spread to estimate).
+    """
+    n = np.broadcast_to(np.asarray(count, dtype=np.float64), np.shape(s1))
+    recorded = n > 0
+    safe = np.where(recorded, n, 1.0)
+    mean = np.where(recorded, s1 / safe, 0.0)
+    spread = n > 1
+    variance = np.where(spread, (s2 / safe - mean * mean) / np.where(spread, n - 1.0, 1.0), 0.0)
+    return mean, np.maximum(variance, 0.0)
 
 
 def _pooled(first: dict, second: dict) -> dict:
     return {q: (first[q][0] + second[q][0], first[q][1] + second[q][1]) for q in first}
 
 
-def buffers_from_bin_sums(bin_sums: list[dict], bin_spp: int) -> dict[str, np.ndarray]:
+def buffers_from_bin_sums(bin_sums: list[dict], bin_spp: int, *, clip_albedo: bool = True) -> dict[str, np.ndarray]:
     """Float32 layers of :data:`ALL_LAYERS` and :data:`mcbench.io.buffers.BIN_LAYERS` from the moment sums of four
     sample bins of ``bin_spp`` samples each (bins 0-1 make half buffer A, bins 2-3 make B).
 
@@ -484,6 +597,7 @@ def buffers_from_bin_sums(bin_sums: list[dict], bin_spp: int) -> dict[str, np.nd
     :func:`buffers_from_moment_sums` of the pooled sums, except that ``color_a`` is
     ``(color_bin0 + color_bin1) / 2`` and ``color_b`` ``(color_bin2 + color_bin3) / 2`` computed on
     the float32 bins, so the identities hold exactly for consumers that recompute them.
+    ``clip_albedo``: as in :func:`buffers_from_moment_sums`.
     """
     if len(bin_sums) != BINS:
         raise ValueError(f"need {BINS} bins, got {len(bin_sums)}")
@@ -498,7 +612,7 @@ def buffers_from_bin_sums(bin_sums: list[dict], bin_spp: int) -> dict[str, np.nd
         bins[j] = (mean.astype(np.float32), variance.astype(np.float32))
     half_means = {"_a": (bins[0][0] + bins[1][0]) / np.float32(2), "_b": (bins[2][0] + bins[3][0]) / np.float32(2)}
     layers = buffers_from_moment_sums(_pooled(bin_sums[0], bin_sums[1]), _pooled(bin_sums[2], bin_sums[3]),
-                                      2 * bin_spp, half_colors=half_means)
+                                      2 * bin_spp, half_colors=half_means, clip_albedo=clip_albedo)
     for j, (mean, variance) in bins.items():
         layers[f"color_bin{j}"] = np.ascontiguousarray(mean)
         layers[f"variance_bin{j}"] = np.ascontiguousarray(variance)
@@ -506,15 +620,21 @@ def buffers_from_bin_sums(bin_sums: list[dict], bin_spp: int) -> dict[str, np.nd
 
 
 def buffers_from_moment_sums(sums_a: dict, sums_b: dict, half_spp: int, *,
-                             half_colors: dict[str, np.ndarray] | None = None) -> dict[str, np.ndarray]:
+                             half_colors: dict[str, np.ndarray] | None = None,
+                             clip_albedo: bool = True) -> dict[str, np.ndarray]:
     """Float32 layers of :data:`ALL_LAYERS` from the per-half moment sums.
 
     ``sums_a[q]``/``sums_b[q]`` = (sum of m1·n, sum of m2·n) over the passes of one half buffer
     of ``half_spp`` samples, for every quantity q of :data:`CHANNELS` and those of
     :data:`FEATURE_CHANNELS` the sums hold (layers of quantities they lack are left out). Means and
-    variances of the mean for A, B and the pooled full image (``2 * half_spp`` samples). ``half_colors``
-    (``{"_a": ..., "_b": ...}``, float32 (H, W, 3)) replaces the colour means of the halves (the
-    bins' average, :func:`buffers_from_bin_sums`).
+    variances of the mean for A, B and the pooled full image (``2 * half_spp`` samples); a quantity
+    with a ``{q}_count`` sum (the Tungsten convention's depth, albedo and position:
+    :data:`PATH_FEATURE_CHANNELS`) is averaged over the samples that recorded it
+    (:func:`weighted_mean_variance`). ``half_colors`` (``{"_a": ..., "_b": ...}``, float32
+    (H, W, 3)) replaces the colour means of the halves (the bins' average,
+    :func:`buffers_from_bin_sums`). ``clip_albedo``: clip the albedo means to [0, 1] (first-hit
+    features: Mitsuba's AOV exceeds 1 on glossy conductors); the Tungsten convention clips each
+    sample's reflectance instead and keeps the emission of emitters on top (as Tungsten).
     """
     sums = {"_a": sums_a, "_b": sums_b}
     layers = {}
@@ -523,8 +643,16 @@ def buffers_from_moment_sums(sums_a: dict, sums_b: dict, half_spp: int, *,
     for suffix, n, moments in (("_a", half_spp, sums["_a"]), ("_b", half_spp, sums["_b"]),
                                ("", 2 * half_spp, pooled)):
         for quantity in quantities:
-            if n >= 2:
+            count = moments.get(f"{quantity}_count")
+            if count is not None and n >= 2:
+                mean, variance = weighted_mean_variance(*moments[quantity], count[0])
+            elif n >= 2:
                 mean, variance = moments_to_mean_variance(*moments[quantity], n)
+            elif count is not None:   # one sample per half: its value where it recorded, as below
+                mean = weighted_mean_variance(*moments[quantity], count[0])[0]
+                other = "_b" if suffix == "_a" else "_a"
+                partner = weighted_mean_variance(*sums[other][quantity], sums[other][f"{quantity}_count"][0])[0]
+                variance = 0.5 * (mean - partner) ** 2
             else:  # spp = 2: one sample per half buffer, no within-buffer variance exists.
                 # 0.5 * (a - b)^2 is an unbiased estimate of the variance of one sample,
                 # i.e. of the mean of one sample; A and B both get it.
@@ -543,7 +671,7 @@ def buffers_from_moment_sums(sums_a: dict, sums_b: dict, half_spp: int, *,
     # Mitsuba's albedo AOV can exceed 1 on glossy conductors (it evaluates the BSDF near the
     # specular peak); denoisers expect reflectance in [0, 1], so the means are clipped (the
     # albedo variances stay those of the raw samples).
-    for suffix in ("", "_a", "_b"):
+    for suffix in ("", "_a", "_b") if clip_albedo else ():
         layers["albedo" + suffix] = np.clip(layers["albedo" + suffix], 0.0, 1.0)
     return {name: np.ascontiguousarray(layers[name], dtype=np.float32) for name in ALL_LAYERS if name in layers}
 
@@ -555,14 +683,20 @@ def merge_reference_chunks(chunks: list[tuple[dict, dict]]) -> tuple[dict[str, n
     Output layers (float32): ``color`` (H, W, 3) mean of all samples, ``variance`` (H, W, 3)
     variance of that mean ``(M2 - mean^2) / (N - 1)`` with ``M2`` the pooled mean of squares and
     ``N`` the total spp (clamped at 0), ``albedo``, ``normal`` (H, W, 3), ``depth`` (H, W).
-    Refuses chunks of different scene, resolution, variant or Mitsuba version, and chunks
-    sharing a seed (the same chunk twice).
+    Refuses chunks of different scene, resolution, variant, Mitsuba version or feature convention
+    (metadata ``features``, ``first_hit`` where absent), and chunks sharing a seed (the same chunk
+    twice).
     """
     if not chunks:
         raise BenchError("merge_reference_chunks: no chunks given")
     first = chunks[0][1]
     seen_seeds: dict[str, int] = {}
     for index, (layers, meta) in enumerate(chunks):
+        # a chunk written before the key existed has first-hit features
+        if str(meta.get("features", "first_hit")) != str(first.get("features", "first_hit")):
+            raise BenchError(f"reference chunk {meta.get('chunk', index)} has features "
+                             f"'{meta.get('features', 'first_hit')}' but chunk {first.get('chunk', 0)} has "
+                             f"'{first.get('features', 'first_hit')}'; render the chunks under one convention")
         for key in ("scene", "resolution", "variant", "mitsuba"):
             if key in first and str(meta.get(key)) != str(first[key]):
                 raise BenchError(f"reference chunk {meta.get('chunk', index)} has {key} "
@@ -597,5 +731,6 @@ def merge_reference_chunks(chunks: list[tuple[dict, dict]]) -> tuple[dict[str, n
         "mitsuba": str(first.get("mitsuba", "")), "seed": str(first.get("seed", "")),
         "seeds": ",".join(str(meta.get("seeds", "")) for _, meta in chunks),
         "seconds": f"{sum(float(meta.get('seconds', 0.0)) for _, meta in chunks):.3f}",
+        "features": str(first.get("features", "first_hit")),
     }
     return out, metadata

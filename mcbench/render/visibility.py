@@ -44,7 +44,7 @@ per sample (Mitsuba warns about the speed once); a miss returns early there (no 
 
 from __future__ import annotations
 
-__all__ = ["PLUGIN", "AOV_NAME", "register"]
+__all__ = ["PLUGIN", "AOV_NAME", "register", "direct_light_visible"]
 
 PLUGIN = "mcbench_visibility"
 AOV_NAME = "v"
@@ -68,6 +68,24 @@ def register() -> str:
     return PLUGIN
 
 
+def direct_light_visible(scene, bsdf, si, sample, active):
+    """RDFC's indicator at surface interaction ``si`` (module docstring): ``True`` where the one-sample
+    direct-light estimate ``R = f(wi, wo) * W`` of emitter sample ``sample`` (a ``Point2f``) is
+    positive in some channel, for the lanes of ``active`` whose ``si`` is a hit (else ``False``).
+    ``bsdf`` is ``si``'s BSDF. Shared by this module's integrator (the first hit) and
+    :mod:`mcbench.render.path_features` (the first non-specular vertex)."""
+    import drjit as dr
+    import mitsuba as mi
+
+    hit = mi.Bool(active) & si.is_valid()
+    if not dr.is_jit_v(mi.Float) and not hit:
+        return False
+    ds, weight = scene.sample_emitter_direction(si, sample, True, hit)
+    value = mi.unpolarized_spectrum(bsdf.eval(mi.BSDFContext(), si, si.to_local(ds.d), hit) * weight)
+    positive = (value[0] > 0) | (value[1] > 0) | (value[2] > 0)
+    return hit & (ds.pdf > 0) & positive
+
+
 def _integrator_class():
     """The integrator class for the current variant (``mi.SamplingIntegrator`` is per variant)."""
     import drjit as dr
@@ -86,12 +104,7 @@ def _integrator_class():
             sample = sampler.next_2d(hit)
             if not dr.is_jit_v(mi.Float) and not hit:     # scalar: a miss has no BSDF to call
                 return mi.Spectrum(0.0), mi.Bool(True), [mi.Float(0.0)]
-            ds, weight = scene.sample_emitter_direction(si, sample, True, hit)
-            bsdf = si.bsdf(ray)
-            value = bsdf.eval(mi.BSDFContext(), si, si.to_local(ds.d), hit) * weight
-            value = mi.unpolarized_spectrum(value)
-            positive = (value[0] > 0) | (value[1] > 0) | (value[2] > 0)
-            visible = hit & (ds.pdf > 0) & positive
+            visible = direct_light_visible(scene, si.bsdf(ray), si, sample, hit)
             return mi.Spectrum(0.0), mi.Bool(True), [dr.select(visible, mi.Float(1.0), mi.Float(0.0))]
 
         def aov_names(self):

@@ -105,7 +105,7 @@ def crop_boxes(seed: int, width: int, height: int, crop_size: int, count: int
 
 
 def training_example(seed: int, spp_levels, target_spp: int, resolution, crop_size: int,
-                     crops_per_image: int, variant: str = "auto"
+                     crops_per_image: int, variant: str = "auto", features: str = "first_hit"
                      ) -> list[tuple[dict[str, np.ndarray], dict]]:
     """Render training scene ``seed`` and cut it into crops.
 
@@ -118,7 +118,8 @@ def training_example(seed: int, spp_levels, target_spp: int, resolution, crop_si
     Returns ``crops_per_image`` pairs ``(layers, metadata)``: layers ``<layer>_spp<N>`` for
     every layer and level plus ``target`` and ``target_variance``, each cropped to
     ``crop_size``²; metadata (strings): seed, crop index, crop box ``x0,y0,x1,y1``, spp levels,
-    target spp, resolution, variant, mitsuba version, scene fingerprint, render seconds.
+    target spp, resolution, variant, mitsuba version, scene fingerprint, render seconds, features
+    (the convention of :data:`mcbench.render.renderer.FEATURE_CONVENTIONS` the levels were rendered with).
     """
     import mitsuba as mi
 
@@ -142,7 +143,7 @@ def training_example(seed: int, spp_levels, target_spp: int, resolution, crop_si
         for spp in levels:
             layers, _ = render_dict_buffers(
                 desc, spp, lambda half, j, p, spp=spp: training_render_seed(seed, "noisy", spp, half, p, bin=j),
-                key=key, variant=variant)
+                key=key, variant=variant, features=features)
             for name, layer in layers.items():
                 full[f"{name}_spp{spp}"] = layer
         full["target"], full["target_variance"], _ = render_target(
@@ -161,6 +162,6 @@ def training_example(seed: int, spp_levels, target_spp: int, resolution, crop_si
                     "spp_levels": ",".join(map(str, levels)), "target_spp": str(int(target_spp)),
                     "resolution": f"{width}x{height}", "variant": variant,
                     "mitsuba": mi.__version__, "fingerprint": fingerprint,
-                    "seconds": f"{seconds:.3f}"}
+                    "seconds": f"{seconds:.3f}", "features": features}
         out.append((layers, metadata))
     return out

@@ -141,3 +141,30 @@ def test_reasons_drop_torch_advice_but_keep_the_cause():
     assert weights.safe_failure_reason(error) == \
         "RuntimeError: Unsupported global: GLOBAL os.system was not an allowed global by default."
     assert weights.safe_failure_reason(EOFError()) == "EOFError"
+
+
+def test_weights_trained_on_other_features_are_refused_naming_the_record(tmp_path):
+    """A network's record names the feature convention of its training crops (``data.features``);
+    a record without it (or no record) means first-hit features; every committed network was trained
+    on the convention the schema's default ``features`` renders (the default study runs them)."""
+    import json
+
+    record = tmp_path / "kpcn.json"
+    assert weights.trained_features(record) == "first_hit"                  # no record
+    record.write_text(json.dumps({"data": {"spp_levels": [4, 16]}}))
+    assert weights.trained_features(record) == "first_hit"
+    weights.check_trained_features(record, "first_hit", name="kpcn")
+    with pytest.raises(BenchError, match=r"kpcn\.json.*'first_hit'.*'tungsten'.*train_kpcn"):
+        weights.check_trained_features(record, "tungsten", name="kpcn")
+    record.write_text(json.dumps({"data": {"features": "tungsten"}}))
+    weights.check_trained_features(record, "tungsten", name="kpcn")
+    with pytest.raises(BenchError, match="trained on 'tungsten'"):
+        weights.check_trained_features(record, "first_hit", name="kpcn")
+    record.write_text("{not json")
+    with pytest.raises(BenchError, match=r"kpcn\.json: cannot read the training record"):
+        weights.trained_features(record)
+    from mcbench.pipeline.config import resolve_config
+
+    default = resolve_config({})["features"]
+    for committed in sorted((ROOT / "methods" / "weights").glob("*.json")):
+        assert weights.trained_features(committed) == default, committed.name

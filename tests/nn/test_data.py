@@ -213,6 +213,14 @@ def test_combiner_and_crop_loading_errors_name_the_file_and_input(combiner_files
     infinite = tmp_path / "example_4_0.exr"
     write_layers(infinite, nan, metadata={"seed": "4", "spp_levels": ",".join(map(str, LEVELS))})
     load_crops([infinite])                          # a denoiser does not read that layer
+    # crops of two feature conventions never make one training set; the set records its convention
+    assert load_crops([crop_files[0]]).info["features"] == "first_hit"     # written without the key
+    other = tmp_path / "example_5_0.exr"
+    write_layers(other, crops_in[0], metadata={"seed": "5", "spp_levels": ",".join(map(str, LEVELS)),
+                                               "features": "tungsten"})
+    assert load_crops([other]).info["features"] == "tungsten"
+    with pytest.raises(BenchError, match=r"example_5_0\.exr.*features 'tungsten'"):
+        load_crops([crop_files[0], other])
     with pytest.raises(BenchError, match=r"example_4_0\.exr.*albedo_variance_b_spp4"):
         load_combiner_crops([infinite], {"kpcn": files["kpcn"][:1]}, COMBINER_KEYS)
 

@@ -23,7 +23,7 @@ from mcbench.analysis.pool import POOL  # noqa: E402
 from mcbench.analysis.study.figures import STUDY_FIGURES as STUDY_FIGURE_KEYS, curve_candidates, paper_recommended  # noqa: E402
 from mcbench.pipeline.resources import JobCost, estimate_job, job_request, load_job_costs  # noqa: E402
 from mcbench.io.method_spec import method_spec  # noqa: E402
-from mcbench.io.weights import COMMITTED_WEIGHTS, is_learned_method  # noqa: E402
+from mcbench.io.weights import COMMITTED_WEIGHTS, check_trained_features, is_learned_method  # noqa: E402
 from mcbench.pipeline.registry import available_scenes, config_method_table, load_method, load_scene  # noqa: E402
 from mcbench.pipeline.jobs import (  # noqa: E402
     batch_name, batch_text, missing_batches, read_batch, spec_text, target_batch_names, write_if_changed)
@@ -241,6 +241,14 @@ def case_entry_viewers(wildcards):
     return [_path(ENTRY_VIEWER, wildcards.scene, wildcards.spp, entry=entry) for entry in ENTRIES]
 
 
+def feature_params():
+    """The render rules' ``features`` param: empty for the default ``first_hit`` convention (the
+    params of renders made before the key existed stay the same, so a finished study is not
+    rendered again), ``{"features": <convention>}`` otherwise (the params trigger then reruns every
+    render, and with it everything downstream, when the convention changes)."""
+    return {} if config["features"] == "first_hit" else {"features": config["features"]}
+
+
 def reference_chunk_spp(wildcards):
     return REFERENCE_SPP[wildcards.scene] // REFERENCE_CHUNKS
 
@@ -268,6 +276,8 @@ def check_weights(name):
     if spec["learned"] and not Path(weights_file(spec["module"])).exists():
         raise BenchError(f"no weights for {spec['module']} in {WEIGHTS_DIR} (weights_dir); train them "
                          f"with `snakemake --cores 2 train_{spec['module']}` or fix weights_dir")
+    if spec["learned"]:
+        check_trained_features(Path(WEIGHTS_DIR) / f"{spec['module']}.json", config["features"], name=spec["module"])
 
 
 def weights_digest(wildcards):

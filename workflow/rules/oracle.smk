@@ -37,6 +37,7 @@ rule oracle_study:
         downscale=ORACLE_DOWNSCALE,
         resolution=config["resolution"],
         variant=config["variant"],
+        **feature_params(),
         seed=config["seed"],
         weights_dir=WEIGHTS_DIR,
     threads: 1

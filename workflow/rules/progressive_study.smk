@@ -75,6 +75,7 @@ rule progressive_curve:
         downscale=PROGRESSIVE_DOWNSCALE,
         resolution=config["resolution"],
         variant=config["variant"],
+        **feature_params(),
         seed=config["seed"],
         weights_dir=WEIGHTS_DIR,
     threads: 1

@@ -10,6 +10,7 @@ rule render_noisy:
     params:
         resolution=config["resolution"],
         variant=config["variant"],
+        **feature_params(),
         seed=config["seed"],
     threads: config["render_threads"]
     resources:
@@ -31,6 +32,7 @@ rule render_reference_chunk:
         spp=reference_chunk_spp,
         resolution=config["resolution"],
         variant=config["variant"],
+        **feature_params(),
         seed=config["seed"],
     threads: config["render_threads"]
     resources:

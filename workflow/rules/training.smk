@@ -13,6 +13,7 @@ rule training_example:
         # the settings one example depends on (fibre_count only says how many scenes exist)
         settings={key: value for key, value in TRAINING.items() if key != "fibre_count"},
         variant=config["variant"],
+        **feature_params(),
     threads: config["render_threads"]
     resources:
         **job_resources("training_example"),

@@ -14,5 +14,5 @@ run_logged(snakemake.log[0], run_oracle_study, snakemake.wildcards.scene, snakem
            table_csv=snakemake.output.table, table_md=snakemake.output.markdown,
            weights_png=snakemake.output.weights, denoisers=list(params.denoisers),
            repetitions=int(params.repetitions), spp=int(params.spp), downscale=int(params.downscale),
-           resolution=params.resolution, variant=params.variant, seed=int(params.seed),
+           resolution=params.resolution, variant=params.variant, features=params.get("features", "first_hit"), seed=int(params.seed),
            threads=snakemake.threads)

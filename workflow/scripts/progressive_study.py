@@ -18,7 +18,7 @@ if snakemake.rule == "progressive_curve":
                table_csv=snakemake.output.table, table_md=snakemake.output.markdown,
                figure_png=snakemake.output.figure, spp_levels=[int(s) for s in params.spp], base=params.base,
                divergence=params.divergence, downscale=int(params.downscale), resolution=params.resolution,
-               variant=params.variant, seed=int(params.seed), threads=snakemake.threads)
+               variant=params.variant, features=params.get("features", "first_hit"), seed=int(params.seed), threads=snakemake.threads)
 else:
     run_logged(snakemake.log[0], write_progressive_tables, snakemake.input.metrics, snakemake.input.timings,
                os.path.dirname(snakemake.output.consistency), pairs=dict(params.pairs),

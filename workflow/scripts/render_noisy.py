@@ -7,4 +7,4 @@ from mcbench.pipeline.render import render_noisy  # noqa: E402
 
 run_logged(snakemake.log[0], render_noisy, snakemake.wildcards.scene, int(snakemake.wildcards.spp),
            snakemake.output[0], resolution=snakemake.params.resolution,
-           variant=snakemake.params.variant, seed=snakemake.params.seed, threads=snakemake.threads)
+           variant=snakemake.params.variant, features=snakemake.params.get("features", "first_hit"), seed=snakemake.params.seed, threads=snakemake.threads)
