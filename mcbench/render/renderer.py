@@ -665,9 +665,12 @@ def buffers_from_moment_sums(sums_a: dict, sums_b: dict, half_spp: int, *,
     for suffix, color in (half_colors or {}).items():
         layers["color" + suffix] = np.asarray(color, dtype=np.float32)
     # The full image is by definition (A + B) / 2, computed on the float32 halves so that the
-    # identity holds exactly for consumers that recompute it.
+    # identity holds exactly for consumers that recompute it; a quantity averaged over the samples
+    # that recorded it (a ``{q}_count`` sum) keeps the mean over the pooled recorded samples, as
+    # Tungsten's output buffer gives it (a half that recorded nothing must not halve the other's).
     for quantity in quantities:
-        layers[quantity] = (layers[quantity + "_a"] + layers[quantity + "_b"]) / np.float32(2)
+        if f"{quantity}_count" not in pooled:
+            layers[quantity] = (layers[quantity + "_a"] + layers[quantity + "_b"]) / np.float32(2)
     # Mitsuba's albedo AOV can exceed 1 on glossy conductors (it evaluates the BSDF near the
     # specular peak); denoisers expect reflectance in [0, 1], so the means are clipped (the
     # albedo variances stay those of the raw samples).
