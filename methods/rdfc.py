@@ -31,7 +31,8 @@ samples of a pixel go to buffer 0, the rest to buffer 1). One ``denoise``:
    :func:`mcbench.filters.rdfc_filter.select_candidate`), binary maps filtered (window 5, same
    otherwise), blend of A~ and B~ (F:581-628).
 6. **Second pass** (F:409-423): the blended A~, B~ filtered again with shared weights from their
-   mean, variance (A~ - B~)^2 / 4 pyramid-smoothed (C:900-916), window radius // 2, patch 3, k_c
+   mean, variance (A~ - B~)^2 / 4 pyramid-smoothed (C:900-916), window radius // 2 (F:410; 0, an
+   empty window, for radius 1), patch 3, k_c
    0.45, k_f 0.6, weight box 2, ``use_diff_var=false`` (2 Vd_p denominators), tau 1e-4.
 
 Output: ``Denoised(full = (A~~ + B~~) / 2, a = A~~, b = B~~)`` (C:1318-1321; the ensemble reads the
@@ -53,6 +54,12 @@ Switches (keyword-only; defaults are the authors'):
   exp(-max(0, d)). A diagnostic switch, not a departure the default takes: on cornell_box the blend
   lets THIRD average the directly visible light into the ceiling (docs/fidelity_rdfc.md, "Known
   failure").
+* ``nonfinite="authors"``: NaN/inf in the render layers are left as they are, but for a NaN in the
+  normal layers, which becomes 0 after the (n + 1) / 2 map with variance 0 (the authors skip NaN
+  normal samples, F:135-138,160-164, and guard nothing else); the output is not sanitised either.
+  ``"zero"``: ``np.nan_to_num`` on every layer read and on the output (this module's former
+  behaviour), which keeps the output finite for a broken input. Renders reaching the pipeline are
+  finite (``mcbench.render.renderer`` raises on NaN/inf in any pass), where both agree exactly.
 
 Departures without a switch (each with its reason; docs/fidelity_rdfc.md):
 
@@ -61,8 +68,8 @@ Departures without a switch (each with its reason; docs/fidelity_rdfc.md):
   buffer's mean (the same wherever every sample's albedo is <= 1). Feature variances are the
   renderer's ``*_variance`` mapped through the same transforms (the position's without the
   components' covariance, which is not rendered). Visibility is the renderer's fraction of samples
-  whose emitter sample is unoccluded with nonzero contribution; theirs tests the red channel of the
-  sample's direct light, ``DIRECT_R > 0`` (F:123).
+  whose one-sample direct light R = f W is positive in the red channel, as theirs,
+  ``sample[DIRECT_R] > 0.f`` (F:123; ``mcbench.render.visibility.direct_light_visible``).
 * ``GetScaledSampleVariance`` box-filters with a hard-coded 3-channel stride (C:1406-1409), which
   for the 1-channel visibility reads other pixels and memory left from earlier kernels; we box the
   one channel (stale memory cannot be reproduced).
@@ -103,15 +110,24 @@ RENDER_LAYERS = ("color_a", "color_b", "variance",
                  *(f"{name}{s}" for name in FEATURES for s in ("_a", "_b", "_variance")))
 
 
-def _layer(buffers: RenderBuffers, name: str) -> np.ndarray:
+NONFINITE = ("authors", "zero")
+
+
+def _layer(buffers: RenderBuffers, name: str, nonfinite: str = "authors") -> np.ndarray:
+    """Render layer ``name`` as float64 (H, W, C) (a 1-channel layer gets its channel axis).
+    ``nonfinite="authors"`` leaves NaN/inf as they are (the authors' code has no guard but for NaN
+    normals, see :func:`authors_features`); ``"zero"`` applies ``np.nan_to_num`` (NaN -> 0,
+    +-inf -> +-float max)."""
     if name not in buffers.layers:
         raise ValueError(f"{buffers.source}: RDFC reads the render layer {name!r}, which this render lacks; "
                          f"re-render with a renderer that writes {', '.join(RENDER_LAYERS)}")
-    a = np.nan_to_num(np.asarray(buffers.layers[name], dtype=np.float64))
+    a = np.asarray(buffers.layers[name], dtype=np.float64)
+    if nonfinite == "zero":
+        a = np.nan_to_num(a)
     return a[..., None] if a.ndim == 2 else a
 
 
-def authors_features(buffers: RenderBuffers):
+def authors_features(buffers: RenderBuffers, *, nonfinite: str = "authors"):
     """The four features of the authors' code (F:107-136), each as (A, B, variance of the full mean)
     (H, W, C) float64, and maxPos (F:328-333).
 
@@ -119,13 +135,21 @@ def authors_features(buffers: RenderBuffers):
     the same; albedo / max(1, max channel) is applied to each buffer's mean (equal where the
     albedo of every sample is <= 1, Mitsuba's diffuse reflectance); the XYZ->sRGB matrix is linear.
     Variances follow the maps: /4 for the normal, /m^2 (m of the full mean) for the albedo,
-    sum_j M_ij^2 Var_j for the position (the components' covariance is not rendered)."""
+    sum_j M_ij^2 Var_j for the position (the components' covariance is not rendered).
+
+    Non-finite values (``nonfinite``, see :func:`denoise`): the authors skip a NaN normal component
+    of a sample (F:135-138,160-164) and guard nothing else. Per pixel, a NaN in the normal layers
+    becomes 0 *after* the map (the authors' buffer and M2 keep their zero initialisation, F:79, when
+    every sample of the pixel is skipped) and its variance 0; every other layer keeps its NaN/inf.
+    ``"zero"``: ``np.nan_to_num`` on every layer before the maps (a NaN normal then maps to 0.5)."""
     out = {}
     for name in FEATURES:
-        a, b = _layer(buffers, name + "_a"), _layer(buffers, name + "_b")
-        var = np.maximum(_layer(buffers, name + "_variance"), 0.0)
+        a, b = _layer(buffers, name + "_a", nonfinite), _layer(buffers, name + "_b", nonfinite)
+        var = np.maximum(_layer(buffers, name + "_variance", nonfinite), 0.0)
         if name == "normal":
             a, b, var = (a + 1.0) / 2.0, (b + 1.0) / 2.0, var / 4.0
+            if nonfinite == "authors":
+                a, b, var = (np.where(np.isnan(x), 0.0, x) for x in (a, b, var))
         elif name == "albedo":
             ma = np.maximum(1.0, a.max(axis=-1, keepdims=True))
             mb = np.maximum(1.0, b.max(axis=-1, keepdims=True))
@@ -197,28 +221,33 @@ def select_and_blend(bufs, means, derivs, y, v, *, index_bug: bool = True, max_d
 
 def second_pass(blend, prefiltered, max_pos, *, radius: int, max_d2: float = MAX_D2):
     """F:409-423: the two pass-1 buffers filtered again with shared weights (``SECOND_PASS``),
-    guide = their mean, variance :func:`dual_buffer_variance` (C:900-916); (2, H, W, 3)."""
+    guide = their mean, variance :func:`dual_buffer_variance` (C:900-916), window ``radius // 2``
+    (``wnd_rad / 2``, F:410: 0 for ``radius=1``, an empty window whose output is the input,
+    C:1150-1153,1175-1177); (2, H, W, 3)."""
     guide_var = dual_buffer_variance(blend[0], blend[1])
-    return nl_means(blend, blend.mean(axis=0), guide_var, radius=max(radius // 2, 1),
+    return nl_means(blend, blend.mean(axis=0), guide_var, radius=radius // 2,
                     features=feature_set(prefiltered, TAU_SECOND, max_pos), feature_k=K_FEATURE,
                     max_d2=max_d2, **SECOND_PASS).buffers
 
 
 def denoise(buffers: RenderBuffers, *, radius: int = WINDOW_RADIUS, variance: str = "rescaled",
-            clamp_derivative: bool = True, index_bug: bool = True, symmetric_weights: bool = True):
+            clamp_derivative: bool = True, index_bug: bool = True, symmetric_weights: bool = True,
+            nonfinite: str = "authors"):
     """RDFC as the authors' code runs it (module docstring); returns Denoised(full, a, b) float32
     (H, W, 3). Keyword switches: module docstring."""
     if variance not in ("rescaled", "raw"):
         raise ValueError(f"variance must be 'rescaled' (the authors') or 'raw', got {variance!r}")
+    if nonfinite not in NONFINITE:
+        raise ValueError(f"nonfinite must be 'authors' (the authors' handling) or 'zero', got {nonfinite!r}")
     if int(radius) < 1:
         raise ValueError(f"radius must be >= 1 (10: the authors' scenes, 20: fbksd), got {radius!r}")
-    a, b = _layer(buffers, "color_a"), _layer(buffers, "color_b")
+    a, b = _layer(buffers, "color_a", nonfinite), _layer(buffers, "color_b", nonfinite)
     y = (a + b) / 2.0
-    v_full = np.maximum(_layer(buffers, "variance"), 0.0)
+    v_full = np.maximum(_layer(buffers, "variance", nonfinite), 0.0)
     v = scaled_sample_variance(a, b, v_full) if variance == "rescaled" else v_full
     max_d2 = MAX_D2 if symmetric_weights else -np.inf
     stage_done = StageLog.for_image("rdfc", *y.shape[:2])    # prints on large images only
-    features, max_pos = authors_features(buffers)
+    features, max_pos = authors_features(buffers, nonfinite=nonfinite)
     prefiltered = prefilter_features(features, max_d2=max_d2)
     stage_done("feature prefiltering")
     bufs, means, derivs = candidates(a, b, y, v, prefiltered, max_pos, radius=int(radius), clamp=clamp_derivative,
@@ -227,8 +256,9 @@ def denoise(buffers: RenderBuffers, *, radius: int = WINDOW_RADIUS, variance: st
     blend, _ = select_and_blend(bufs, means, derivs, y, v, index_bug=index_bug, max_d2=max_d2)
     final = second_pass(blend, prefiltered, max_pos, radius=int(radius), max_d2=max_d2)
     stage_done("selection and second pass")
-    out_a = np.nan_to_num(final[0]).astype(np.float32)
-    out_b = np.nan_to_num(final[1]).astype(np.float32)
+    if nonfinite == "zero":
+        final = np.nan_to_num(final)
+    out_a, out_b = final[0].astype(np.float32), final[1].astype(np.float32)
     full = ((out_a.astype(np.float64) + out_b) / 2.0).astype(np.float32)
     return Denoised(full=full, a=out_a, b=out_b)
 

@@ -364,7 +364,7 @@ class Feature:
 @dataclass(frozen=True)
 class Filtered:
     """Result of :func:`nl_means`: ``buffers`` (B, H, W, C) filtered buffers; ``centre`` (H, W)
-    w_max / sum w (C:1339); ``scaled`` (H, W, Cg) the filter of the guide with its centre scaled by
+    w_max / (1e-10 + sum w) (``ratio``, C:1339 with C:150); ``scaled`` (H, W, Cg) the filter of the guide with its centre scaled by
     1.01 (``delta=True`` only, else None)."""
 
     buffers: np.ndarray
@@ -481,27 +481,31 @@ def nl_means(buffers, guide, guide_variance, *, radius: int, patch_radius, weigh
                                         int(radius), radii, int(weight_radius), float(k) ** 2,
                                         bool(use_colour), bool(use_diff_var), float(feature_k) ** 2,
                                         bool(diff_f), bool(delta), float(max_d2))
-    results = [Filtered(buffers=np.moveaxis(out[i], 1, -1), centre=wmax[i] / wsum[i],
+    results = [Filtered(buffers=np.moveaxis(out[i], 1, -1), centre=wmax[i] / (RATIO_EPSILON + wsum[i]),
                         scaled=np.moveaxis(outs[i], 0, -1) if delta else None) for i in range(len(radii))]
     return results if np.ndim(patch_radius) else results[0]
 
 
 def finite_difference_derivative(filtered, scaled, guide) -> np.ndarray:
     """``derivative`` (C:132-141,1349): F / (1e-10 + y - 1.01 y) - F_s / (1e-10 + y - 1.01 y) per
-    channel, F the filtered guide, F_s the scaled filter; float64, finite (0 where the denominator
-    is 0 in float64, which float32 never reaches for y != 0)."""
+    channel, F the filtered guide, F_s the scaled filter; float64, (H, W, C). Non-finite values are
+    kept as IEEE arithmetic gives them, as the authors' kernel has no guard: where the denominator
+    is 0 (y = +-inf, or a y ~ 1e-8 whose two roundings cancel) the result is +-inf (then replaced by
+    w_max / sum w in :func:`clamp_derivative`, C:1364) or NaN (which passes the clamp, whose
+    comparisons are false for NaN, and makes that candidate's SURE NaN: never selected)."""
     y = np.asarray(guide, dtype=np.float64)
     den = DELTA_OFFSET_DEN + y - DELTA_SCALE * y
-    with np.errstate(divide="ignore", invalid="ignore"):
-        d = np.asarray(filtered) / den - np.asarray(scaled) / den
-    return np.where(np.isfinite(d), d, 0.0)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        return np.asarray(filtered, dtype=np.float64) / den - np.asarray(scaled, dtype=np.float64) / den
 
 
 def clamp_derivative(derivative, centre) -> np.ndarray:
     """C:1361-1369: where any channel of dF/dy (H, W, 3) lies outside [0, 1], all three become
-    w_max / sum w (``centre``, (H, W))."""
+    w_max / sum w (``centre``, (H, W)); +-inf is outside, NaN is not (its comparisons are false, so
+    a NaN channel stays NaN unless another channel is outside)."""
     d = np.asarray(derivative, dtype=np.float64)
-    invalid = np.any((d < 0.0) | (d > 1.0), axis=-1, keepdims=True)
+    with np.errstate(invalid="ignore"):
+        invalid = np.any((d < 0.0) | (d > 1.0), axis=-1, keepdims=True)
     return np.where(invalid, np.asarray(centre)[..., None], d)
 
 
@@ -517,7 +521,10 @@ def select_candidate(errors, derivative_first, derivative_second, *, index_bug: 
     """The selection rule of F:650-662: (H, W) int index of the chosen candidate.
 
     ``errors`` (K, H, W) filtered SURE maps. Candidates are visited from the last to the first with a
-    strict ``<`` against the running minimum (ties go to the higher index); the first (FIRST) is
+    strict ``<`` against the running minimum, which starts at +inf (F:652; ties go to the higher
+    index). A pixel where no candidate passes (every eligible SURE NaN or +inf) keeps the map's
+    initial 0, FIRST: ``sel_map`` is zero-initialised (``resize``, F:87) and only written at F:658
+    before this point of the driver's single ``WriteImage`` (F:480-486). The first (FIRST) is
     eligible only if mean_c dF/dy(FIRST)_p <= the mean of three entries of SECOND's derivative. The
     authors' code reads those as ``derivatives[1][pix]`` (F:656): the flat (pixel-major, channel-minor)
     entries pix, pix+1, pix+2 instead of 3 pix..3 pix+2, an index bug followed by default;
@@ -533,11 +540,12 @@ def select_candidate(errors, derivative_first, derivative_second, *, index_bug: 
     else:
         second_mean = second.mean(axis=-1)
     best = np.full((h, w), np.inf)
-    sel = np.full((h, w), k - 1, dtype=np.int64)
+    sel = np.zeros((h, w), dtype=np.int64)                  # F:87: sel_map starts at 0 (FIRST)
     for i in range(k - 1, -1, -1):
-        better = err[i] < best
-        if i == 0 and k > 1:
-            better &= first <= second_mean
+        with np.errstate(invalid="ignore"):
+            better = err[i] < best
+            if i == 0 and k > 1:
+                better &= first <= second_mean
         best = np.where(better, err[i], best)
         sel = np.where(better, i, sel)
     return sel

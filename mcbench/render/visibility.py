@@ -10,13 +10,15 @@ of the same scene with the colour pass's spp and seed, so it traces the same cam
 
 Per camera ray (one sample) the indicator ``v`` in {0, 1} is
 
-    v = 1  iff  the ray hits a surface  and  ds.pdf > 0  and  max_c( f_c(wi, wo) * W_c ) > 0
+    v = 1  iff  the ray hits a surface  and  ds.pdf > 0  and  f_R(wi, wo) * W_R > 0
 
 with ``(ds, W) = scene.sample_emitter_direction(si, u, test_visibility=True)`` one emitter
 sample (one emitter picked by the scene's emitter sampling, then a point/direction on it; ``W`` is
 ``Le * G / pdf``, zero when the shadow ray is blocked) and ``f = bsdf.eval`` the first hit's BSDF
-(cosine included) for that direction. So ``v`` is 1 exactly when the one-sample direct-light
-estimate ``R = f * W`` is positive in some channel, the authors' ``R > 0``. Cases:
+(cosine included) for that direction. So ``v`` is 1 exactly when the red channel of the
+one-sample direct-light estimate ``R = f * W`` is positive, as the authors test it (fbksd-package
+``denoisers/RDFC/src/multifilm.cpp:123``, ``R[0] > 0``; a test of any channel is the commented-out
+line 122): a surface lit only in green and blue records 0, as theirs. Cases:
 
 * miss (the ray leaves the scene, an environment map seen directly included): ``v = 0`` (the
   authors: a miss has ``R = 0``);
@@ -71,7 +73,8 @@ def register() -> str:
 def direct_light_visible(scene, bsdf, si, sample, active):
     """RDFC's indicator at surface interaction ``si`` (module docstring): ``True`` where the one-sample
     direct-light estimate ``R = f(wi, wo) * W`` of emitter sample ``sample`` (a ``Point2f``) is
-    positive in some channel, for the lanes of ``active`` whose ``si`` is a hit (else ``False``).
+    positive in the red channel (the authors' test, module docstring), for the lanes of ``active``
+    whose ``si`` is a hit (else ``False``).
     ``bsdf`` is ``si``'s BSDF. Shared by this module's integrator (the first hit) and
     :mod:`mcbench.render.path_features` (the first non-specular vertex)."""
     import drjit as dr
@@ -82,7 +85,7 @@ def direct_light_visible(scene, bsdf, si, sample, active):
         return False
     ds, weight = scene.sample_emitter_direction(si, sample, True, hit)
     value = mi.unpolarized_spectrum(bsdf.eval(mi.BSDFContext(), si, si.to_local(ds.d), hit) * weight)
-    positive = (value[0] > 0) | (value[1] > 0) | (value[2] > 0)
+    positive = value[0] > 0
     return hit & (ds.pdf > 0) & positive
 
 

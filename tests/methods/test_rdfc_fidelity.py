@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from mcbench.filters import rdfc_filter as rf
+from mcbench.io.buffers import RenderBuffers
 from mcbench.filters.smoothing import box_mean, pyramid_smooth
 from methods import rdfc
 
@@ -148,7 +149,7 @@ def brute_filter(data, guide, vn, vd, feats, *, R, f, fw, k, colour=True, diff=T
                     acc_s[y, x] += guide[y1, x1] * w1s[y, x] + guide[y2, x2] * w2s[y, x]
     out = (acc + data * wmax[None, :, :, None]) / (wsum + wmax)[None, :, :, None]
     scaled = (acc_s + 1.01 * guide * wmax_s[..., None]) / (wsum_s + wmax_s)[..., None] if delta else None
-    return out, wmax / (wsum + wmax), scaled
+    return out, wmax / (1e-10 + (wsum + wmax)), scaled                 # ratio (C:150,1339)
 
 
 def brute_normaliser(feature, var, tau):
@@ -472,3 +473,87 @@ def test_render_layers_are_declared():
     for name in ("position", "visibility", "normal", "albedo"):
         assert {name + "_a", name + "_b", name + "_variance"} <= set(layers)
     assert "depth" not in " ".join(layers)
+
+
+# ----------------------------------------------------------------------------- departures of issue 45, item 4
+
+def test_selection_keeps_first_where_no_candidate_passes():
+    """F:87 zero-initialises ``sel_map`` and F:653-661 only writes it when a SURE value beats the
+    running minimum, which starts at +inf (F:652): where every eligible error is NaN or +inf the map
+    keeps 0, FIRST, also when FIRST itself is barred by the derivative test."""
+    nan, inf = np.nan, np.inf
+    # pixel 0: all NaN; pixel 1: THIRD NaN, SECOND +inf, FIRST finite but barred; pixel 2: all +inf
+    err = np.array([[[nan, 0.1, inf]], [[nan, inf, inf]], [[nan, nan, inf]]])
+    d0 = np.full((1, 3, 3), 0.9)
+    d1 = np.full((1, 3, 3), 0.1)                       # mean dF/dy(FIRST) 0.9 > 0.1: FIRST barred
+    for bug in (True, False):
+        assert rf.select_candidate(err, d0, d1, index_bug=bug).tolist() == [[0, 0, 0]]
+    err[2, 0, 0] = 5.0                                 # one finite candidate is taken as before
+    assert rf.select_candidate(err, d0, d1)[0, 0] == 2
+
+
+def test_non_finite_derivative_is_kept_as_the_authors_kernel_gives_it():
+    """``derivative`` (C:138-139) divides by 1e-10 + y - 1.01 y with no guard. Where that is 0
+    (a y near 1e-8 whose roundings cancel, found here by search): F, F_s > 0 give inf - inf = NaN,
+    which the clamp's comparisons (C:1364) let through; F > 0 > F_s gives +inf, which the clamp
+    replaces by w_max / sum w. A NaN SURE is never selected (F:655)."""
+    y0 = 1e-8
+    while 1e-10 + y0 - 1.01 * y0 != 0.0:
+        y0 = np.nextafter(y0, 0.0)
+    y = np.full((1, 2, 3), y0)
+    F = np.full((1, 2, 3), 0.5)
+    Fs = np.array([[[0.25] * 3, [-0.25] * 3]])
+    d = rf.finite_difference_derivative(F, Fs, y)
+    assert np.isnan(d[0, 0]).all() and np.isposinf(d[0, 1]).all()
+    clamped = rf.clamp_derivative(d, np.array([[0.3, 0.4]]))
+    assert np.isnan(clamped[0, 0]).all()
+    np.testing.assert_array_equal(clamped[0, 1], [0.4, 0.4, 0.4])
+    err = np.stack([rf.sure(F, clamped, y, np.full_like(y, 0.01)), np.ones((1, 2)), np.full((1, 2), 2.0)])
+    assert np.isnan(err[0, 0, 0])
+    assert rf.select_candidate(err, np.zeros((1, 2, 3)), np.ones((1, 2, 3)))[0, 0] == 1
+
+
+def test_centre_ratio_has_the_authors_epsilon():
+    """``ratio`` (C:150, called at C:1339): w_max / (1e-10 + sum w). An isolated pixel has
+    w_max = sum w = 1e-3 (C:17,1175-1177): 1e-3 / (1e-3 + 1e-10), not 1."""
+    h = w = 5
+    data = np.zeros((1, h, w, 3))
+    guide = np.zeros((h, w, 3))
+    guide[2, 2] = 1e3
+    res = rf.nl_means(data, guide, np.zeros((h, w, 3)), radius=1, patch_radius=0, weight_radius=0, k=1.0)
+    assert res.centre[2, 2] == pytest.approx(1e-3 / (1e-10 + 1e-3), rel=1e-14)
+    assert res.centre[2, 2] < 1.0 - 5e-8
+
+
+def test_second_pass_window_is_half_the_radius_rounded_down():
+    """F:410 ``SetWndRad(wnd_rad / 2)``: for wnd_rad 1 the window radius is 0, the offset loop of
+    FilterData (C:1150-1153) is empty and the output is the input (only the centre, weight 1e-3 /
+    1e-3, C:1175-1177)."""
+    rng = np.random.default_rng(8)
+    blend = 0.5 + 0.02 * rng.standard_normal((2, 7, 9, 3))            # flat: a wider window averages
+    prefiltered = {"f": (np.ones((7, 9, 3)), np.zeros((7, 9, 3)))}
+    out = rdfc.second_pass(blend, prefiltered, 1.0, radius=1)
+    np.testing.assert_allclose(out, blend, rtol=1e-15, atol=0)
+    assert np.abs(rdfc.second_pass(blend, prefiltered, 1.0, radius=2) - blend).max() > 1e-3
+
+
+def test_non_finite_layers_as_the_authors(make_render_buffers):
+    """F:135-138,160-164: a NaN normal component is skipped (a pixel whose samples all are NaN
+    keeps the buffer's initial 0, F:79, and M2 = 0: variance 0), after the (n + 1)/2 map; nothing
+    else is guarded (NaN colour reaches the output). ``nonfinite="zero"``: nan_to_num everywhere."""
+    buffers = make_render_buffers(height=10, width=11, seed=2)
+    layers = dict(buffers.layers)
+    for name in ("normal_a", "normal_variance"):
+        layers[name] = layers[name].copy()
+        layers[name][3, 4, 0] = np.nan
+    feats, _ = rdfc.authors_features(RenderBuffers(layers=layers, spp=buffers.spp))
+    assert feats["normal"][0][3, 4, 0] == 0.0 and feats["normal"][2][3, 4, 0] == 0.0
+    zero, _ = rdfc.authors_features(RenderBuffers(layers=layers, spp=buffers.spp), nonfinite="zero")
+    assert zero["normal"][0][3, 4, 0] == 0.5
+    layers["color_a"] = layers["color_a"].copy()
+    layers["color_a"][5, 5, 1] = np.nan
+    broken = RenderBuffers(layers=layers, spp=buffers.spp)
+    assert np.isnan(rdfc.denoise(broken, radius=2).full).any()
+    assert np.isfinite(rdfc.denoise(broken, radius=2, nonfinite="zero").full).all()
+    with pytest.raises(ValueError, match="nonfinite"):
+        rdfc.denoise(broken, radius=2, nonfinite="clip")

@@ -246,3 +246,21 @@ def test_renders_without_the_features_still_load(tmp_path, variant):
     np.testing.assert_array_equal(buffers.image("b").position, layers["position_b"])
     np.testing.assert_array_equal(buffers.image("a").visibility, layers["visibility_a"])
     np.testing.assert_array_equal(buffers.image("full").visibility, layers["visibility"])
+
+
+@pytest.mark.parametrize("features", ["first_hit", "tungsten"])
+def test_visibility_tests_the_direct_lights_red_channel_as_the_authors(variant, features):
+    """RDFC's authors set v = 1 where the direct light's red channel is positive (fbksd-package
+    multifilm.cpp:123): the same lit pixels record 1 under a light with red and 0 under a light
+    with green and blue only, in both feature conventions."""
+    lit_pixels = {}
+    for name, rgb in (("red", [10.0, 0.0, 0.0]), ("cyan", [0.0, 10.0, 10.0])):
+        desc = _plane_scene(12)
+        desc["light"]["intensity"]["value"] = rgb
+        key = f"visibility-{name}-{features}"
+        layers, _ = render_dict_buffers(desc, 4, lambda half, j, p: 11 + 2 * half + j + 5 * p, key=key,
+                                        variant=variant, features=features)
+        forget_scene(key)
+        lit_pixels[name] = layers["visibility"]
+    assert (lit_pixels["red"] == 1).sum() >= 20
+    assert np.all(lit_pixels["cyan"] == 0)
