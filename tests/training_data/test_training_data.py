@@ -226,3 +226,16 @@ def test_training_seeds_disjoint_from_test_render_seeds():
         training_render_seed(65536, "target")
     with pytest.raises(BenchError):
         training_render_seed(0, "noisy", 12, 0)      # not a power of two
+
+
+def test_crops_carry_their_feature_convention_and_the_same_colour(example_3):
+    """Training crops record the convention their features were rendered with (the networks'
+    records inherit it); the colour and its variance are the same in both conventions (the feature
+    pass never touches the colour pass) and every feature is finite."""
+    tungsten = training_example(3, LEVELS, TARGET_SPP, RESOLUTION, CROP, 2, features="tungsten")
+    for (layers, meta), (first, first_meta) in zip(tungsten, example_3):
+        assert meta["features"] == "tungsten" and first_meta["features"] == "first_hit"
+        for name in ("target", "target_variance", *(f"{q}_spp{s}" for q in ("color", "variance", "color_a")
+                                                   for s in LEVELS)):
+            np.testing.assert_array_equal(layers[name], first[name], err_msg=name)
+        assert all(np.all(np.isfinite(layer)) for layer in layers.values())
