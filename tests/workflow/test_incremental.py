@@ -3,7 +3,7 @@
 A tiny study (one 16x16 scene, 4 spp, JBF, OIDN and their ensemble) is run once; each edit kind
 of the config (a new plugin method, an external program, precomputed results, a combiner over
 existing outputs, one method's params, a removed method, a new scene, a new spp level, a new
-metric) is then applied to a copy of that finished study. For each: the dry run must plan exactly
+metric, the feature convention) is then applied to a copy of that finished study. For each: the dry run must plan exactly
 the jobs the edit needs (the per-method, per-entry and render jobs of what changed, then the
 per-case assemblies and the tables; never another method's job), and after the incremental run
 every table (mcbench.analysis.run_comparison: metrics.csv and every table, timing left out)
@@ -176,9 +176,17 @@ def edit_metric(config, finished, tmp):
     return {("metrics", f"{SCENE}/{SPP}/{name}") for name in ("jbf", "oidn", "ens", "noisy")}
 
 
+def edit_features(config, finished, tmp):
+    config["features"] = "tungsten"
+    # every render (noisy, reference, the oracle's) and everything that reads one; no batch job
+    renders = {("render_noisy", f"scene={SCENE}/spp={SPP}"), ("render_reference_chunk", f"chunk=0/scene={SCENE}"),
+               ("merge_reference", f"scene={SCENE}"), ("oracle_study", f"scene={SCENE}")}
+    return renders | cases([SCENE], [SPP], ["jbf", "oidn", "ens", "noisy"])
+
+
 EDITS = {"plugin": edit_plugin, "external": edit_external, "precomputed": edit_precomputed,
          "combiner": edit_combiner, "params": edit_params, "remove": edit_remove, "scene": edit_scene,
-         "spp": edit_spp, "metric": edit_metric}
+         "spp": edit_spp, "metric": edit_metric, "features": edit_features}
 
 
 #: The edit kinds of the README's test command (about 70 s each); the others are in the extended
@@ -200,7 +208,7 @@ def test_an_edit_runs_only_what_it_changes_and_equals_a_run_from_scratch(finishe
     # an existing out-of-date one by its own per-file rule
     batched = [rule.startswith("case_batch_") for rule, _, outputs in jobs
                if any(pattern.search(path) for path in outputs for _, pattern in FILE_KINDS)]
-    if kind == "params":
+    if kind in ("params", "features"):
         assert not any(batched)
     elif kind != "remove":
         assert batched == [True]              # the one new case's, or each case's new files: one job
