@@ -76,6 +76,7 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
+from mcbench.render.variants import register_integrator_once
 from mcbench.render.visibility import direct_light_visible
 
 __all__ = ["PLUGIN", "AOVS", "WEIGHTED", "DEFAULT_MAX_VERTICES", "register"]
@@ -92,22 +93,11 @@ WEIGHTED = ("albedo", "depth", "position")
 #: Vertices examined when the scene's integrator has no ``max_depth`` (Tungsten's default maxBounces).
 DEFAULT_MAX_VERTICES = 64
 
-_registered: set[str] = set()
-
-
 def register() -> str:
     """Register the :data:`PLUGIN` integrator for Mitsuba's current variant (once per variant; call
     after the variant is set) and return the plugin name. Property ``max_vertices`` (int, default
     :data:`DEFAULT_MAX_VERTICES`): the most surface vertices a feature path examines."""
-    variant = mi.variant()
-    if variant is None:
-        raise ValueError("set a Mitsuba variant (mcbench.render.variants.pick_variant) before registering "
-                         f"the {PLUGIN} integrator")
-    if variant not in _registered:
-        integrator_class = _integrator_class()
-        mi.register_integrator(PLUGIN, lambda props: integrator_class(props))
-        _registered.add(variant)
-    return PLUGIN
+    return register_integrator_once(PLUGIN, _integrator_class)
 
 
 def _emitted(scene, si, mask):

@@ -15,7 +15,8 @@ import sys
 
 from mcbench import BenchError
 
-__all__ = ["MIN_LLVM_MAJOR", "LLVM_SEARCH_PATTERNS", "find_libllvm", "pick_variant", "set_threads"]
+__all__ = ["MIN_LLVM_MAJOR", "LLVM_SEARCH_PATTERNS", "find_libllvm", "pick_variant", "set_threads",
+           "register_integrator_once"]
 
 MIN_LLVM_MAJOR = 19              # older libLLVM versions crash Dr.Jit 1.5
 LLVM_SEARCH_PATTERNS = ("/usr/lib/x86_64-linux-gnu/libLLVM*.so*", "/usr/lib/llvm-*/lib/libLLVM*.so*",
@@ -118,3 +119,23 @@ def set_threads(threads: int | None) -> None:
         if int(threads) < 1:
             raise BenchError(f"config key 'render_threads': must be >= 1, got {threads}")
         dr.set_thread_count(int(threads))
+
+
+_registered_integrators: set[tuple[str, str]] = set()
+
+
+def register_integrator_once(plugin: str, integrator_class) -> str:
+    """Register the Python integrator ``plugin`` for Mitsuba's current variant, once per variant
+    (``mi.SamplingIntegrator`` and so the class are per variant: ``integrator_class()`` makes it),
+    and return ``plugin``. Call after the variant is set (:func:`pick_variant`)."""
+    import mitsuba as mi
+
+    variant = mi.variant()
+    if variant is None:
+        raise ValueError("set a Mitsuba variant (mcbench.render.variants.pick_variant) before registering "
+                         f"the {plugin} integrator")
+    if (plugin, variant) not in _registered_integrators:
+        cls = integrator_class()
+        mi.register_integrator(plugin, lambda props: cls(props))
+        _registered_integrators.add((plugin, variant))
+    return plugin

@@ -51,23 +51,12 @@ __all__ = ["PLUGIN", "AOV_NAME", "register", "direct_light_visible"]
 PLUGIN = "mcbench_visibility"
 AOV_NAME = "v"
 
-_registered: set[str] = set()
-
-
 def register() -> str:
     """Register the :data:`PLUGIN` integrator for Mitsuba's current variant (once per variant;
     call after the variant is set) and return the plugin name."""
-    import mitsuba as mi
+    from mcbench.render.variants import register_integrator_once
 
-    variant = mi.variant()
-    if variant is None:
-        raise ValueError("set a Mitsuba variant (mcbench.render.variants.pick_variant) before registering "
-                         f"the {PLUGIN} integrator")
-    if variant not in _registered:
-        integrator_class = _integrator_class()
-        mi.register_integrator(PLUGIN, lambda props: integrator_class(props))
-        _registered.add(variant)
-    return PLUGIN
+    return register_integrator_once(PLUGIN, _integrator_class)
 
 
 def direct_light_visible(scene, bsdf, si, sample, active):

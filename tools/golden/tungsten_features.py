@@ -39,7 +39,6 @@ from __future__ import annotations
 
 import argparse
 import datetime
-import hashlib
 import importlib.util
 import json
 import os
@@ -58,8 +57,9 @@ sys.path.insert(0, str(ROOT))
 
 from mcbench.io.tungsten_buffers import read_pfm  # noqa: E402
 
-TUNGSTEN_REPO = "https://github.com/tunabrain/tungsten"
-TUNGSTEN_COMMIT = "88ea02044dbaf20472a8173b6752460b50c096d8"
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from tungsten_nfor import TUNGSTEN_COMMIT, TUNGSTEN_REPO, machine, sha256  # noqa: E402  (the NFOR goldens' tool)
+
 GOLDEN = ROOT / "tests" / "data" / "golden" / "tungsten_features"
 SCENE_MODULE = GOLDEN / "scene.py"
 NPZ_FILE = "tungsten_features.npz"
@@ -91,22 +91,6 @@ floating-point code free of FMA contraction. The target builds Tungsten's `core`
 and bundled `embree` static libraries and links `build/tungsten` (`tungsten -v`: version 0.2.2;
 about 5 minutes on 2 shared cores; 205 compiler warnings, no errors).
 """
-
-
-def sha256(path: Path) -> str:
-    return hashlib.sha256(path.read_bytes()).hexdigest()
-
-
-def machine() -> str:
-    cpu = platform.processor() or "unknown CPU"
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    return f"{platform.system()} {platform.release()} {platform.machine()}, {cpu}, {os.cpu_count()} CPUs"
 
 
 def load_scene_module(path: Path = SCENE_MODULE):
