@@ -4,9 +4,10 @@
 
 Prints Markdown: each entry's mean error per spp in both runs and their ratio (tungsten / first-hit),
 over all scenes, over the scenes with a delta lobe (a smooth mirror, glass or coated surface, where the
-conventions differ) and over the others, then the per-scene table of the entries at each spp. The
+conventions differ most) and over the others, then the per-scene table of the entries at each spp. The
 scenes with a delta lobe are found by loading each scene with Mitsuba and reading its BSDFs' flags
-(`mi.BSDFFlags.Delta`). The noisy input (`noisy`) is the control: its colour is the same in both runs
+(``DeltaReflection`` or ``DeltaTransmission``). An emitter's albedo (its radiance added) differs too,
+in every scene whose camera sees a light. The noisy input (`noisy`) is the control: its colour is the same in both runs
 (the conventions change the features only), so its ratio must be 1. Writes nothing.
 """
 
@@ -23,7 +24,8 @@ sys.path.insert(0, str(ROOT))
 
 
 def scenes_with_delta_lobes(scenes: list[str]) -> set[str]:
-    """The scenes (names of ``scenes/``) with a BSDF that has a delta lobe, at 16x16 pixels."""
+    """The scenes (names of ``scenes/``) with a BSDF that has a delta reflection or transmission lobe
+    (not Mitsuba's ``null`` interface of a medium, which both conventions cross), at 16x16 pixels."""
     import mitsuba as mi
 
     from mcbench.render.variants import pick_variant
@@ -34,7 +36,8 @@ def scenes_with_delta_lobes(scenes: list[str]) -> set[str]:
     for name in scenes:
         scene = mi.load_dict(load_scene(name).build(16, 16))
         flags = [shape.bsdf().flags() for shape in scene.shapes() if shape.bsdf() is not None]
-        if any(int(flag) & int(mi.BSDFFlags.Delta) for flag in flags):
+        delta = int(mi.BSDFFlags.DeltaReflection) | int(mi.BSDFFlags.DeltaTransmission)
+        if any(int(flag) & delta for flag in flags):
             found.add(name)
     return found
 
