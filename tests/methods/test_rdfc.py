@@ -124,21 +124,26 @@ def test_flat_black_and_fireflies_stay_finite(make_render_buffers):
 
 
 @pytest.fixture(scope="module", params=[
-    pytest.param("cornell_box", marks=pytest.mark.xfail(strict=True, reason=(
-        "the authors' algorithm leaks the directly visible light into the ceiling: THIRD (features only) with the "
-        "symmetric weights on the linear position feature blends q2 (the light, same albedo and normal, visibility "
-        "0 as the authors define it) with q1 on the far side; docs/fidelity_rdfc.md, 'Known failure'"))),
-    "veach_ajar"])
+    pytest.param(("cornell_box", "first_hit"), marks=pytest.mark.xfail(strict=True, reason=(
+        "with first-hit features the authors' algorithm leaks the directly visible light into the ceiling: THIRD "
+        "(features only) with the symmetric weights on the linear position feature blends q2 (the light, same albedo "
+        "and normal, visibility 0 as the authors define it) with q1 on the far side; docs/fidelity_rdfc.md, "
+        "'Known failure'"))),
+    # the features as the paper's renderer records them: the light's albedo carries its radiance
+    ("cornell_box", "tungsten"),
+    ("veach_ajar", "first_hit")], ids=lambda p: "-".join(p))
 def cornell_series(request):
     from mcbench.render.renderer import merge_reference_chunks, render_buffers, render_reference_chunk
     from mcbench.io.buffers import ALL_LAYERS
     from scenes import load_scene
     if not set(rdfc.METHOD.render_layers) <= set(ALL_LAYERS):
         pytest.skip("the renderer does not write RDFC's position/visibility layers yet")
+    scene, features = request.param
     resolution = (48, 48)
-    reference, _ = merge_reference_chunks([render_reference_chunk(load_scene(request.param), 4096, chunk, resolution=resolution)
+    reference, _ = merge_reference_chunks([render_reference_chunk(load_scene(scene), 4096, chunk, resolution=resolution)
                                            for chunk in range(2)])
-    renders = {spp: RenderBuffers(layers=render_buffers(load_scene(request.param), spp, resolution=resolution)[0], spp=spp)
+    renders = {spp: RenderBuffers(layers=render_buffers(load_scene(scene), spp, resolution=resolution,
+                                                        features=features)[0], spp=spp)
                for spp in (16, 64, 256, 1024)}
     missing = [name for name in rdfc.METHOD.render_layers if name not in renders[16].layers]
     if missing:
