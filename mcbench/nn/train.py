@@ -13,13 +13,23 @@ Settings (the ``training`` dict of a method's declaration, :class:`mcbench.io.me
 overridable from ``config.yaml``):
 
 ``steps``, ``batch_size``, ``patch`` (square training patches, pixels), ``learning_rate``
-(Adam; cosine-decayed to ``learning_rate * final_lr_fraction`` over the run), ``loss`` (a name
+(Adam; cosine-decayed to ``learning_rate * final_lr_fraction`` over each round of ``steps``
+steps), ``rounds`` and ``plateau`` (the stopping rule below), ``loss`` (a name
 in :data:`mcbench.nn.losses.LOSSES`), ``grad_clip`` (global gradient-norm clip; HDR fireflies
 make rare huge gradients), ``seed``, ``validate_every``, ``checkpoint_every``, ``threads``, and
 a method may declare ``augment_batch(buffers, rng)`` (extra training inputs drawn from
 ``default_rng([seed, step, 1])``, e.g. the swap flags of progressive denoising); for adversarial
 training (a method that also declares ``critic`` and ``build_critic``): ``adversarial_weight``,
 ``gradient_penalty``, ``critic_learning_rate``.
+
+Stopping rule: training runs in rounds of ``steps`` steps, each one cosine cycle of the learning
+rate (a warm restart, Loshchilov & Hutter 2017) ending with a validation. From the second round on,
+training stops after a round whose final validation loss is lower than the best earlier round's
+by less than ``plateau`` of it (default 2 %: the validation loss stopped improving,
+:func:`plateau_reached`), or after ``rounds`` rounds; the weights of the round with the lowest
+validation loss are kept (in the checkpoint too, so a resumed run keeps them). ``rounds: 1`` (the
+default) is a fixed count of ``steps`` steps. The record gives ``steps_run``, ``rounds_run`` and
+``stopped_by`` (``plateau`` or ``rounds``).
 
 Determinism and resuming: weights are initialised from ``torch.manual_seed(seed)``; batch
 ``s`` is drawn from ``default_rng([seed, s])`` and the gradient-penalty mixing from a torch
@@ -76,9 +86,12 @@ DEFAULT_SETTINGS = {
     "adversarial_weight": 0.0,
     "gradient_penalty": 10.0,
     "critic_learning_rate": 1e-4,
+    "rounds": 1,
+    "plateau": 0.02,
 }
-# Settings that may change between a run and its resumption without changing the result's meaning.
-RESUMABLE_CHANGES = ("threads", "validate_every", "checkpoint_every")
+# Settings that may change between a run and its resumption without changing the result's meaning
+# (more rounds continue a run that stopped at its last round).
+RESUMABLE_CHANGES = ("threads", "validate_every", "checkpoint_every", "rounds")
 # Steps between two progress lines (mean training loss over the interval, its seconds, ETA).
 LOG_EVERY = 50
 # Validation items (full crops) per forward pass: small, because a network's activations over a
@@ -98,17 +111,37 @@ def training_settings(module, overrides: dict | None = None) -> dict:
             raise BenchError(f"{source} of '{module.__name__}': unknown training setting(s) {unknown}; "
                              f"known: {sorted(DEFAULT_SETTINGS)}")
         settings.update(values)
+    if not isinstance(settings["rounds"], int) or settings["rounds"] < 1 or not settings["plateau"] >= 0:
+        raise BenchError(f"'{module.__name__}': training rounds must be an integer >= 1 and plateau >= 0, got "
+                         f"rounds {settings['rounds']!r}, plateau {settings['plateau']!r}")
     if settings["loss"] not in LOSSES:
         raise BenchError(f"'{module.__name__}': unknown loss '{settings['loss']}'; known: {sorted(LOSSES)}")
     return settings
 
 
 def learning_rate(settings: dict, step: int, key: str = "learning_rate") -> float:
-    """Cosine decay from the initial rate to ``final_lr_fraction`` of it at the last step."""
+    """Cosine decay from the initial rate to ``final_lr_fraction`` of it at the last step of each
+    round of ``steps`` steps (a warm restart at the start of each round)."""
     base = settings[key]
-    progress = min(max(step / max(settings["steps"] - 1, 1), 0.0), 1.0)
+    progress = min(max((step % settings["steps"]) / max(settings["steps"] - 1, 1), 0.0), 1.0)
     floor = settings["final_lr_fraction"]
     return base * (floor + (1.0 - floor) * 0.5 * (1.0 + math.cos(math.pi * progress)))
+
+
+def round_ends(history: list[dict], steps: int) -> list[dict]:
+    """The validations of ``history`` at the end of a round (step a multiple of ``steps``)."""
+    return [entry for entry in history if entry["step"] % steps == 0]
+
+
+def plateau_reached(history: list[dict], steps: int, plateau: float) -> bool:
+    """The stopping rule (module docstring): True when the last round's final validation loss is
+    lower than the best of the earlier rounds' by less than ``plateau`` of it (a relative
+    improvement below ``plateau``, or none); False before the second round ends."""
+    ends = round_ends(history, steps)
+    if len(ends) < 2:
+        return False
+    best_before = min(entry["validation_loss"] for entry in ends[:-1])
+    return best_before - ends[-1]["validation_loss"] < plateau * abs(best_before)
 
 
 def _save_atomic(obj, path: Path) -> None:
@@ -171,10 +204,11 @@ def _gradient_penalty(critic, real, fake, buffers, generator: torch.Generator) -
 
 def train_network(module: ModuleType, data: list[str | Path] | CropSet, weights_out: str | Path,
                   record_out: str | Path, checkpoint: str | Path, overrides: dict | None = None,
-                  log=print) -> dict:
+                  log=print, *, provenance: dict | None = None) -> dict:
     """Train the network of learned method ``module`` (resuming from ``checkpoint`` if present)
     on ``data``: training crop files, or a :class:`CropSet` already loaded (a combiner's, from
-    :func:`mcbench.nn.data.load_combiner_crops`); returns the record."""
+    :func:`mcbench.nn.data.load_combiner_crops`); returns the record (``provenance``, e.g. the
+    CPU, is added to it as given)."""
     name = method_name(check_learned_method(module))
     spec = method_spec(module)
     settings = training_settings(module, overrides)
@@ -201,7 +235,8 @@ def train_network(module: ModuleType, data: list[str | Path] | CropSet, weights_
         critic_optimizer = torch.optim.Adam(critic.parameters(), lr=settings["critic_learning_rate"],
                                             betas=(0.5, 0.9))
     loss_fn = LOSSES[settings["loss"]]
-    history, start_step, elapsed = [], 0, 0.0
+    steps, total_steps = int(settings["steps"]), int(settings["steps"]) * int(settings["rounds"])
+    history, start_step, elapsed, best_state = [], 0, 0.0, None
     if checkpoint.exists():
         required = CHECKPOINT_KEYS + (("critic", "critic_optimizer") if adversarial else ())
         state = load_weights(checkpoint, required=required, what="checkpoint")
@@ -216,11 +251,14 @@ def train_network(module: ModuleType, data: list[str | Path] | CropSet, weights_
             critic.load_state_dict(state["critic"])
             critic_optimizer.load_state_dict(state["critic_optimizer"])
         history, start_step, elapsed = list(state["history"]), int(state["step"]), float(state["seconds"])
+        best_state = state.get("best_network")
         log(f"{name}: resuming from {checkpoint} at step {start_step}")
 
     def save_checkpoint(step: int, seconds: float) -> None:
         state = {"arch": spec.network, "settings": settings, "step": step, "seconds": seconds,
                  "network": network.state_dict(), "optimizer": optimizer.state_dict(), "history": history}
+        if best_state is not None:
+            state["best_network"] = best_state
         if adversarial:
             state.update(critic=critic.state_dict(), critic_optimizer=critic_optimizer.state_dict())
         _save_atomic(state, checkpoint)
@@ -230,7 +268,8 @@ def train_network(module: ModuleType, data: list[str | Path] | CropSet, weights_
     started = time.perf_counter() - elapsed
     session_started = interval_started = time.perf_counter()
     running = []
-    for step in range(start_step, int(settings["steps"])):
+    stopped = start_step % steps == 0 and plateau_reached(history, steps, settings["plateau"])
+    for step in range(start_step, start_step if stopped else total_steps):
         for group in optimizer.param_groups:
             group["lr"] = learning_rate(settings, step)
         buffers, targets = sample_batch(train_set, settings["seed"], step, settings["batch_size"],
@@ -268,29 +307,41 @@ def train_network(module: ModuleType, data: list[str | Path] | CropSet, weights_
             raise BenchError(f"{name}: training loss became {loss_value} at step {step}; lower learning_rate")
         running.append(loss_value)
         done = step + 1
-        if done % LOG_EVERY == 0 or done == settings["steps"]:
+        if done % LOG_EVERY == 0 or done % steps == 0:
             now = time.perf_counter()
             steps_in_interval = min(len(running), done % LOG_EVERY or LOG_EVERY)
-            eta = eta_seconds(now - session_started, done - start_step, int(settings["steps"]) - start_step)
-            log(progress_line(name, f"step {done}/{settings['steps']} loss {np.mean(running[-steps_in_interval:]):.5f} "
+            eta = eta_seconds(now - session_started, done - start_step, total_steps - start_step)
+            log(progress_line(name, f"step {done}/{total_steps} loss {np.mean(running[-steps_in_interval:]):.5f} "
                                     f"lr {learning_rate(settings, step):.2e}, {now - interval_started:.1f} s for "
                                     f"{steps_in_interval} steps "
                                     f"({(now - interval_started) / steps_in_interval:.3f} s/step)",
                               now - started, eta))
             interval_started = now
-        if done % settings["validate_every"] == 0 or done == settings["steps"]:
+        if done % settings["validate_every"] == 0 or done % steps == 0:
             validation_started = time.perf_counter()
             result = evaluate(network, validation_set, settings["loss"])
-            history.append({"step": done, "train_loss": float(np.mean(running[-settings["validate_every"]:])),
+            history.append({"step": done, "round": (done - 1) // steps + 1,
+                            "train_loss": float(np.mean(running[-settings["validate_every"]:])),
                             "validation_loss": result["loss"], "validation_relmse": result["relmse"],
                             "seconds": time.perf_counter() - started})
+            if settings["rounds"] > 1 and done % steps == 0 and result["loss"] <= min(
+                    entry["validation_loss"] for entry in round_ends(history, steps)):
+                best_state = {key: value.detach().clone() for key, value in network.state_dict().items()}
+            stopped = done % steps == 0 and plateau_reached(history, steps, settings["plateau"])
             log(f"{name}: step {done} validation {settings['loss']} {result['loss']:.5f} "
                 f"relMSE {result['relmse']:.5f} ({time.perf_counter() - validation_started:.1f} s, "
                 f"elapsed {time.perf_counter() - started:.1f} s)")
             interval_started += time.perf_counter() - validation_started
-        if done % settings["checkpoint_every"] == 0 or done == settings["steps"]:
+        if done % settings["checkpoint_every"] == 0 or done % steps == 0:
             save_checkpoint(done, time.perf_counter() - started)
+        if stopped:
+            log(f"{name}: round {done // steps} improved the validation loss by less than "
+                f"{settings['plateau']:.0%}: stopped at step {done}")
+            break
     seconds = time.perf_counter() - started
+    steps_run = history[-1]["step"] if history else start_step
+    if best_state is not None:          # the round with the lowest validation loss
+        network.load_state_dict(best_state)
 
     network.eval()
     final = evaluate(network, validation_set, settings["loss"])
@@ -310,8 +361,11 @@ def train_network(module: ModuleType, data: list[str | Path] | CropSet, weights_
         },
         "loss": settings["loss"],
         # one epoch = every (training crop, level, buffer) once, as a full crop
-        "epochs": settings["steps"] * settings["batch_size"] * settings["patch"] ** 2
+        "epochs": steps_run * settings["batch_size"] * settings["patch"] ** 2
                   / math.prod(train_set.shape[:3] + train_set.shape[4:]),
+        "steps_run": steps_run,
+        "rounds_run": math.ceil(steps_run / steps),
+        "stopped_by": "plateau" if plateau_reached(history, steps, settings["plateau"]) else "rounds",
         "validation": final,
         "history": history,
         "seconds": seconds,
@@ -320,6 +374,7 @@ def train_network(module: ModuleType, data: list[str | Path] | CropSet, weights_
         "threads": int(settings["threads"]),
         "torch": torch.__version__,
         "finished": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+        **(provenance or {}),
     }
     _save_atomic({"arch": spec.network, "state_dict": network.state_dict()}, Path(weights_out))
     record[WEIGHTS_DIGEST_KEY] = file_sha256(weights_out)
@@ -348,11 +403,12 @@ def correlated_paths(folder: str | Path, bases, crop_files: list[Path]) -> tuple
 
 
 def main(argv: list[str] | None = None, *, load_method: Callable[[str], ModuleType],
-         load_data: Callable | None = None) -> int:
+         load_data: Callable | None = None, provenance: dict | None = None) -> int:
     """Command line: ``train <name>`` or ``evaluate <name>``; ``load_method`` resolves a method
     name to its module (the caller's, e.g. ``methods.load_method``: core never imports ``methods``);
     ``load_data(name, crop_files, correlated_files)`` builds a learned combiner's training data
-    (the crops with results of its declared ``correlated_bases`` under ``<data>/correlated/<base>/``)."""
+    (the crops with results of its declared ``correlated_bases`` under ``<data>/correlated/<base>/``);
+    ``provenance``: added to a training's record (:func:`train_network`)."""
     parser = argparse.ArgumentParser(prog="python -m mcbench.pipeline.training",
                                      description="Train a learned denoiser, or evaluate its committed weights.")
     parser.add_argument("command", choices=["train", "evaluate"])
@@ -374,7 +430,7 @@ def main(argv: list[str] | None = None, *, load_method: Callable[[str], ModuleTy
             overrides = {"steps": args.steps} if args.steps else {}
             checkpoint = args.checkpoint or f"results/training/checkpoints/{args.name}.ckpt"
             train_network(module, data, weights_path(args.name), record_path(args.name), checkpoint,
-                          overrides, log=lambda m: print(m, file=sys.stderr, flush=True))
+                          overrides, log=lambda m: print(m, file=sys.stderr, flush=True), provenance=provenance)
         else:
             result = evaluate_committed(module, data if isinstance(data, CropSet) else load_crops(data))
             recorded = read_json(record_path(args.name))["validation"]["loss"]

@@ -129,7 +129,16 @@ def train_learned_method(name: str, crop_files: list[str], *args, correlated_fil
     :func:`training_data` (the step resolves the name, core never imports methods)."""
     from mcbench.nn.train import train_network
 
+    kwargs.setdefault("provenance", training_provenance())
     return train_network(learned_method(name), training_data(name, crop_files, correlated_files), *args, **kwargs)
+
+
+def training_provenance() -> dict:
+    """What a training record adds about the machine: the CPU (model, family, ISA flags, cores;
+    :func:`mcbench.pipeline.provenance.cpu_info`)."""
+    from mcbench.pipeline.provenance import cpu_info
+
+    return {"cpu": cpu_info()}
 
 
 def train_progressive_variant(variant: str, data: str = "results/training", steps: int | None = None,
@@ -157,7 +166,8 @@ def train_progressive_variant(variant: str, data: str = "results/training", step
     return train_network(module, crops, weights_path(name), record_path(name),
                          f"results/training/checkpoints/{name}.ckpt",
                          {**({"steps": steps} if steps else {}), **({"threads": threads} if threads else {})},
-                         log=lambda message: print(message, file=sys.stderr, flush=True))
+                         log=lambda message: print(message, file=sys.stderr, flush=True),
+                         provenance=training_provenance())
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -181,7 +191,7 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     from mcbench.nn.train import main as train_main
 
-    return train_main(argv, load_method=learned_method, load_data=training_data)
+    return train_main(argv, load_method=learned_method, load_data=training_data, provenance=training_provenance())
 
 
 if __name__ == "__main__":

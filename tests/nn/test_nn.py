@@ -411,3 +411,51 @@ def test_deterministic_inference_sets_and_restores_the_flag_without_inductor():
             "print(before, inside, after, 'torch._inductor' in sys.modules)\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split()
     assert out == ["False", "True", "False", "False"]
+
+
+def test_plateau_rule_compares_the_last_round_with_the_best_earlier_one():
+    from mcbench.nn.train import plateau_reached
+
+    def history(*losses, steps=10):
+        return [{"step": steps * (k + 1), "validation_loss": loss} for k, loss in enumerate(losses)]
+
+    assert not plateau_reached(history(1.0), 10, 0.02)                      # one round: never
+    assert not plateau_reached(history(1.0, 0.97), 10, 0.02)                # 3 % better
+    assert plateau_reached(history(1.0, 0.99), 10, 0.02)                    # 1 %
+    assert plateau_reached(history(1.0, 1.2), 10, 0.02)                     # worse
+    assert plateau_reached(history(1.0, 0.5, 0.495), 10, 0.02)              # against the best earlier round
+    assert not plateau_reached(history(1.0, 0.5, 0.45), 10, 0.02)
+    assert not plateau_reached(history(1.0, 0.99), 10, 0.0)                 # plateau 0: any improvement goes on
+    # validations between round ends do not count
+    mixed = [{"step": 5, "validation_loss": 0.1}, {"step": 10, "validation_loss": 1.0},
+             {"step": 15, "validation_loss": 0.1}, {"step": 20, "validation_loss": 0.9}]
+    assert not plateau_reached(mixed, 10, 0.02)
+
+
+def test_training_in_rounds_stops_at_the_plateau_and_keeps_the_best_round(tmp_path, crop_files):
+    from mcbench.nn.train import evaluate, train_network
+    import methods.kpcn as module
+
+    settings = {**TINY, "rounds": 4, "plateau": 100.0}      # any round after the first stops it
+    record = train_network(module, crop_files, tmp_path / "w.pt", tmp_path / "w.json", tmp_path / "ck.pt",
+                           settings, log=lambda m: None, provenance={"cpu": {"model": "test CPU"}})
+    assert record["steps_run"] == 12 and record["rounds_run"] == 2 and record["stopped_by"] == "plateau"
+    assert [h["step"] for h in record["history"]] == [3, 6, 9, 12] and record["history"][-1]["round"] == 2
+    assert record["cpu"] == {"model": "test CPU"}
+    ends = [h["validation_loss"] for h in record["history"] if h["step"] % TINY["steps"] == 0]
+    blob = torch.load(tmp_path / "w.pt", weights_only=True)
+    network = module.build_network(**blob["arch"])
+    network.load_state_dict(blob["state_dict"])
+    _, validation = load_crops(crop_files).split()
+    assert evaluate(network, validation, record["loss"])["loss"] == pytest.approx(min(ends), rel=1e-6)
+    # resumed from its final checkpoint, it trains no further and keeps the same weights
+    again = train_network(module, crop_files, tmp_path / "w2.pt", tmp_path / "w2.json", tmp_path / "ck.pt",
+                          settings, log=lambda m: None)
+    assert again["steps_run"] == 12 and again["validation"]["loss"] == pytest.approx(min(ends), rel=1e-6)
+    # plateau 0 on two rounds: both run, the record says the rounds ended it
+    both = train_network(module, crop_files, tmp_path / "w3.pt", tmp_path / "w3.json", tmp_path / "ck3.pt",
+                         {**TINY, "rounds": 2, "plateau": 0.0}, log=lambda m: None)
+    assert both["steps_run"] == 12 and both["stopped_by"] in ("rounds", "plateau")
+    with pytest.raises(BenchError, match="rounds must be an integer"):
+        train_network(module, crop_files, tmp_path / "x.pt", tmp_path / "x.json", tmp_path / "x.ckpt",
+                      {**TINY, "rounds": 0}, log=lambda m: None)
