@@ -23,7 +23,7 @@ from mcbench.analysis.pool import POOL  # noqa: E402
 from mcbench.analysis.study.figures import STUDY_FIGURES as STUDY_FIGURE_KEYS, curve_candidates, paper_recommended  # noqa: E402
 from mcbench.pipeline.resources import JobCost, estimate_job, job_request, load_job_costs  # noqa: E402
 from mcbench.io.method_spec import method_spec  # noqa: E402
-from mcbench.io.weights import COMMITTED_WEIGHTS, check_trained_features, is_learned_method  # noqa: E402
+from mcbench.io.weights import COMMITTED_WEIGHTS, check_trained_features, file_sha256, is_learned_method  # noqa: E402
 from mcbench.pipeline.registry import available_scenes, config_method_table, load_method, load_scene  # noqa: E402
 from mcbench.pipeline.jobs import (  # noqa: E402
     batch_name, batch_text, missing_batches, read_batch, spec_text, target_batch_names, write_if_changed)
@@ -280,13 +280,6 @@ def check_weights(name):
         check_trained_features(Path(WEIGHTS_DIR) / f"{spec['module']}.json", config["features"], name=spec["module"])
 
 
-def weights_digest(wildcards):
-    """SHA-256 of a learned method's weights ("" otherwise): a params entry, so the provenance
-    trigger reruns the method when its weights change."""
-    spec = METHODS[wildcards.method]
-    return weights_digest_of(spec["module"]) if spec["learned"] else ""
-
-
 def weights_digest_of(module):
     """SHA-256 of the weights of method module ``module`` ("" when it has none)."""
     path = Path(weights_file(module))
@@ -295,10 +288,9 @@ def weights_digest_of(module):
 
 @functools.lru_cache(maxsize=None)
 def _file_digest(path, mtime_ns):
-    """SHA-256 of a file, cached per (path, modification time) while the DAG is built."""
-    import hashlib
-
-    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+    """SHA-256 of a file (mcbench.io.weights.file_sha256), cached per (path, modification time)
+    while the DAG is built."""
+    return file_sha256(path)
 
 
 def missing_weights(network):
