@@ -475,7 +475,7 @@ def test_render_layers_are_declared():
     assert "depth" not in " ".join(layers)
 
 
-# ----------------------------------------------------------------------------- departures of issue 45, item 4
+# ----------------------------------------------------------------------------- departures now as the authors' code
 
 def test_selection_keeps_first_where_no_candidate_passes():
     """F:87 zero-initialises ``sel_map`` and F:653-661 only writes it when a SURE value beats the
