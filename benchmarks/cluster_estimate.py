@@ -36,8 +36,8 @@ MEASURED_RENDER_THREADS = 1
 def planned_jobs(config: dict) -> list[dict]:
     """One dict per job: rule, pixels, entries, spp, threads."""
     methods = config_method_table(config, is_learned=is_learned_method)
-    # from scratch each case's methods and evaluations run in one batch job (methods.smk); its
-    # cost is the sum of its methods' (run_method/<module>) and its entries' evaluations
+    # each case's methods and evaluations run in one job (rule run_case, methods.smk); from
+    # scratch its cost is the sum of its methods' (run_method/<module>) and its entries' evaluations
     chunks = config["reference"]["chunks"]
     jobs = []
     for scene in config["scenes"]:
@@ -52,8 +52,6 @@ def planned_jobs(config: dict) -> list[dict]:
             jobs += [{"rule": "run_method", "module": methods[name]["module"], "pixels": pixels, "entries": 1,
                       "spp": 0, "threads": 1} for name in methods]
             jobs += [{"rule": "evaluate_entry", "pixels": pixels, "entries": 1, "spp": 0, "threads": 1}] * (len(methods) + 1)
-            for rule in ("case_metrics", "viewer_case"):
-                jobs.append({"rule": rule, "pixels": pixels, "entries": len(methods) + 1, "spp": 0, "threads": 1})
     oracle_scene = config["oracle"]["scene"] or config["scenes"][0]
     width, height = config["resolution"] or load_scene(oracle_scene).RESOLUTION
     jobs.append({"rule": "oracle_study", "pixels": int(width) * int(height), "entries": 1, "spp": 0, "threads": 1})

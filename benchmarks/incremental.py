@@ -106,8 +106,7 @@ def main(argv=None) -> None:
         edited.write_text(yaml.safe_dump(config))
         _, _, plan = timed(snakemake(workdir, edited, "-n"), cwd=workdir)
         counts = job_counts(plan)
-        jobs = ", ".join(f"{rule} {n}" for rule, n in counts.items() if rule in ("run_method", "evaluate_entry",
-                                                                                  "case_metrics", "viewer_case"))
+        jobs = ", ".join(f"{rule} {n}" for rule, n in counts.items() if rule == "run_case")
         wall, cpu, _ = timed(snakemake(workdir, edited, "--cores", str(args.cores)), cwd=workdir)
         row(f"add {what}", wall, cpu, f"{sum(counts.values())} ({jobs})")
         wall, cpu, _ = timed(snakemake(workdir, configfile, "--cores", str(args.cores)), cwd=workdir)

@@ -22,7 +22,7 @@ import OpenEXR
 from mcbench import BenchError
 from mcbench.io.checksums import CHECKSUM_ATTRIBUTE, ChecksumError, exr_checksum, layer_crc
 
-__all__ = ["ExrError", "NonFiniteError", "read_layers", "write_layers", "read_metadata", "check_finite",
+__all__ = ["ExrError", "NonFiniteError", "read_layers", "write_layers", "read_metadata", "recorded_checksum", "content_checksum", "check_finite",
            "check_resolution", "write_exr_atomically",
            "LayerRows", "layer_rows"]
 
@@ -125,6 +125,30 @@ def read_layers(path: str | os.PathLike, names: list[str] | None = None,
         # asarray: a float32 layer is the decoder's own array (no copy; the layers not wanted
         # are freed with the file), so reading peaks at one copy of the file's pixels, not two
         return {n: np.asarray(available[n], dtype=dtype) for n in wanted}
+
+
+def recorded_checksum(path: str | os.PathLike) -> str | None:
+    """The ``mcbench.crc32`` checksum an EXR's header records (None for a file written elsewhere),
+    read from the header alone: the file's content identity without decoding its pixels (the
+    checksum covers its size, layer names, ``mcbench.*`` attributes and pixels). ``ExrError``
+    naming the file when it is missing or not an EXR."""
+    with _open(Path(path), header_only=True) as exr:
+        return _recorded_checksum(exr.header())[0]
+
+
+def content_checksum(path: str | os.PathLike) -> str:
+    """The content identity of an EXR: ``crc32:<hex>``, its recorded checksum
+    (:func:`recorded_checksum`), else ``sha256:<hex>`` of the whole file."""
+    recorded = recorded_checksum(path)
+    if recorded is not None:
+        return f"crc32:{recorded}"
+    import hashlib
+
+    digest = hashlib.sha256()
+    with open(path, "rb") as handle:
+        for block in iter(lambda: handle.read(1 << 20), b""):
+            digest.update(block)
+    return f"sha256:{digest.hexdigest()}"
 
 
 def _recorded_checksum(header: dict) -> tuple[str | None, dict[str, str]]:

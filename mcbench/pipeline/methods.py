@@ -36,27 +36,13 @@ def run_method(method: str, render_path: str, output_path: str, timing_path: str
                 render_path, scene=scene, spp=spp, threads=threads)
 
 
-def run_case_items(entries: list[dict], evaluations: list[dict], *, scene: str, spp: int, threads: int = 1,
-                   metrics: list[str] = ()) -> None:
-    """What one case job makes (workflow/rules/methods.smk): the methods of ``entries``
-    (:func:`run_methods`, with the case's render), then the evaluations of ``evaluations``
-    (:func:`mcbench.pipeline.metrics.evaluate_entries` with ``metrics``, against the case's
-    reference). ``entries`` and ``evaluations`` carry their own paths; the render and reference
-    paths come with them (``render``, ``reference`` keys of the first)."""
-    if entries:
-        run_methods(entries, entries[0]["render"], scene=scene, spp=spp, threads=threads)
-    if evaluations:
-        from mcbench.pipeline.metrics import evaluate_entries
-
-        evaluate_entries(evaluations, evaluations[0]["reference"], scene=scene, spp=spp, metrics=list(metrics))
-
-
 def run_methods(entries: list[dict], render_path: str, *, scene: str = "", spp: int = 0,
                 threads: int = 1) -> None:
     """Run several methods of one test case in one process, in the given order.
 
     ``entries``: dicts with ``name``, ``module``, ``params``, ``input_paths`` (the output EXRs
-    of the method's inputs) and ``exr``, ``timing`` (where its output and timing record go),
+    of the method's inputs), ``exr``, ``timing`` (where its output and timing record go) and
+    optionally ``key`` (:func:`mcbench.pipeline.cases.method_key`, recorded in both),
     in dependency order: an entry may take an earlier entry's output as an input. The render and
     every input EXR are read once; an input made earlier in the same call is read back from the
     file just written, so each method sees exactly what a job of its own would see (results
@@ -120,11 +106,12 @@ def run_methods(entries: list[dict], render_path: str, *, scene: str = "", spp: 
         bad = {name: layer for name, layer in layers.items() if not np.all(np.isfinite(layer))}
         if bad:
             check_finite(f"{entry['exr']} (output of method '{method}')", bad)
+        key = {"key": entry["key"]} if entry.get("key") else {}
         write_layers(entry["exr"], layers, metadata={"method": method, "scene": scene, "spp": spp,
-                                                     "seconds": f"{seconds:.6f}"})
+                                                     "seconds": f"{seconds:.6f}", **key})
         write_json(entry["timing"], {"scene": scene, "spp": spp, "method": method, "module": module_name,
                                      "kind": spec.kind, "seconds": seconds, "width": width,
-                                     "height": height, "threads": threads, "machine": _machine()})
+                                     "height": height, "threads": threads, "machine": _machine(), **key})
 
 
 #: (module, parameters) already warmed up in this process (a batch, or a warm worker of mcbench.pipeline.pool)

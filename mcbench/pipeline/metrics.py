@@ -141,48 +141,89 @@ def gather_timings(paths: list[str], output_path: str) -> pd.DataFrame:
 ENTRY_RECORD = "entry.json"
 
 
-def evaluate_entries(items: list[dict], reference_path: str, *, scene: str, spp: int,
-                     metrics: list[str]) -> None:
-    """Evaluate entries of one test case against its reference: per item of ``items`` (dicts
-    with ``entry``, ``image``, ``metrics``, ``viewer``, ``weight_inputs``, ``values``), the files asked for
-    (a path, or None): :func:`evaluate_entry`'s metrics CSV and/or viewer folder."""
-    for item in items:
-        evaluate_entry(scene, spp, item["entry"], item["image"], reference_path, metrics,
-                       metrics_path=item.get("metrics"), viewer_dir=item.get("viewer"),
-                       weight_inputs=item.get("weight_inputs") or (), values_path=item.get("values"))
-
-
 def evaluate_entry(scene: str, spp: int, entry: str, image_path: str, reference_path: str,
                    metrics: list[str], *, metrics_path: str | None = None, viewer_dir: str | None = None,
-                   weight_inputs: list[str] = (), values_path: str | None = None) -> pd.DataFrame | None:
-    """Errors of one entry of a test case (the noisy input ``NOISY``, read from its render, or a
-    candidate's output EXR) against the reference, and/or the entry's viewer images.
+                   weight_inputs: list[str] = (), values_path: str | None = None) -> pd.DataFrame:
+    """Errors of one entry of a test case against the reference as a tidy table (columns scene,
+    spp, candidate, metric, value: one row per metric of ``metrics``, in that order), written to
+    ``metrics_path`` when given; the values and images of :func:`evaluate_entry_values`."""
+    import pandas as pd
 
-    With ``metrics_path``: a tidy CSV with columns scene, spp, candidate, metric, value (one row
-    per metric of ``metrics``, in that order; returned). With ``viewer_dir``: the entry's images
-    (:func:`mcbench.analysis.viewer.write_entry_images`: tone-mapped at each exposure, relMSE
-    and HDR-FLIP maps, and for a candidate whose inputs ``weight_inputs`` names and whose EXR
-    holds ``weights_filtered_{i}``, its weight maps) with their fragment and CRC-32s as
-    :data:`ENTRY_RECORD`; the noisy entry's folder also holds the reference's images. Written
-    together, the FLIP map drawn is the one the ``flip`` metric's value comes from (one
-    evaluation). The reference and the image are read through
-    :func:`mcbench.io.file_cache.cached_read` (a warm worker reads them once per case).
+    values, _ = evaluate_entry_values(scene, spp, entry, image_path, reference_path, metrics, viewer_dir=viewer_dir,
+                                      weight_inputs=weight_inputs, values_path=values_path)
+    frame = pd.DataFrame([{"scene": scene, "spp": int(spp), "candidate": entry, "metric": metric, "value": value}
+                          for metric, value in values.items()], columns=["scene", "spp", "candidate", "metric", "value"])
+    if metrics_path is not None:
+        write_csv(metrics_path, frame)
+    return frame
+
+
+def evaluate_entry_values(scene: str, spp: int, entry: str, image_path: str, reference_path: str,
+                          metrics: list[str], *, viewer_dir: str | None = None, weight_inputs: list[str] = (),
+                          values_path: str | None = None, viewer_key: str | None = None,
+                          checksums: dict | None = None) -> tuple[dict[str, float], list[str]]:
+    """The metric values of one entry of a test case (the noisy input ``NOISY``, read from its
+    render, or a candidate's output EXR) against the reference, ``({metric: value}`` in the order
+    of ``metrics``, the metrics computed here), and with ``viewer_dir`` the entry's viewer images.
 
     With ``values_path``: the entry's metric values already computed for these very files (any
     metric list) are kept there (:func:`read_metric_values`), so a metric added to the config is
-    the only one computed; a value is reused only when the image's and the reference's SHA-256
-    and the metric code's digest (:func:`metric_code_digest`) are those it was computed from.
+    the only one computed; a value is reused only when the image's and the reference's content
+    checksums (:func:`mcbench.io.exr.content_checksum`, or ``checksums``: ``{"image", "reference"}``
+    already read) and the metric code's digest (:func:`metric_code_digest`) are those it was
+    computed from. The image and reference are decoded only when something is computed.
+
+    With ``viewer_dir``: the entry's images (:func:`mcbench.analysis.viewer.write_entry_images`:
+    tone-mapped at each exposure, relMSE and HDR-FLIP maps, and for a candidate whose inputs
+    ``weight_inputs`` names and whose EXR holds ``weights_filtered_{i}``, its weight maps) with
+    their fragment, CRC-32s and ``viewer_key`` as :data:`ENTRY_RECORD`; the noisy entry's folder
+    also holds the reference's images. Made together, the FLIP map drawn is the one the ``flip``
+    metric's value comes from (one evaluation). The reference and the image are read through
+    :func:`mcbench.io.file_cache.cached_read` (a warm worker reads them once per case).
     """
-    import pandas as pd
+    from mcbench.io.exr import content_checksum
 
-    from mcbench.analysis.metrics import flip_with_map
-    from mcbench.analysis.viewer import REFERENCE, case_files, merge_fragments, write_entry_images
-    from mcbench.io.checksums import crc32_hex
+    known, sources = {}, None
+    if values_path is not None:
+        checksums = checksums or {"image": content_checksum(image_path), "reference": content_checksum(reference_path)}
+        sources = {"image": checksums["image"], "reference": checksums["reference"], "code": metric_code_digest()}
+        known = read_metric_values(values_path, sources)
+    missing = [metric for metric in metrics if metric not in known]
+    if not missing and viewer_dir is None:
+        return {metric: known[metric] for metric in metrics}, []
+    image, weights, reference, reference_variance = _read_entry(
+        entry, image_path, reference_path, variance=any(metric in REFERENCE_METRICS for metric in missing),
+        weight_inputs=weight_inputs)
+    flip_map = flip_value = None
+    if "flip" in missing or viewer_dir is not None:
+        from mcbench.analysis.metrics import flip_with_map
+
+        flip_map, flip_value = flip_with_map(image, reference)
+    values = dict(known)
+    for metric in missing:
+        if metric == "flip":
+            value = flip_value
+        elif metric in REFERENCE_METRICS:
+            value = REFERENCE_METRICS[metric](image, reference, reference_variance)
+        else:
+            value = METRICS[metric](image, reference)
+        values[metric] = float(value)
+    if values_path is not None and values != known:
+        from mcbench.io.tables import write_json
+
+        write_json(values_path, {**sources, "values": values})
+    if viewer_dir is not None:
+        _write_entry_viewer(Path(viewer_dir), scene, spp, entry, image, reference, weights, flip_map, viewer_key)
+    return {metric: values[metric] for metric in metrics}, missing
+
+
+def _read_entry(entry: str, image_path: str, reference_path: str, *, variance: bool, weight_inputs) -> tuple:
+    """``(image, weight maps or None, reference colour, reference variance or None)`` of an entry,
+    through :func:`mcbench.io.file_cache.cached_read`; refused, naming the image, when its shape
+    is not the reference's."""
     from mcbench.io.file_cache import cached_read
-    from mcbench.io.tables import write_json
 
-    needs_variance = metrics_path is not None and any(metric in REFERENCE_METRICS for metric in metrics)
-    names = ("color", "variance") if needs_variance else ("color",)
+    names = ("color", "variance") if variance else ("color",)
 
     def read_reference(path):
         layers = read_layers(path, list(names))
@@ -191,7 +232,7 @@ def evaluate_entry(scene: str, spp: int, entry: str, image_path: str, reference_
         return layers
 
     reference_layers = cached_read(reference_path, read_reference, key=("reference", names))
-    reference, reference_variance = reference_layers["color"], reference_layers.get("variance")
+    reference = reference_layers["color"]
     weights = None
     if entry == NOISY:
         image = cached_read(image_path, lambda p: RenderBuffers.load(p, layers=("color",)), key=("render", ("color",))).color
@@ -204,46 +245,23 @@ def evaluate_entry(scene: str, spp: int, entry: str, image_path: str, reference_
     if image.shape != reference.shape:
         raise BenchError(f"{image_path}: shape {image.shape} does not match reference "
                          f"{reference_path} of shape {reference.shape}")
-    known, sources = {}, None
-    if metrics_path is not None and values_path is not None:
-        from mcbench.io.weights import file_sha256
+    return image, weights, reference, reference_layers.get("variance")
 
-        sources = {"image_sha256": cached_read(image_path, file_sha256, key=("sha256",)),
-                   "reference_sha256": cached_read(reference_path, file_sha256, key=("sha256",)),
-                   "code": metric_code_digest()}
-        known = read_metric_values(values_path, sources)
-    flip_map = flip_value = None
-    if (metrics_path is not None and "flip" in metrics and "flip" not in known) or viewer_dir is not None:
-        flip_map, flip_value = flip_with_map(image, reference)
-    frame = None
-    if metrics_path is not None:
-        rows, values = [], dict(known)
-        for metric in metrics:
-            if metric in known:
-                value = known[metric]
-            elif metric == "flip":
-                value = flip_value
-            elif metric in REFERENCE_METRICS:
-                value = REFERENCE_METRICS[metric](image, reference, reference_variance)
-            else:
-                value = METRICS[metric](image, reference)
-            values[metric] = float(value)
-            rows.append({"scene": scene, "spp": int(spp), "candidate": entry, "metric": metric, "value": value})
-        frame = pd.DataFrame(rows, columns=["scene", "spp", "candidate", "metric", "value"])
-        write_csv(metrics_path, frame)
-        if values_path is not None and values != known:
-            write_json(values_path, {**sources, "values": values})
-    if viewer_dir is not None:
-        folder = Path(viewer_dir)
-        folder.mkdir(parents=True, exist_ok=True)
-        fragments = [write_entry_images(folder, REFERENCE, reference, reference=reference)] if entry == NOISY else []
-        fragments.append(write_entry_images(folder, entry, image, reference=reference, weights=weights,
-                                            flip_map=flip_map))
-        fragment = merge_fragments(fragments)
-        checksums = {name: crc32_hex((folder / name).read_bytes()) for name in sorted(case_files(fragment))}
-        write_json(folder / ENTRY_RECORD, {"scene": scene, "spp": int(spp), "entry": entry, **fragment,
-                                           "files_crc32": checksums})
-    return frame
+
+def _write_entry_viewer(folder: Path, scene: str, spp: int, entry: str, image, reference, weights, flip_map,
+                        key: str | None) -> None:
+    """An entry's viewer images and its record (:data:`ENTRY_RECORD`: fragment, CRC-32s, key)."""
+    from mcbench.analysis.viewer import REFERENCE, case_files, merge_fragments, write_entry_images
+    from mcbench.io.checksums import crc32_hex
+    from mcbench.io.tables import write_json
+
+    folder.mkdir(parents=True, exist_ok=True)
+    fragments = [write_entry_images(folder, REFERENCE, reference, reference=reference)] if entry == NOISY else []
+    fragments.append(write_entry_images(folder, entry, image, reference=reference, weights=weights, flip_map=flip_map))
+    fragment = merge_fragments(fragments)
+    checksums = {name: crc32_hex((folder / name).read_bytes()) for name in sorted(case_files(fragment))}
+    write_json(folder / ENTRY_RECORD, {"scene": scene, "spp": int(spp), "entry": entry, **fragment,
+                                       "files_crc32": checksums, **({"key": key} if key else {})})
 
 
 @functools.lru_cache(maxsize=None)
@@ -268,7 +286,7 @@ def metric_code_digest() -> str:
 
 def read_metric_values(path: str | Path, sources: dict) -> dict[str, float]:
     """The metric values kept in ``path`` ({metric: value}) when they were computed from
-    ``sources`` (the image's and reference's SHA-256, the metric code's digest), else none: a
+    ``sources`` (the image's and reference's content checksums, the metric code's digest), else none: a
     missing, damaged or stale record is recomputed, never trusted (a wrong number would reach
     the tables)."""
     import math

@@ -1,16 +1,14 @@
-"""Warm worker processes for the study's per-method and per-entry jobs.
+"""Warm worker processes for the study's case jobs.
 
-The study's method outputs and evaluations are per-file, so that Snakemake can decide, method by
-method, what an edit of the config makes out of date (mcbench.pipeline.jobs: a case's missing
-files are made by one batch job, an existing file's rerun by its per-file rule). A process per
+Each test case is one job (mcbench.pipeline.cases), and after an edit of the config most of them
+make little (one method, one metric). A process per
 job would pay a Python start, Snakemake's script preamble and the imports (numpy, numba's cached
 kernels, torch for the networks: 0.5--2 s), more than most methods' compute at 128 x 128 and
 more than a rerun of one method costs. These rules therefore say ``run:`` and hand their step to
 :func:`run_step`: a pool of worker processes that live as long as the Snakemake process, each
 importing once and running one step at a time (its caches, :mod:`mcbench.io.file_cache`, keep
 the case's render and reference decoded between jobs). Snakemake still plans, orders, checks and records every job (params, inputs, code,
-mtimes), so what is out of date is its decision alone; the pool only changes where a job's Python
-runs.
+mtimes); the pool only changes where a job's Python runs.
 
 * Workers are started with ``forkserver`` (never ``fork`` from Snakemake's threaded process), with
   every library's thread pool held to ``threads`` (:func:`mcbench.pipeline.threads.limit_threads`

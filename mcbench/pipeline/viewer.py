@@ -164,7 +164,7 @@ def assemble_viewer_case(entry_dirs: dict[str, str], case_dir: str, *, scene: st
         if (record.get("scene"), record.get("spp"), record.get("entry")) != (scene, int(spp), entry):
             raise BenchError(f"{record_path}: holds entry {record.get('entry')!r} of case ({record.get('scene')}, "
                              f"{record.get('spp')}), expected {entry!r} of ({scene}, {spp}); rerun the job that writes it")
-        fragment = {key: value for key, value in record.items() if key not in ("scene", "spp", "entry", FILE_CHECKSUMS)}
+        fragment = {key: value for key, value in record.items() if key not in ("scene", "spp", "entry", "key", FILE_CHECKSUMS)}
         _check_case_files(Path(folder), {**fragment, FILE_CHECKSUMS: record.get(FILE_CHECKSUMS)}, record_path)
         for name in sorted(case_files(fragment)):
             target = case_path / name

@@ -76,8 +76,8 @@ def test_written_costs_read_back_and_the_committed_file_loads(tmp_path):
     assert (tmp_path / "c.yaml").read_text().startswith("# fitted by hand\n# for a test\n")
     for section in ("rules", "typical"):
         committed = load_job_costs(JOB_COSTS_PATH, section=section)
-        assert {"render_noisy", "render_reference_chunk", "run_method", "run_method/nfor", "evaluate_entry",
-                "case_metrics"} <= set(committed), section
+        assert {"render_noisy", "render_reference_chunk", "run_method", "run_method/nfor",
+                "evaluate_entry"} <= set(committed), section
 
 
 def _planned_resources(configfile: Path, *extra: str, workdir: Path) -> list[tuple[str, dict]]:
@@ -136,8 +136,7 @@ def test_paper_config_plans_under_the_slurm_profile(tmp_path):
     jobs = _planned_resources(REPO / "workflow/configs/paper.yaml", "--profile", str(REPO / "profiles/slurm"),
                               workdir=tmp_path / "plan")
     rules = {rule for rule, _ in jobs}
-    # (the case assemblies are grouped per case by the profile: their resources print as a group's)
-    assert "render_reference_chunk" in rules and any(r.startswith("case_batch_") for r in rules)
+    assert "render_reference_chunk" in rules and "run_case" in rules
     assert sum(rule == "render_noisy" for rule, _ in jobs) == 30 * 9
     for rule, resources in jobs:
         if rule != "all":

@@ -3,11 +3,12 @@
 A tiny study (one 16x16 scene, 4 spp, JBF, OIDN and their ensemble) is run once; each edit kind
 of the config (a new plugin method, an external program, precomputed results, a combiner over
 existing outputs, one method's params, a removed method, a new scene, a new spp level, a new
-metric, the feature convention) is then applied to a copy of that finished study. For each: the dry run must plan exactly
-the jobs the edit needs (the per-method, per-entry and render jobs of what changed, then the
-per-case assemblies and the tables; never another method's job), and after the incremental run
-every table (mcbench.analysis.run_comparison: metrics.csv and every table, timing left out)
-must equal that of a from-scratch run of the edited config.
+metric, the feature convention) is then applied to a copy of that finished study. For each: the
+work must be exactly what the edit needs: the render jobs the dry run plans, and the method
+outputs and entry evaluations the case jobs make (their records, mcbench.pipeline.cases: never
+another method's output), then the tables; and after the incremental run every table
+(mcbench.analysis.run_comparison: metrics.csv and every table, timing left out) must equal that
+of a from-scratch run of the edited config.
 """
 
 from __future__ import annotations
@@ -37,7 +38,7 @@ BASE = {
     "oracle": {"repetitions": 2, "spp": 4, "denoisers": ["oidn", "jbf"]},
 }
 #: Rules that only assemble or tabulate finished results (each reruns when a result it reads changed).
-TABLE_RULES = {"case_metrics", "viewer_case", "gather_metrics", "gather_timings", "ranking_table", "extras_table",
+TABLE_RULES = {"gather_metrics", "gather_timings", "ranking_table", "extras_table",
                "scene_table", "gallery", "error_curves", "speed_error", "viewer", "provenance_manifest", "all",
                "comparison_onehot", "comparison_ablations", "comparison_ranking", "study_tables", "study_figures",
                "progressive_tables"}
@@ -69,27 +70,25 @@ def planned_jobs(workdir: Path) -> list[tuple[str, dict, list[str]]]:
     return jobs
 
 
-#: What a per-method or per-entry file is: (kind, "scene/spp/name").
-FILE_KINDS = [("method", re.compile(r"results/outputs/(\w+)/spp(\d+)/(\w+)\.exr$")),
-              ("metrics", re.compile(r"results/metrics/(\w+)/spp(\d+)/\w+/(\w+)\.csv$")),
-              ("viewer", re.compile(r"results/viewer_entries/(\w+)/spp(\d+)/(\w+)$"))]
-
-
 def work_jobs(jobs) -> set[tuple[str, str]]:
-    """What the planned jobs compute (not assemble or tabulate): ("method" | "metrics" | "viewer",
-    "scene/spp/name") for each method output and entry evaluation planned, whichever job makes it
-    (a case's batch or a per-file rule), and (rule, "key=value/...") for every other job."""
-    work = set()
-    for rule, wildcards, outputs in jobs:
-        if rule in TABLE_RULES:
+    """What the planned jobs other than the cases' compute (not assemble or tabulate): (rule,
+    "key=value/...") for each."""
+    return {(rule, "/".join(f"{key}={value}" for key, value in sorted(wildcards.items())))
+            for rule, wildcards, _ in jobs if rule not in TABLE_RULES and rule != "run_case"}
+
+
+def made_by_cases(workdir: Path, jobs) -> set[tuple[str, str]]:
+    """What the case jobs planned in ``jobs`` made, from their records after the run: ("method" |
+    "metrics" | "viewer", "scene/spp/name") for each method output and entry evaluation."""
+    made = set()
+    for rule, wildcards, _ in jobs:
+        if rule != "run_case":
             continue
-        kinds = [(kind, "/".join(m.groups())) for path in outputs for kind, pattern in FILE_KINDS
-                 if (m := pattern.search(path))]
-        if kinds:
-            work.update(kinds)
-        else:
-            work.add((rule, "/".join(f"{key}={value}" for key, value in sorted(wildcards.items()))))
-    return work
+        scene, spp = wildcards["scene"], wildcards["spp"]
+        record = json.loads((workdir / f"results/cases/{scene}/spp{spp}.json").read_text())
+        made |= {(kind, f"{scene}/{spp}/{name}") for kind, names in (("method", record["made"]["methods"]),
+                 ("metrics", record["made"]["metrics"]), ("viewer", record["made"]["viewer"])) for name in names}
+    return made
 
 
 def write_config(workdir: Path, config: dict) -> None:
@@ -178,7 +177,7 @@ def edit_metric(config, finished, tmp):
 
 def edit_features(config, finished, tmp):
     config["features"] = "tungsten"
-    # every render (noisy, reference, the oracle's) and everything that reads one; no batch job
+    # every render (noisy, reference, the oracle's) and everything that reads one
     renders = {("render_noisy", f"scene={SCENE}/spp={SPP}"), ("render_reference_chunk", f"chunk=0/scene={SCENE}"),
                ("merge_reference", f"scene={SCENE}"), ("oracle_study", f"scene={SCENE}")}
     return renders | cases([SCENE], [SPP], ["jbf", "oidn", "ens", "noisy"])
@@ -203,16 +202,13 @@ def test_an_edit_runs_only_what_it_changes_and_equals_a_run_from_scratch(finishe
     expected = EDITS[kind](config, finished, tmp_path)
     write_config(incremental, config)
     jobs = planned_jobs(incremental)
-    assert work_jobs(jobs) == expected, sorted(work_jobs(jobs) ^ expected)
-    # a new file is made by its case's batch job (one a case: one process call for all of them),
-    # an existing out-of-date one by its own per-file rule
-    batched = [rule.startswith("case_batch_") for rule, _, outputs in jobs
-               if any(pattern.search(path) for path in outputs for _, pattern in FILE_KINDS)]
-    if kind in ("params", "features"):
-        assert not any(batched)
-    elif kind != "remove":
-        assert batched == [True]              # the one new case's, or each case's new files: one job
+    planned = work_jobs(jobs)
+    assert planned == {item for item in expected if item[0] not in ("method", "metrics", "viewer")}, planned
+    cases = [(wildcards["scene"], int(wildcards["spp"])) for rule, wildcards, _ in jobs if rule == "run_case"]
+    assert len(cases) == len(set(cases))                 # one job a case, whatever it makes
     run_snakemake(incremental)
+    made = made_by_cases(incremental, jobs)
+    assert made == {item for item in expected if item[0] in ("method", "metrics", "viewer")}, sorted(made)
     if kind == "metric":                      # the entries' kept values: the two known, the added one
         records = sorted((incremental / "results" / "metrics").glob("*/spp*/values/*.json"))
         assert len(records) == len(expected), records

@@ -54,9 +54,9 @@ KILL_POINTS = 10
 #: next (two per stage); one whose jobs do not start within :data:`STAGE_WAIT` s (done already) is
 #: killed at a random moment instead.
 STAGES = [("render", ("render_reference_chunk", "render_noisy")),
-          ("method", (r"case_batch_\w+", "run_method")),     # a case's batch of missing files, or one method
-          ("metrics", ("entry_metrics", "case_metrics", "gather_metrics", "gather_timings")),
-          ("report", ("viewer_case", "viewer", "gallery", "study_figures", "error_curves")),
+          ("method", ("run_case",)),                     # a case's methods, evaluations and tables
+          ("metrics", ("gather_metrics", "gather_timings")),
+          ("report", ("viewer", "gallery", "study_figures", "error_curves")),
           ("table", ("ranking_table", "extras_table", "study_tables", "scene_table"))]
 STAGE_WAIT = 25.0
 

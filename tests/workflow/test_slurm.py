@@ -47,7 +47,7 @@ def _local_rules() -> set[str]:
 LOCAL_RULES = _local_rules()
 # the parse is checked against rules known to be local (and one known not to be)
 assert {"all", "gather_metrics", "ranking_table", "study_tables", "progressive_tables"} <= LOCAL_RULES
-assert "run_method" not in LOCAL_RULES and "progressive_curve" not in LOCAL_RULES
+assert "run_case" not in LOCAL_RULES and "progressive_curve" not in LOCAL_RULES
 
 
 @pytest.fixture(scope="module")

@@ -517,8 +517,8 @@ def test_timings_hold_one_positive_row_per_method_run(smoke_run, results, timing
     assert (timings["seconds"] > 0).all() and np.isfinite(timings["seconds"]).all(), timings[timings["seconds"] <= 0]
     assert (timings[["width", "height"]] == 32).all().all()
     assert list(keys) == sorted(keys, key=lambda k: (k[2], k[0], k[1]))   # sorted by method, scene, spp
-    # from scratch, one batch job per case made every method and evaluation of the case, with its log
-    logs = sorted((results / "logs/cases").rglob("case_batch_*.log"))
+    # one job per case made every method and evaluation of the case, with its log
+    logs = sorted((results / "logs/cases").rglob("*.log"))
     assert len(logs) == 3 * 2, logs
 
 
@@ -730,25 +730,25 @@ def test_train_rule_trains_missing_weights_and_the_main_job_never_retrains(tmp_p
     for crop in (workdir / "results/training").glob("*.exr"):
         os.utime(crop, (time.time() + 60, time.time() + 60))
     text = "".join(snakemake(workdir, "-n").stdout.splitlines(keepends=True))
-    assert "train_network" not in text and ("run_method" in text or "case_batch_" in text)
-    snakemake(workdir, "results/outputs/cornell_box/spp4/wskpn.exr")
+    assert "train_network" not in text and "run_case" in text
+    snakemake(workdir, "results/cases/cornell_box/spp4.json")
     timing = json.loads((workdir / "results/outputs/cornell_box/spp4/wskpn.json").read_text())
     assert timing["method"] == "wskpn" and timing["seconds"] > 0
     # Nor does a checkout without training data (a clean clone): no crops, no training planned;
     # and an explicit train_<name> with the weights present has nothing to do.
     shutil.rmtree(workdir / "results/training")
     text = snakemake(workdir, "-n").stdout
-    assert "training_example" not in text and "train_network" not in text and ("run_method" in text or "case_batch_" in text)
+    assert "training_example" not in text and "train_network" not in text and "run_case" in text
     assert "train_network" not in snakemake(workdir, "-n", "train_wskpn").stdout
     # New weights rerun the method (their digest is a parameter), still without training.
     torch.save(blob | {"state_dict": {k: v + 0.01 if v.is_floating_point() else v
                                       for k, v in blob["state_dict"].items()}}, weights / "wskpn.pt")
-    text = snakemake(workdir, "-n", "results/outputs/cornell_box/spp4/wskpn.exr").stdout
-    assert ("run_method" in text or "case_batch_" in text) and "train_network" not in text
+    text = snakemake(workdir, "-n", "results/cases/cornell_box/spp4.json").stdout
+    assert "run_case" in text and "train_network" not in text
     # Without weights the main job stops, naming the folder (it never plans training itself);
     # train_<name> plans the training again.
     (weights / "wskpn.pt").unlink()
-    result = snakemake(workdir, "-n", "results/outputs/cornell_box/spp64/wskpn.exr", check=False)
+    result = snakemake(workdir, "-n", "results/cases/cornell_box/spp64.json", check=False)
     assert result.returncode != 0 and f"no weights for wskpn in {weights}" in result.stdout + result.stderr
     assert "train_network" in snakemake(workdir, "-n", "train_wskpn").stdout
 
@@ -815,22 +815,37 @@ def test_the_manifest_is_planned_after_the_tables_and_read_by_the_summary_alone(
     assert _job_counts(result)["provenance_manifest"] == 1
 
 
-def test_from_scratch_each_case_is_one_batch_job_making_every_method_and_evaluation(tmp_path):
-    """From scratch (nothing exists), one case_batch job per case makes every method output and
-    every entry's metrics and viewer images of that case (mcbench.pipeline.jobs); no per-file job."""
+def test_each_case_is_one_job_and_parsing_writes_nothing(tmp_path):
+    """One run_case job per case (mcbench.pipeline.cases: its methods, evaluations and tables),
+    no per-method or per-entry job; a dry run writes nothing under the folder it plans in."""
     config = write_config(tmp_path, study={"pool": False})   # the config's methods only
+    before = sorted(p.relative_to(tmp_path) for p in tmp_path.rglob("*") if ".snakemake" not in p.parts)
     result = _dry_run(tmp_path, "--configfile", str(tmp_path / "config.yaml"))
     counts, cases = _job_counts(result), len(config["scenes"]) * len(config["spp"])
-    methods = config["denoisers"] + [c["name"] for c in config["combiners"]]
-    batches = {rule: n for rule, n in counts.items() if rule.startswith("case_batch_")}
-    assert list(batches.values()) == [cases], counts
-    assert not {"run_method", "entry_metrics", "entry_viewer"} & set(counts)
-    assert counts["case_metrics"] == counts["viewer_case"] == cases
-    outputs = {line.strip() for line in (result.stdout + result.stderr).splitlines() if line.strip().startswith("output:")}
-    planned = {p for line in outputs for p in line.removeprefix("output:").replace(",", " ").split()}
-    for name in methods:
-        assert f"results/outputs/cornell_box/spp4/{name}.exr" in planned
-        assert f"results/viewer_entries/cornell_box/spp4/{name}" in planned
+    assert counts["run_case"] == cases, counts
+    assert not {"run_method", "entry_metrics", "entry_viewer", "case_metrics", "viewer_case"} & set(counts)
+    assert not any(rule.startswith("case_batch_") for rule in counts)
+    after = sorted(p.relative_to(tmp_path) for p in tmp_path.rglob("*") if ".snakemake" not in p.parts)
+    assert after == before                                     # no results/, no spec or batch file
+
+
+def _rules(cwd: Path, configfile: Path) -> list[str]:
+    command = [sys.executable, "-m", "snakemake", "-s", str(REPO / "Snakefile"), "--list-rules", "--nolock",
+               "--configfile", str(configfile)]
+    result = subprocess.run(command, capture_output=True, text=True, cwd=cwd, timeout=300)
+    assert result.returncode == 0, (result.stdout + result.stderr)[-3000:]
+    return sorted(line.strip() for line in result.stdout.splitlines() if line.strip())
+
+
+def test_the_rules_are_the_same_in_a_finished_study_and_an_empty_folder(smoke_run, tmp_path):
+    """The rules and their names do not depend on what exists under results/: a finished study's
+    folder and an empty one list the same rules (a SLURM job or a spawned job re-parses the
+    workflow while other jobs are making files)."""
+    workdir, _ = smoke_run
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    finished = _rules(workdir, workdir / "config.yaml")
+    assert finished == _rules(empty, workdir / "config.yaml") and "run_case" in finished
 
 
 def test_a_config_naming_only_scenes_runs(tmp_path):

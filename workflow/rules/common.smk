@@ -4,8 +4,6 @@
 
 import copy
 import functools
-import hashlib
-import json
 import os
 import sys
 
@@ -14,19 +12,16 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(workflow.basedir)))  # methods/, scenes/, mcbench/ from a checkout
 
-from mcbench import NOISY, NOISY_LABEL, BenchError  # noqa: E402
+from mcbench import NOISY, BenchError  # noqa: E402
 from mcbench.pipeline.config import config_digest, resolve_config  # noqa: E402
 from mcbench.pipeline.plan import plan_study  # noqa: E402
 from mcbench.pipeline.render import folder_case_files, folder_reference_files  # noqa: E402
 from mcbench.analysis.metrics import ALL_METRICS  # noqa: E402
-from mcbench.analysis.pool import POOL  # noqa: E402
 from mcbench.analysis.study.figures import STUDY_FIGURES as STUDY_FIGURE_KEYS, curve_candidates, paper_recommended  # noqa: E402
 from mcbench.pipeline.resources import JobCost, estimate_job, job_request, load_job_costs  # noqa: E402
 from mcbench.io.method_spec import method_spec  # noqa: E402
 from mcbench.io.weights import COMMITTED_WEIGHTS, check_trained_features, file_sha256, is_learned_method  # noqa: E402
-from mcbench.pipeline.registry import available_scenes, config_method_table, load_method, load_scene  # noqa: E402
-from mcbench.pipeline.jobs import (  # noqa: E402
-    batch_name, batch_text, missing_batches, read_batch, spec_text, target_batch_names, write_if_changed)
+from mcbench.pipeline.registry import load_method, load_scene  # noqa: E402
 
 
 # The whole configuration: the config file (config.yaml or the --configfile) plus the schema's
@@ -95,95 +90,22 @@ def run_in_pool(step, *args, log, **kwargs):
              paths=[str(Path(workflow.basedir))], **kwargs)
 
 
-# Per-method and per-entry files, and the jobs that make them (mcbench.pipeline.jobs): a file that
-# exists belongs to its per-file rule (run_method, entry_metrics, entry_viewer), which Snakemake
-# reruns when it finds the file out of date; the files that do not exist yet are made by one batch
-# job per case (from scratch: every method of the case in one job). Neither kind has params: a
-# method's parameters are its spec file (results/specs/methods/<name>.json, rewritten only when the
-# spec changes, so its mtime says when), the metric list is in the metrics files' folder name; both
-# have the same `run:` code (one rule definition in a loop), so Snakemake records the same for a
-# file whichever made it. The workflow profile leaves out Snakemake's `input` rerun trigger (a
-# batch's input list is not a per-file rule's): every rule whose input list can change without
-# its files' mtimes carries that list in its params.
+# A case's files (mcbench.pipeline.cases): each method's output and timing record, each entry's
+# metric values and viewer images. They are made by the case's one job (rule run_case), which
+# keeps what its records say is up to date and makes the rest; they are not Snakemake outputs.
 METHOD_EXR = f"{RESULTS}/outputs/{{scene}}/spp{{spp}}/{{method}}.exr"
 METHOD_TIMING = f"{RESULTS}/outputs/{{scene}}/spp{{spp}}/{{method}}.json"
-SPEC_FILE = f"{RESULTS}/specs/methods/{{method}}.json"
-BATCH_FILE = f"{RESULTS}/specs/batches/{{name}}.json"
-METRIC_SET = f"m{hashlib.sha256(json.dumps(METRIC_NAMES).encode()).hexdigest()[:10]}"
-ENTRY_METRICS = f"{RESULTS}/metrics/{{scene}}/spp{{spp}}/{METRIC_SET}/{{entry}}.csv"
-# The metric values of an entry kept across metric lists (an added metric is the only one computed;
-# mcbench.pipeline.metrics.read_metric_values): not a rule's output, a record the evaluation reuses.
 ENTRY_VALUES = f"{RESULTS}/metrics/{{scene}}/spp{{spp}}/values/{{entry}}.json"
 ENTRY_VIEWER = f"{RESULTS}/viewer_entries/{{scene}}/spp{{spp}}/{{entry}}"
 #: A case's entries: the noisy input and every candidate.
 ENTRIES = [NOISY] + CANDIDATES
-CASES = [(scene, int(spp)) for scene in SCENES for spp in SPPS]
-
-
 def _path(pattern, scene, spp, **names):
     return pattern.format(scene=scene, spp=spp, **names)
-
-
-def run_case_assembly(step, input, output, params, wildcards, log, **kwargs):
-    """A per-case assembly (case_metrics, viewer_case) in the pool: ``step({entry: input file},
-    output, scene=, spp=, **kwargs)``, the inputs in the order of ``params.entries`` (method
-    names are never Snakemake input names: some, e.g. 'copy', are reserved there)."""
-    run_in_pool(step, dict(zip(params.entries, input)), output[0], log=log[0], scene=wildcards.scene,
-                spp=int(wildcards.spp), **kwargs)
 
 
 def method_output(name, wildcards, kind="exr"):
     """Output path (``exr`` or ``timing``) of method ``name`` in the case of ``wildcards``."""
     return _path(METHOD_EXR if kind == "exr" else METHOD_TIMING, wildcards.scene, wildcards.spp, method=name)
-
-
-def method_spec_file(name):
-    return SPEC_FILE.format(method=name)
-
-
-def _method_spec(name):
-    spec = METHODS[name]
-    return {"module": spec["module"], "params": spec["params"], "inputs": spec["inputs"],
-            "weights_sha256": weights_digest_of(spec["module"]) if spec["learned"] else ""}
-
-
-def _method_exists(scene, spp, name):
-    return all(os.path.exists(_path(p, scene, spp, method=name)) for p in (METHOD_EXR, METHOD_TIMING))
-
-
-def _case_item_exists(scene, spp, item):
-    """Whether a case's item exists: a method's output (and timing record), or ``entry:metrics``/``entry:viewer``."""
-    if ":" not in item:
-        return _method_exists(scene, spp, item)
-    entry, product = item.rsplit(":", 1)
-    return os.path.exists(_path(ENTRY_METRICS if product == "metrics" else ENTRY_VIEWER, scene, spp, entry=entry))
-
-
-def _constraints(batch):
-    return {"scene": "|".join(batch["scenes"]), "spp": "|".join(str(s) for s in batch["spps"])}
-
-
-def _batch_inputs(items):
-    """Input function of a case batch: the method outputs its methods and evaluations read that it does not make."""
-    made = {i for i in items if ":" not in i}
-
-    def inputs(wildcards):
-        wanted = [i for name in made for i in METHODS[name]["inputs"]]
-        wanted += [i.rsplit(":", 1)[0] for i in items if ":" in i]
-        return [method_output(name, wildcards) for name in dict.fromkeys(wanted) if name in METHODS and name not in made]
-
-    return inputs
-
-
-def _check_all_weights(names):
-    def weights(wildcards):
-        for name in names:
-            check_weights(name)
-        return []
-
-    return weights
-
-
 
 
 def entry_image(entry, wildcards):
@@ -193,52 +115,42 @@ def entry_image(entry, wildcards):
     return method_output(entry, wildcards)
 
 
-def _eval_outputs(items):
-    metrics = [ENTRY_METRICS.replace("{entry}", i.rsplit(":", 1)[0]) for i in items if i.endswith(":metrics")]
-    viewers = [directory(ENTRY_VIEWER.replace("{entry}", i.rsplit(":", 1)[0])) for i in items if i.endswith(":viewer")]
-    return {**({"metrics": metrics} if metrics else {}), **({"viewer": viewers} if viewers else {})}
+def case_plan(wildcards=None):
+    """What a case's job depends on besides its files (rule run_case's params, the same for every
+    case): the methods in dependency order with their settings and, for a learned method, its
+    weights' SHA-256 (new weights rerun every case, whose job reruns the methods they belong
+    to), the entries, the metrics. Checks that every learned method has its weights."""
+    return _case_plan()
 
 
+@functools.lru_cache(maxsize=None)
+def _case_plan():
+    methods = []
+    for name, spec in METHODS.items():
+        if spec["learned"]:
+            check_weights(name)
+        methods.append({"name": name, "module": spec["module"], "params": spec["params"],
+                        "inputs": list(spec["inputs"]),
+                        **({"weights_sha256": weights_digest_of(spec["module"])} if spec["learned"] else {})})
+    return {"methods": methods, "entries": ENTRIES, "metrics": METRIC_NAMES}
 
 
-def case_items(rule_name, wildcards):
-    """What a case job (common.smk CASE_JOBS) makes in one case: ``(method entries, evaluation
-    items)`` for ``mcbench.pipeline.methods.run_case_items``."""
-    if rule_name == "run_method":
-        items = [wildcards.method]
-    elif rule_name in ("entry_metrics", "entry_viewer"):
-        items = [f"{wildcards.entry}:{rule_name.removeprefix('entry_')}"]
-    else:
-        items = CASE_JOB_OF[rule_name]["items"]
-    render = _path(_RENDER, wildcards.scene, wildcards.spp)
-    reference = _REFERENCE.format(scene=wildcards.scene)
-    entries = [{"name": name, "module": METHODS[name]["module"], "params": METHODS[name]["params"],
-                "input_paths": [method_output(i, wildcards) for i in METHODS[name]["inputs"]],
-                "exr": method_output(name, wildcards), "timing": method_output(name, wildcards, "timing"),
-                "render": render}
-               for name in items if ":" not in name]
-    by_entry = {}
-    for item in (i for i in items if ":" in i):
-        entry, product = item.rsplit(":", 1)
-        record = by_entry.setdefault(entry, {"entry": entry, "image": entry_image(entry, wildcards), "metrics": None,
-                                             "reference": reference,
-                                             "viewer": None, "weight_inputs": list(METHODS[entry]["inputs"])
-                                             if entry in METHODS else []})
-        record[product] = _path(ENTRY_METRICS if product == "metrics" else ENTRY_VIEWER, wildcards.scene,
-                                wildcards.spp, entry=entry)
-        if product == "metrics":
-            record["values"] = _path(ENTRY_VALUES, wildcards.scene, wildcards.spp, entry=entry)
-    return entries, list(by_entry.values())
-
-
-def case_entry_metrics(wildcards):
-    """The metrics CSVs of a case's entries, in the order of ENTRIES (the noisy input first)."""
-    return [_path(ENTRY_METRICS, wildcards.scene, wildcards.spp, entry=entry) for entry in ENTRIES]
-
-
-def case_entry_viewers(wildcards):
-    """The viewer folders of a case's entries, in the order of ENTRIES (the noisy input's has the reference's images)."""
-    return [_path(ENTRY_VIEWER, wildcards.scene, wildcards.spp, entry=entry) for entry in ENTRIES]
+def case_job(wildcards, input, output):
+    """What run_case's job makes in one case (mcbench.pipeline.cases.run_case): its methods with
+    their paths and weights, its entries' evaluations, its outputs."""
+    scene, spp = wildcards.scene, int(wildcards.spp)
+    methods = [{"name": plan["name"], "module": plan["module"], "params": plan["params"], "inputs": plan["inputs"],
+                "weights": weights_file(plan["module"]) if "weights_sha256" in plan else None,
+                "exr": method_output(plan["name"], wildcards), "timing": method_output(plan["name"], wildcards, "timing")}
+               for plan in case_plan()["methods"]]
+    entries = [{"entry": entry, "image": entry_image(entry, wildcards),
+                "values": _path(ENTRY_VALUES, scene, spp, entry=entry),
+                "viewer": _path(ENTRY_VIEWER, scene, spp, entry=entry),
+                "weight_inputs": list(METHODS[entry]["inputs"]) if entry in METHODS else []}
+               for entry in ENTRIES]
+    return {"scene": scene, "spp": spp, "render": input.render, "reference": input.reference,
+            "metrics": list(METRIC_NAMES), "methods": methods, "entries": entries,
+            "outputs": {"metrics": output.metrics, "viewer": output.viewer, "record": output.record}}
 
 
 def feature_params():
@@ -253,19 +165,8 @@ def reference_chunk_spp(wildcards):
     return REFERENCE_SPP[wildcards.scene] // REFERENCE_CHUNKS
 
 
-def method_inputs(wildcards):
-    """Outputs of the methods a combiner takes (empty for a base denoiser)."""
-    return [method_output(name, wildcards) for name in METHODS[wildcards.method]["inputs"]]
-
-
 def weights_file(network):
     return f"{WEIGHTS_DIR}/{network}.pt"
-
-
-def method_weights(wildcards):
-    """Nothing, after checking that a learned method's weights exist (check_weights)."""
-    check_weights(wildcards.method)
-    return []
 
 
 def check_weights(name):
@@ -333,12 +234,12 @@ def case_outputs(wildcards):
     return [method_output(name, wildcards) for name in CANDIDATES]
 
 
-def all_timing_records(wildcards=None):
-    return expand(METHOD_TIMING, scene=SCENES, spp=SPPS, method=CANDIDATES)
+def all_case_records(wildcards=None):
+    return expand(rules.run_case.output.record, scene=SCENES, spp=SPPS)
 
 
 def all_case_metrics(wildcards=None):
-    return expand(rules.case_metrics.output[0], scene=SCENES, spp=SPPS)
+    return expand(rules.run_case.output.metrics, scene=SCENES, spp=SPPS)
 
 
 # Scenes of renders made elsewhere (scenes/<name>.yaml): their cases and references are imported
@@ -427,28 +328,22 @@ def _job_size(rule_name, wildcards):
         return pixels, 1, int(wildcards.spp)
     if rule_name == "render_reference_chunk":
         return pixels, 1, reference_chunk_spp(wildcards)
-    if rule_name in ("case_metrics", "viewer_case"):
-        return pixels, case_entries(), 0
     if rule_name == "viewer":
         return max(scene_pixels(s) for s in SCENES), len(SCENES) * len(SPPS) * case_entries(), 0
     return pixels, 1, 0
 
 
-def job_resources(rule_name, *, batch=1):
-    """The ``resources:`` of the rule's jobs: mem_mb and runtime from its fitted cost (a method's
-    or a network's own, e.g. run_method/nfor or train_network/kpcn, where measured; the floors
-    for a rule without records), times the attempt; ``gpu`` for the rules that can use one.
-    ``batch``: a batch job making that many of the rule's files asks for that many times the
-    estimated time (its margin and floor applied once)."""
+def job_resources(rule_name):
+    """The ``resources:`` of the rule's jobs: mem_mb and runtime from its fitted cost (a
+    network's own, e.g. train_network/kpcn, where measured; the floors for a rule without
+    records), times the attempt; ``gpu`` for the rules that can use one."""
 
     def request(wildcards, attempt):
-        method, network = getattr(wildcards, "method", None), getattr(wildcards, "network", None)
-        own = (f"{rule_name}/{METHODS[method]['module']}" if method in METHODS else
-               f"{rule_name}/{network}" if network else None)
-        cost = JOB_COSTS.get(own) or JOB_COSTS.get(rule_name, JobCost())
+        network = getattr(wildcards, "network", None)
+        cost = (network and JOB_COSTS.get(f"{rule_name}/{network}")) or JOB_COSTS.get(rule_name, JobCost())
         pixels, entries, spp = _job_size(rule_name, wildcards)
         seconds, rss_mb = estimate_job(cost, pixels=pixels, entries=entries, spp=spp)
-        request = job_request(seconds * batch, rss_mb)           # the floors once, not once per item
+        request = job_request(seconds, rss_mb)
         return {key: value * attempt for key, value in request.items()}
 
     resources = {"mem_mb": lambda wildcards, attempt: request(wildcards, attempt)["mem_mb"],
@@ -458,6 +353,27 @@ def job_resources(rule_name, *, batch=1):
         if config["gpu_model"]:
             resources["gpu_model"] = config["gpu_model"]
     return resources
+
+
+def case_resources():
+    """The ``resources`` of a case's job, run_case's: the sum of its methods' fitted costs
+    (run_method/<module>, else run_method) and of its entries' evaluations (evaluate_entry), the
+    whole case made (an incremental run makes less), times the attempt."""
+
+    def request(wildcards, attempt):
+        pixels = scene_pixels(wildcards.scene)
+        seconds, rss_mb = 0.0, 0.0
+        for spec in METHODS.values():
+            cost = JOB_COSTS.get(f"run_method/{spec['module']}") or JOB_COSTS.get("run_method", JobCost())
+            method_seconds, method_mb = estimate_job(cost, pixels=pixels, entries=1, spp=0)
+            seconds, rss_mb = seconds + method_seconds, max(rss_mb, method_mb)
+        evaluation_seconds, evaluation_mb = estimate_job(JOB_COSTS.get("evaluate_entry", JobCost()), pixels=pixels,
+                                                         entries=1, spp=0)
+        request = job_request(seconds + evaluation_seconds * case_entries(), max(rss_mb, evaluation_mb))
+        return {key: value * attempt for key, value in request.items()}
+
+    return {"mem_mb": lambda wildcards, attempt: request(wildcards, attempt)["mem_mb"],
+            "runtime": lambda wildcards, attempt: request(wildcards, attempt)["runtime"]}
 
 
 def study_targets(wildcards=None):
@@ -482,54 +398,3 @@ def progressive_targets(wildcards=None):
     if not PROGRESSIVE:
         return []
     return [*rules.progressive_tables.output, *expand(rules.progressive_curve.output, scene=PROGRESSIVE_SCENE)]
-
-
-# The method and evaluation jobs (methods.smk, metrics.smk): the per-file rules, then one batch rule
-# per group of cases lacking the same files (mcbench.pipeline.jobs.missing_batches). The methods'
-# spec files are written here, before Snakemake looks at any mtime, and only when a spec changed.
-for _name in METHODS:
-    write_if_changed(method_spec_file(_name), spec_text(_method_spec(_name)))
-
-_REFERENCE = f"{RESULTS}/references/{{scene}}.exr"
-_RENDER = f"{RESULTS}/renders/{{scene}}/spp{{spp}}.exr"
-_ENTRY = {"entry": "|".join(ENTRIES)}
-CASE_JOBS = [
-    {"rule": "run_method", "outputs": {"exr": METHOD_EXR, "timing": METHOD_TIMING},
-     "inputs": {"render": _RENDER, "inputs": method_inputs, "spec": lambda wildcards: [method_spec_file(wildcards.method)],
-                "weights": method_weights},
-     "constraints": {"method": "|".join(METHODS) or "(?!)"}, "resources": job_resources("run_method"),
-     "log": f"{RESULTS}/logs/methods/{{scene}}/spp{{spp}}/{{method}}.log"},
-    {"rule": "entry_metrics", "outputs": {"metrics": ENTRY_METRICS},
-     "inputs": {"image": lambda wildcards: entry_image(wildcards.entry, wildcards), "reference": _REFERENCE},
-     "constraints": _ENTRY, "resources": job_resources("evaluate_entry"),
-     "log": f"{RESULTS}/logs/metrics/{{scene}}/spp{{spp}}/{{entry}}.log"},
-    {"rule": "entry_viewer", "outputs": {"viewer": directory(ENTRY_VIEWER)},
-     "inputs": {"image": lambda wildcards: entry_image(wildcards.entry, wildcards), "reference": _REFERENCE},
-     "constraints": _ENTRY, "resources": job_resources("evaluate_entry"),
-     "log": f"{RESULTS}/logs/viewer/{{scene}}/spp{{spp}}/{{entry}}.log"},
-]
-_ITEMS = list(METHODS) + [f"{entry}:{product}" for entry in ENTRIES for product in ("metrics", "viewer")]
-# A process started for target jobs (a SLURM job, a spawned run: job) defines the batches it is
-# asked for from the main process's records, not from the files it finds (mcbench.pipeline.jobs).
-_TARGET_BATCHES = target_batch_names(sys.argv, "case_batch") if not workflow.is_main_process else []
-if _TARGET_BATCHES:
-    _BATCHES = [read_batch(BATCH_FILE.format(name=n), n, "case_batch") for n in _TARGET_BATCHES]
-else:
-    _BATCHES = missing_batches(CASES, _ITEMS, _case_item_exists)
-    for _batch in _BATCHES:
-        write_if_changed(BATCH_FILE.format(name=batch_name("case_batch", _batch)), batch_text(_batch))
-for _batch in _BATCHES:
-    _name = batch_name("case_batch", _batch)
-    _methods = [i for i in _batch["items"] if ":" not in i]
-    _evaluations = [i for i in _batch["items"] if ":" in i]
-    CASE_JOBS.append({
-        "rule": _name, "items": _batch["items"],
-        "outputs": {**({"exr": [METHOD_EXR.replace("{method}", n) for n in _methods],
-                        "timing": [METHOD_TIMING.replace("{method}", n) for n in _methods]} if _methods else {}),
-                    **_eval_outputs(_evaluations)},
-        "inputs": {"render": _RENDER, "inputs": _batch_inputs(_batch["items"]), "weights": _check_all_weights(_methods),
-                   **({"reference": _REFERENCE} if _evaluations else {})},
-        "constraints": _constraints(_batch),
-        "resources": job_resources("run_method", batch=len(_methods) + len(_evaluations)),
-        "log": f"{RESULTS}/logs/cases/{{scene}}/spp{{spp}}/{_name}.log"})
-CASE_JOB_OF = {job["rule"]: job for job in CASE_JOBS}

@@ -5,13 +5,14 @@
 
 rule export_case:
     input:
-        candidates=case_outputs,
+        case=rules.run_case.output.record,
         render=rules.render_noisy.output[0],
         reference=rules.merge_reference.output[0],
     output:
         directory(f"{RESULTS}/export/{{scene}}/spp{{spp}}"),
     params:
         candidates=CANDIDATES,
+        candidate_paths=case_outputs,
     threads: 1
     resources:
         **job_resources("export_case"),

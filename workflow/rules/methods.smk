@@ -1,40 +1,33 @@
-# Base denoisers and combiners, and each entry's evaluation: per-file results, so that Snakemake
-# decides method by method what an edit of the config makes out of date (a new method runs alone;
-# changed params rerun the method and the combiners that read it; a new metric list is new
-# metrics files). A base denoiser returns its full and half-buffer results in one run; a combiner
-# also reads its input methods' outputs; a learned method also reads its weights. Each entry of
-# a case (the noisy input, every candidate) is evaluated into its errors
-# (metrics/<scene>/spp<N>/<metric set>/<entry>.csv) and its viewer images
-# (viewer_entries/<scene>/spp<N>/<entry>/).
-#
-# Who makes a file (common.smk CASE_JOBS, mcbench.pipeline.jobs): an existing file, its per-file
-# rule (run_method, entry_metrics, entry_viewer), rerun when Snakemake finds it out of date (a
-# method's spec file, render or input outputs newer); the files a case lacks, one batch job per
-# case (case_batch_<key>): from scratch, every method of the case in dependency order, then every
-# evaluation. All are this one rule definition (same code, no params) and run in warm worker
-# processes that import once (mcbench.pipeline.pool). `snakemake -f <output EXR>` reruns one method.
+# Base denoisers and combiners, and each entry's evaluation: one job per test case (rule run_case,
+# mcbench.pipeline.cases.run_case). The job runs the case's methods in dependency order (a base
+# denoiser returns its full and half-buffer results in one run; a combiner also reads its input
+# methods' outputs; a learned method also reads its weights), then evaluates each entry of the
+# case (the noisy input, every candidate) into its metric values and viewer images, and writes
+# the case's metrics table, viewer folder and record. Each method output and evaluation it finds
+# up to date (by its key: the method's settings, its inputs', its weights' and the render's
+# content; mcbench.pipeline.cases) it keeps, so an edit of the config makes only what it changes:
+# a new method runs alone, changed params rerun the method and the combiners that read it, an
+# added metric is the only one computed. The rule is the same whatever exists under results/.
+# It runs in a warm worker process that imports once (mcbench.pipeline.pool).
+# `snakemake -f results/cases/<scene>/spp<N>.json` reassembles a case; delete a method's output to
+# make it again.
 
 
-for job in CASE_JOBS:
-
-    rule:
-        name:
-            job["rule"]
-        input:
-            **job["inputs"],
-        output:
-            **job["outputs"],
-        wildcard_constraints:
-            **job["constraints"],
-        threads: 1
-        resources:
-            **job["resources"],
-        log:
-            job["log"],
-        run:
-            run_in_pool("mcbench.pipeline.methods:run_case_items", *case_items(rule, wildcards), log=log[0],
-                        scene=wildcards.scene, spp=int(wildcards.spp), threads=threads, metrics=METRIC_NAMES)
-
-    if "items" in job:  # a missing file: its case's batch, not the per-file rules
-        for single in ("run_method", "entry_metrics", "entry_viewer"):
-            workflow.ruleorder(job["rule"], single)
+rule run_case:
+    input:
+        render=rules.render_noisy.output[0],
+        reference=rules.merge_reference.output[0],
+    output:
+        metrics=f"{RESULTS}/metrics/{{scene}}/spp{{spp}}.csv",
+        viewer=directory(f"{RESULTS}/viewer_cases/{{scene}}/spp{{spp}}"),
+        record=f"{RESULTS}/cases/{{scene}}/spp{{spp}}.json",
+    params:
+        plan=case_plan,
+    threads: 1
+    resources:
+        **case_resources(),
+    log:
+        f"{RESULTS}/logs/cases/{{scene}}/spp{{spp}}.log",
+    run:
+        run_in_pool("mcbench.pipeline.cases:run_case", case_job(wildcards, input, output), log=log[0],
+                    threads=threads)

@@ -1,26 +1,5 @@
-# Errors of every candidate and of the noisy input against the reference, per test case.
-
-
-# A case's errors in one table (its entries' rows, each checked whole).
-rule case_metrics:
-    input:
-        case_entry_metrics,
-    output:
-        f"{RESULTS}/metrics/{{scene}}/spp{{spp}}.csv",
-    params:
-        metrics=METRIC_NAMES,
-        entries=ENTRIES,
-    # a case's assembly runs as soon as its case is done (before the next case's batch), so
-    # that finished cases' assemblies do not pile up among the jobs the scheduler weighs
-    priority: 10
-    threads: 1
-    resources:
-        **job_resources("case_metrics"),
-    log:
-        f"{RESULTS}/logs/metrics/{{scene}}_spp{{spp}}.log",
-    run:
-        run_case_assembly("mcbench.pipeline.metrics:assemble_case_metrics", input, output, params, wildcards, log,
-                          metric_names=list(params.metrics))
+# Errors of every candidate and of the noisy input against the reference, gathered from the
+# cases' tables (rule run_case, methods.smk), and the methods' timings from the cases' records.
 
 
 # One table of every error; every case must hold every candidate and metric with a finite value
@@ -55,7 +34,7 @@ rule gather_metrics:
 rule gather_timings:
     localrule: True
     input:
-        all_timing_records,
+        all_case_records,
     output:
         report(
             f"{RESULTS}/timings.csv",

@@ -1,6 +1,6 @@
 # The static image viewer: each entry's images (tone-mapped at each exposure, relMSE and FLIP
-# error maps, ensemble weight maps) are written by its evaluation (metrics.smk); one job
-# per test case links them into a case folder, so a new case or method redoes only its own
+# error maps, ensemble weight maps) are written by its evaluation, and linked into a case folder
+# by the case's job (rule run_case, methods.smk), so a new case or method redoes only its own
 # images; `viewer` copies
 # the page (workflow/report/viewer/) and every case folder into results/viewer with data.js,
 # the manifest holding each case's numbers from metrics.csv.
@@ -9,29 +9,10 @@
 VIEWER_PAGE = [f"{workflow.basedir}/workflow/report/viewer/{name}" for name in ("index.html", "viewer.js", "viewer.css")]
 
 
-rule viewer_case:
-    input:
-        case_entry_viewers,
-    output:
-        directory(f"{RESULTS}/viewer_cases/{{scene}}/spp{{spp}}"),
-    params:
-        entries=ENTRIES,
-    # a case's assembly runs as soon as its case is done (before the next case's batch), so
-    # that finished cases' assemblies do not pile up among the jobs the scheduler weighs
-    priority: 10
-    threads: 1
-    resources:
-        **job_resources("viewer_case"),
-    log:
-        f"{RESULTS}/logs/viewer/{{scene}}_spp{{spp}}.log",
-    run:
-        run_case_assembly("mcbench.pipeline.viewer:assemble_viewer_case", input, output, params, wildcards, log)
-
-
 rule viewer:
     input:
         metrics=rules.gather_metrics.output[0],
-        cases=expand(rules.viewer_case.output[0], scene=SCENES, spp=SPPS),
+        cases=expand(rules.run_case.output.viewer, scene=SCENES, spp=SPPS),
         page=VIEWER_PAGE,
     output:
         report(

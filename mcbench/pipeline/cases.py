@@ -1,0 +1,194 @@
+"""One job per test case: its methods, its entries' evaluations, and what they have already made.
+
+A study's work on a case (a scene at one spp) is one job, :func:`run_case` (rule ``run_case``,
+``workflow/rules/methods.smk``): the case's methods in dependency order, then each entry (the
+noisy input and every candidate) evaluated against the reference into its metric values and its
+viewer images, then the case's metrics table, viewer folder and record. The rule is the same
+whatever exists under ``results/``; the job itself decides, item by item, what is already made:
+
+* a method's output (``outputs/<scene>/spp<N>/<method>.exr`` and its timing record ``.json``) is
+  kept when both record its *key* (:func:`method_key`): the SHA-256 of its module, parameters,
+  its inputs' keys, its weights' SHA-256 and the render's content checksum. An edit of one
+  method's parameters changes its key and those of the combiners that read it, nothing else.
+* an entry's metric values (``metrics/<scene>/spp<N>/values/<entry>.json``) are kept per metric
+  when the image's and the reference's content checksums and the metric code's digest are those
+  they were computed from (:func:`mcbench.pipeline.metrics.read_metric_values`): an added metric
+  is the only one computed.
+* an entry's viewer images (``viewer_entries/<scene>/spp<N>/<entry>/``) are kept when their record
+  names the same image, reference and weight inputs (:func:`viewer_key`).
+
+Snakemake reruns a case's job when its plan changes (the rule's params: the case's methods and
+their settings, the entries, the metrics), when its render, reference or a learned method's
+weights are newer than its outputs, or when an output is missing; the job then makes only what
+is out of date, so a method added to a finished study costs that method's work and the case's
+assembly. The case record (``cases/<scene>/spp<N>.json``) says what the job made and what it
+kept, and lists the timing records of the case's methods (rule ``gather_timings`` reads them).
+
+A content checksum is the ``mcbench.crc32`` header attribute every EXR of the harness carries
+(:mod:`mcbench.io.exr`; read from the header, without decoding pixels), or the file's SHA-256
+for an EXR written elsewhere.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from pathlib import Path
+
+from mcbench import BenchError
+from mcbench.io.exr import content_checksum
+from mcbench.io.tables import read_json, write_csv, write_json
+
+__all__ = ["CASE_RECORD_VERSION", "method_key", "viewer_key", "run_case", "case_timing_paths", "gather_case_timings"]
+
+CASE_RECORD_VERSION = 1
+
+
+def _digest(value) -> str:
+    return hashlib.sha256(json.dumps(value, sort_keys=True, default=str).encode()).hexdigest()
+
+
+def method_key(*, module: str, params: dict, input_keys: list[str], weights_sha256: str, render: str) -> str:
+    """The key of one method's output in one case: SHA-256 of its module, parameters, the keys of
+    its inputs (in order), its weights' SHA-256 ("" for a method without weights) and the
+    render's content checksum (:func:`mcbench.io.exr.content_checksum`)."""
+    return _digest({"module": module, "params": params, "inputs": list(input_keys),
+                    "weights_sha256": weights_sha256, "render": render})
+
+
+def viewer_key(*, image: str, reference: str, weight_inputs: list[str]) -> str:
+    """The key of an entry's viewer images: its image's and the reference's content checksums and
+    the names of the inputs whose weight maps it draws."""
+    return _digest({"image": image, "reference": reference, "weight_inputs": list(weight_inputs)})
+
+
+def _stored_method_key(exr: str, timing: str) -> str | None:
+    """The key both files of a method's output record, or None (either missing, unreadable, or
+    the two disagree: a run killed between them)."""
+    from mcbench.io.exr import read_metadata
+
+    if not (Path(exr).exists() and Path(timing).exists()):
+        return None
+    try:
+        from_timing = read_json(timing).get("key")
+        from_exr = read_metadata(exr).get("key")
+    except (OSError, ValueError, BenchError):
+        return None
+    return from_timing if from_timing is not None and from_timing == from_exr else None
+
+
+def _stored_viewer_key(folder: str) -> str | None:
+    from mcbench.pipeline.metrics import ENTRY_RECORD
+
+    path = Path(folder) / ENTRY_RECORD
+    if not path.exists():
+        return None
+    try:
+        return read_json(path).get("key")
+    except (OSError, ValueError, BenchError):
+        return None
+
+
+def run_case(case: dict, *, threads: int = 1) -> dict:
+    """Make what one case lacks and assemble it; return the case record.
+
+    ``case`` (built by ``workflow/rules/common.smk``, JSON-able):
+    ``scene``, ``spp``, ``render``, ``reference`` (paths), ``metrics`` (metric names),
+    ``methods``: ``[{name, module, params, inputs, weights, exr, timing}]`` in dependency order
+    (``inputs``: method names; ``weights``: the weights file of a learned method, else None),
+    ``entries``: ``[{entry, image, values, viewer, weight_inputs}]`` (the noisy input first),
+    ``outputs``: ``{metrics, viewer, record}`` (the case's metrics CSV, viewer folder, record).
+    """
+    from mcbench.io.weights import file_sha256
+    from mcbench.pipeline.methods import run_methods
+
+    scene, spp = case["scene"], int(case["spp"])
+    render = content_checksum(case["render"])
+    keys, stale = {}, []
+    for method in case["methods"]:
+        unknown = [name for name in method["inputs"] if name not in keys]
+        if unknown:
+            raise BenchError(f"method '{method['name']}' of case ({scene}, {spp}) reads {unknown}, which the case "
+                             "does not make before it (the plan's dependency order is broken)")
+        weights = file_sha256(method["weights"]) if method.get("weights") else ""
+        keys[method["name"]] = method_key(module=method["module"], params=method["params"],
+                                          input_keys=[keys[name] for name in method["inputs"]],
+                                          weights_sha256=weights, render=render)
+        if _stored_method_key(method["exr"], method["timing"]) != keys[method["name"]]:
+            stale.append(method)
+    by_name = {method["name"]: method for method in case["methods"]}
+    if stale:
+        run_methods([{"name": m["name"], "module": m["module"], "params": m["params"], "key": keys[m["name"]],
+                      "input_paths": [by_name[i]["exr"] for i in m["inputs"]], "exr": m["exr"], "timing": m["timing"]}
+                     for m in stale], case["render"], scene=scene, spp=spp, threads=threads)
+    evaluated = _evaluate_case(case)
+    _assemble_case(case, evaluated)
+    record = {"version": CASE_RECORD_VERSION, "scene": scene, "spp": spp,
+              "made": {"methods": [m["name"] for m in stale],
+                       "metrics": [e for e, made in evaluated.items() if made["metrics"]],
+                       "viewer": [e for e, made in evaluated.items() if made["viewer"]]},
+              "methods": {m["name"]: {"key": keys[m["name"]], "exr": m["exr"], "timing": m["timing"]}
+                          for m in case["methods"]}}
+    write_json(case["outputs"]["record"], record)
+    return record
+
+
+def _evaluate_case(case: dict) -> dict[str, dict]:
+    """Each entry's metric values and viewer images, made where not kept; per entry, which it
+    made (``{"metrics": [names computed], "viewer": bool}``) and its metric values
+    (``"values"``, in the order of the case's metrics)."""
+    from mcbench.pipeline.metrics import evaluate_entry_values
+
+    scene, spp = case["scene"], int(case["spp"])
+    reference = content_checksum(case["reference"])
+    done = {}
+    for item in case["entries"]:
+        image = content_checksum(item["image"])
+        key = viewer_key(image=image, reference=reference, weight_inputs=item.get("weight_inputs") or [])
+        make_viewer = _stored_viewer_key(item["viewer"]) != key
+        values, computed = evaluate_entry_values(
+            scene, spp, item["entry"], item["image"], case["reference"], list(case["metrics"]),
+            values_path=item["values"], viewer_dir=item["viewer"] if make_viewer else None,
+            weight_inputs=item.get("weight_inputs") or (), viewer_key=key,
+            checksums={"image": image, "reference": reference})
+        done[item["entry"]] = {"metrics": computed, "viewer": make_viewer, "values": values}
+    return done
+
+
+def _assemble_case(case: dict, evaluated: dict[str, dict]) -> None:
+    """The case's metrics CSV (rows scene, spp, candidate, metric, value: the entries in the
+    case's order, each with its metrics in the config's order) and its viewer folder
+    (:func:`mcbench.pipeline.viewer.assemble_viewer_case`)."""
+    import pandas as pd
+
+    from mcbench.pipeline.viewer import assemble_viewer_case
+
+    scene, spp = case["scene"], int(case["spp"])
+    rows = [{"scene": scene, "spp": spp, "candidate": entry, "metric": metric, "value": value}
+            for entry, made in evaluated.items() for metric, value in made["values"].items()]
+    write_csv(case["outputs"]["metrics"], pd.DataFrame(rows, columns=["scene", "spp", "candidate", "metric", "value"]))
+    assemble_viewer_case({item["entry"]: item["viewer"] for item in case["entries"]}, case["outputs"]["viewer"],
+                         scene=scene, spp=spp)
+
+
+def case_timing_paths(record_path: str | Path) -> list[str]:
+    """The timing records of a case's methods, from its case record (:func:`run_case`), each
+    checked to be there; ``BenchError`` naming the record otherwise."""
+    record = read_json(record_path)
+    if record.get("version") != CASE_RECORD_VERSION or not isinstance(record.get("methods"), dict):
+        raise BenchError(f"{record_path}: not a case record of version {CASE_RECORD_VERSION}; rerun its case")
+    paths = [str(method.get("timing")) for method in record["methods"].values()]
+    missing = [path for path in paths if not Path(path).exists()]
+    if missing:
+        raise BenchError(f"{record_path}: the case's timing record(s) {missing} are missing; rerun its case "
+                         f"(snakemake -f {record_path})")
+    return paths
+
+
+
+def gather_case_timings(record_paths: list[str], output_path: str):
+    """``timings.csv`` (:func:`mcbench.pipeline.metrics.gather_timings`) from the timing records
+    the case records list (:func:`case_timing_paths`)."""
+    from mcbench.pipeline.metrics import gather_timings
+
+    return gather_timings([path for record in record_paths for path in case_timing_paths(record)], output_path)

@@ -1,0 +1,194 @@
+"""One job per case (mcbench.pipeline.cases): what it keeps and what it makes, its keys, the
+case tables it writes; and the warm workers' logs and file cache."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from mcbench import NOISY, BenchError
+from mcbench.io.exr import read_layers, write_layers
+from mcbench.io.file_cache import cached_read, clear_cache
+from mcbench.pipeline.cases import method_key, run_case, viewer_key
+from mcbench.pipeline.logs import run_logged
+
+SCENE, SPP = "box", 8
+#: name, module, params, inputs: two bases, a combiner of them, a combiner of that combiner
+METHODS = [("jbf", "jbf", {}, []), ("oidn", "oidn", {}, []), ("ens", "ensemble", {"solver": "exact"}, ["jbf", "oidn"]),
+           ("avg", "naive_average", {}, ["ens", "oidn"])]
+
+
+def test_a_methods_key_changes_with_its_own_settings_and_its_inputs_keys_only():
+    """Keys of a chain base -> combiner: editing one base's params changes its key and those of
+    the combiners that read it (through their inputs' keys); the other base keeps its key; a new
+    render or new weights change every key that reads them."""
+    def keys(params_jbf=None, render="crc32:1", weights=""):
+        jbf = method_key(module="jbf", params=params_jbf or {}, input_keys=[], weights_sha256="", render=render)
+        oidn = method_key(module="oidn", params={}, input_keys=[], weights_sha256=weights, render=render)
+        ens = method_key(module="ensemble", params={}, input_keys=[jbf, oidn], weights_sha256="", render=render)
+        return {"jbf": jbf, "oidn": oidn, "ens": ens}
+
+    base = keys()
+    edited = keys(params_jbf={"radius": 9})
+    assert [name for name in base if base[name] != edited[name]] == ["jbf", "ens"]
+    assert all(base[name] != value for name, value in keys(render="crc32:2").items())
+    assert [name for name, value in keys(weights="abc").items() if base[name] != value] == ["oidn", "ens"]
+    swapped = method_key(module="ensemble", params={}, input_keys=[base["oidn"], base["jbf"]], weights_sha256="",
+                         render="crc32:1")
+    assert swapped != base["ens"]                                # the inputs' order is part of it
+    assert viewer_key(image="a", reference="r", weight_inputs=[]) != viewer_key(image="a", reference="r",
+                                                                                weight_inputs=["jbf"])
+
+
+@pytest.fixture
+def case_dir(tmp_path, make_render_buffers):
+    """A render and its reference (16 x 16) in a case folder."""
+    buffers = make_render_buffers(spp=SPP, half_std=0.05, seed=7)
+    truth = make_render_buffers(spp=SPP, half_std=0.0).color
+    write_layers(tmp_path / "render.exr", buffers.layers, metadata={"spp": SPP, "scene": SCENE})
+    write_layers(tmp_path / "reference.exr", {"color": truth}, metadata={"spp": 4096, "scene": SCENE})
+    return tmp_path
+
+
+def make_case(folder, *, methods=METHODS, metrics=("relmse", "smape")) -> dict:
+    """The job description common.smk builds for one case, in ``folder``."""
+    out = folder / "results"
+    names = [name for name, *_ in methods]
+    return {"scene": SCENE, "spp": SPP, "render": str(folder / "render.exr"), "reference": str(folder / "reference.exr"),
+            "metrics": list(metrics),
+            "methods": [{"name": name, "module": module, "params": params, "inputs": inputs, "weights": None,
+                         "exr": str(out / f"outputs/{name}.exr"), "timing": str(out / f"outputs/{name}.json")}
+                        for name, module, params, inputs in methods],
+            "entries": [{"entry": entry, "image": str(folder / "render.exr") if entry == NOISY else str(out / f"outputs/{entry}.exr"),
+                         "values": str(out / f"values/{entry}.json"), "viewer": str(out / f"viewer_entries/{entry}"),
+                         "weight_inputs": next((inputs for name, _, _, inputs in methods if name == entry), [])}
+                        for entry in [NOISY, *names]],
+            "outputs": {"metrics": str(out / "case.csv"), "viewer": str(out / "viewer_case"),
+                        "record": str(out / "case.json")}}
+
+
+def mtimes(folder) -> dict[str, int]:
+    return {str(p.relative_to(folder)): p.stat().st_mtime_ns for p in sorted(folder.rglob("*"))
+            if p.is_file() and p.parent.name != "viewer_case" and not p.name.startswith((".case.", "case."))}
+
+
+def test_a_case_job_makes_what_is_missing_or_stale_and_keeps_the_rest(case_dir):
+    """From scratch the job makes every method and evaluation; run again it makes nothing and
+    touches no kept file; an edited base remakes itself and the combiners reading it (and their
+    evaluations), an added metric is the only one computed, and each case table equals a
+    from-scratch job's."""
+    first = run_case(make_case(case_dir))
+    names = [name for name, *_ in METHODS]
+    assert first["made"] == {"methods": names, "metrics": [NOISY, *names], "viewer": [NOISY, *names]}
+    before = mtimes(case_dir / "results")
+    again = run_case(make_case(case_dir))
+    assert again["made"] == {"methods": [], "metrics": [], "viewer": []}
+    assert mtimes(case_dir / "results") == before
+    edited = [("jbf", "jbf", {"sigma_color": 0.8}, []), *METHODS[1:]]
+    changed = run_case(make_case(case_dir, methods=edited))
+    assert changed["made"] == {"methods": ["jbf", "ens", "avg"], "metrics": ["jbf", "ens", "avg"],
+                               "viewer": ["jbf", "ens", "avg"]}
+    table = pd.read_csv(case_dir / "results/case.csv")
+    scratch_dir = case_dir / "scratch"
+    scratch_dir.mkdir()
+    for name in ("render.exr", "reference.exr"):
+        shutil.copy(case_dir / name, scratch_dir / name)
+    run_case(make_case(scratch_dir, methods=edited))
+    pd.testing.assert_frame_equal(table, pd.read_csv(scratch_dir / "results/case.csv"))
+    added = run_case(make_case(case_dir, methods=edited, metrics=("relmse", "smape", "dssim")))
+    assert added["made"] == {"methods": [], "metrics": [NOISY, *names], "viewer": []}
+    values = json.loads((case_dir / "results/values/jbf.json").read_text())["values"]
+    assert set(values) == {"relmse", "smape", "dssim"}
+    rows = pd.read_csv(case_dir / "results/case.csv")
+    assert list(rows.candidate.unique()) == [NOISY, *names] and list(rows.metric[:3]) == ["relmse", "smape", "dssim"]
+    assert rows[rows.metric != "dssim"].reset_index(drop=True).equals(table)
+
+
+def test_a_half_written_or_foreign_output_is_made_again(case_dir):
+    """A method whose timing record is missing (killed between its two files), or whose files
+    record another key (written by other settings), is made again; nothing else."""
+    run_case(make_case(case_dir))
+    out = case_dir / "results/outputs"
+    (out / "oidn.json").unlink()
+    record = json.loads((out / "jbf.json").read_text())
+    (out / "jbf.json").write_text(json.dumps({**record, "key": "0" * 64}))
+    (out / "jbf.json.crc32").unlink(missing_ok=True)
+    remade = run_case(make_case(case_dir))
+    # the bases are made again with the keys they had, so the combiners (keyed by their inputs'
+    # keys) are kept; the bases' new files (another recorded time: another content checksum)
+    # are evaluated again
+    assert remade["made"] == {"methods": ["jbf", "oidn"], "metrics": ["jbf", "oidn"], "viewer": ["jbf", "oidn"]}
+
+
+def test_a_case_whose_methods_are_out_of_dependency_order_is_refused(case_dir):
+    case = make_case(case_dir, methods=[METHODS[2], *METHODS[:2]])
+    with pytest.raises(BenchError, match="method 'ens'.*reads"):
+        run_case(case)
+
+
+def test_a_changed_render_remakes_everything(case_dir, make_render_buffers):
+    run_case(make_case(case_dir))
+    before = read_layers(case_dir / "results/outputs/jbf.exr")["color"]
+    other = make_render_buffers(spp=SPP, half_std=0.05, seed=8)
+    write_layers(case_dir / "render.exr", other.layers, metadata={"spp": SPP, "scene": SCENE})
+    clear_cache()
+    remade = run_case(make_case(case_dir))
+    names = [name for name, *_ in METHODS]
+    assert remade["made"] == {"methods": names, "metrics": [NOISY, *names], "viewer": [NOISY, *names]}
+    assert not np.array_equal(read_layers(case_dir / "results/outputs/jbf.exr")["color"], before)
+
+
+def test_a_log_on_a_full_disk_fails_the_step_naming_the_log_and_the_reason(capfd):
+    """/dev/full takes the open and refuses every write (ENOSPC): the step fails, and the terminal
+    line names the log and why, not a bare errno without a file."""
+    def chatty_step():
+        os.write(1, b"x" * 100_000)                  # as a C++ library writes: to fd 1
+
+    with pytest.raises(SystemExit):
+        run_logged("/dev/full", chatty_step)
+    err = capfd.readouterr().err
+    assert "/dev/full: cannot write the log (No space left on device)" in err
+
+
+def test_a_failing_step_with_a_writable_log_puts_the_traceback_there(tmp_path, capfd):
+    log = tmp_path / "step.log"
+
+    def failing_step():
+        raise ValueError("results/renders/a/spp4.exr: not an EXR")
+
+    with pytest.raises(SystemExit):
+        run_logged(str(log), failing_step)
+    err = capfd.readouterr().err
+    assert "ERROR: results/renders/a/spp4.exr: not an EXR" in err and f"(full traceback in {log})" in err
+    assert "Traceback" in log.read_text() and "not an EXR" in log.read_text()
+    assert run_logged(str(log), lambda: 7) == 7
+
+
+def test_the_file_cache_rereads_a_rewritten_file_and_hands_out_read_only_arrays(tmp_path):
+    clear_cache()
+    path = tmp_path / "values.npy"
+    np.save(path, np.arange(4.0))
+    reads = []
+
+    def reader(p):
+        reads.append(p)
+        return {"values": np.load(p)}
+
+    first = cached_read(str(path), reader)
+    assert cached_read(str(path), reader) is first and len(reads) == 1
+    with pytest.raises(ValueError):
+        first["values"][0] = 5.0                                 # an in-place write fails loudly
+    stat = path.stat()
+    with open(path, "r+b") as handle:                            # changed in place, mtime set back
+        handle.seek(-8, 2)
+        handle.write(np.float64(9.0).tobytes())
+    os.utime(path, ns=(stat.st_atime_ns, stat.st_mtime_ns))
+    again = cached_read(str(path), reader)
+    assert len(reads) == 2 and again["values"][-1] == 9.0         # ctime changed: read again
+    with pytest.raises(FileNotFoundError):
+        cached_read(str(tmp_path / "missing.npy"), reader)       # the reader's own error
