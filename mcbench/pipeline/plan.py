@@ -3,7 +3,8 @@
 :func:`plan_study` is everything ``workflow/rules/common.smk`` computes from the resolved config
 alone (the method table, the scenes and spp levels, the ranking pool and the extras, reference
 spp, training seeds, the oracle's and the progressive curve's scene), with every check
-that stops a config before any job. The Snakefile reads its names from it (``PLAN``), so a test
+that stops a config before any job, as a typed value (:mod:`mcbench.pipeline.study_plan`). The
+Snakefile reads its names from it (``PLAN``), so a test
 calling :func:`plan_study` checks the workflow's own logic without starting Snakemake.
 
 Errors are :class:`mcbench.BenchError` (or a subclass) whose message starts with the config's
@@ -46,6 +47,8 @@ from mcbench.io.method_spec import method_spec
 from mcbench.pipeline.config import ConfigError, key_path, schema_defaults
 from mcbench.pipeline.oracle import oracle_size, usable_downscale
 from mcbench.pipeline.registry import available_scenes, config_method_table, load_method, load_scene
+from mcbench.pipeline.study_plan import (CasePlan, MethodPlan, RankingPlan, SideStudyPlan, StudyPlan, TrainingPlan,
+                                         frozen_mapping)
 from mcbench.render.seeds import FIBRE_SEED_BASE, spp_code, training_seeds
 
 __all__ = ["plan_study", "default_note", "defaulted_key"]
@@ -54,7 +57,7 @@ __all__ = ["plan_study", "default_note", "defaulted_key"]
 MAX_TRAINING_SPP = 1 << 15
 
 
-def plan_study(config: dict, *, written: dict | None = None, source: str = "config", is_learned=None) -> dict:
+def plan_study(config: dict, *, written: dict | None = None, source: str = "config", is_learned=None) -> StudyPlan:
     """The plan of a resolved ``config`` (:func:`mcbench.pipeline.config.resolve_config`).
 
     ``written``: the config as its file gave it, before the defaults were filled in (to tell
@@ -62,13 +65,8 @@ def plan_study(config: dict, *, written: dict | None = None, source: str = "conf
     ``source`` (the config file) prefixes every error. ``is_learned`` (a method module ->
     bool; default :func:`mcbench.io.weights.is_learned_method`).
 
-    Returns a dict: ``methods`` (the method table, in dependency order), ``scenes``, ``spps``
-    (sorted), ``cases`` ((scene, spp) pairs), ``candidates``, ``pool_study``, ``ranked``,
-    ``extras``, ``pool_note``, ``progressive`` (PD entry -> its input), ``labels``,
-    ``metrics``, ``reference_chunks``, ``reference_spp`` (per scene),
-    ``training``, ``training_overrides``, ``training_seeds``,
-    ``networks``, ``combiner_training``, ``combiner_seeds``, ``oracle_scene``,
-    ``oracle_downscale``, ``progressive_scene``, ``progressive_downscale``.
+    Returns a :class:`mcbench.pipeline.study_plan.StudyPlan`: the methods in dependency order,
+    the cases, what the tables rank, the training crops and the side studies' scenes.
     """
     if is_learned is None:
         from mcbench.io.weights import is_learned_method as is_learned
@@ -82,7 +80,7 @@ def plan_study(config: dict, *, written: dict | None = None, source: str = "conf
         raise
 
 
-def _plan(config: dict, is_learned) -> dict:
+def _plan(config: dict, is_learned) -> StudyPlan:
     methods = config_method_table(config, is_learned=is_learned)
     for index, scene in enumerate(config["scenes"]):
         load_scene(scene, config_key=f"scenes[{index}]")
@@ -154,17 +152,23 @@ def _plan(config: dict, is_learned) -> dict:
     oracle_scene, oracle_downscale = _oracle(config, scenes, rendered, reference_spp)
     progressive_scene, progressive_downscale = _progressive_curve(config, scenes, rendered, reference_spp,
                                                                   progressive)
-    return {
-        "methods": methods, "scenes": scenes, "spps": spps,
-        "cases": [(scene, spp) for scene in scenes for spp in spps],
-        "candidates": candidates, "pool_study": pool_study, "ranked": ranked, "extras": extras,
-        "pool_note": pool_note, "progressive": progressive, "labels": labels, "metrics": list(config["metrics"]),
-        "reference_chunks": reference_chunks, "reference_spp": reference_spp,
-        "training": training, "training_overrides": training_overrides, "training_seeds": training_seeds_,
-        "networks": networks, "combiner_training": combiner_training, "combiner_seeds": combiner_seeds,
-        "oracle_scene": oracle_scene, "oracle_downscale": oracle_downscale, "render_folders": render_folders,
-        "progressive_scene": progressive_scene, "progressive_downscale": progressive_downscale,
-    }
+    return StudyPlan(
+        methods=frozen_mapping({name: MethodPlan(name=name, kind=spec["kind"], module=spec["module"],
+                                          params=frozen_mapping(spec["params"]), inputs=tuple(spec["inputs"]),
+                                          label=spec["label"], learned=spec["learned"],
+                                          config_key=spec.get("config_key", ""))
+                         for name, spec in methods.items()}),
+        cases=CasePlan(scenes=tuple(scenes), spps=tuple(spps), reference_spp=frozen_mapping(reference_spp),
+                       reference_chunks=reference_chunks, render_folders=frozen_mapping(render_folders)),
+        ranking=RankingPlan(candidates=tuple(candidates), ranked=tuple(ranked), extras=tuple(extras),
+                            pool_study=bool(pool_study), pool_note=pool_note, labels=frozen_mapping(labels),
+                            metrics=tuple(config["metrics"])),
+        training=TrainingPlan(settings=frozen_mapping(training), seeds=tuple(training_seeds_),
+                              overrides=frozen_mapping(training_overrides), networks=tuple(networks),
+                              combiner_settings=frozen_mapping(combiner_training), combiner_seeds=tuple(combiner_seeds)),
+        side=SideStudyPlan(oracle_scene=oracle_scene, oracle_downscale=oracle_downscale,
+                           progressive=frozen_mapping(progressive), progressive_scene=progressive_scene,
+                           progressive_downscale=progressive_downscale))
 
 
 def _check_case_files(methods: dict, scenes: list[str], spps: list[int]) -> None:

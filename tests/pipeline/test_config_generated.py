@@ -414,43 +414,43 @@ def check(config, *, near: list | None = None) -> str:
     return "planned"
 
 
-def check_plan(config: dict, plan: dict) -> None:
+def check_plan(config: dict, plan) -> None:
     """Every configured candidate, metric and case is in the plan; ranked and extras split it."""
     own = [d if isinstance(d, str) else d["name"] for d in config["denoisers"]] + [c["name"] for c in config["combiners"]]
     if config["study"]["pool"]:
         denoisers, combiners = pool_methods(config["study"]["ensembles"])
         pool = denoisers + [c["name"] for c in combiners]
-        assert set(pool) <= set(plan["methods"])
+        assert set(pool) <= set(plan.methods)
         # the slice, and every other pool candidate the config runs (a base among its denoisers)
-        assert set(pool) <= set(plan["ranked"]) <= POOL_NAMES
+        assert set(pool) <= set(list(plan.ranking.ranked)) <= POOL_NAMES
     else:
-        assert plan["ranked"], "no candidate to rank"
-    assert set(own) <= set(plan["methods"])
-    assert plan["candidates"] == list(plan["methods"])
-    assert sorted(plan["ranked"] + plan["extras"]) == sorted(plan["candidates"])
-    assert not set(plan["ranked"]) & set(plan["extras"])
-    assert plan["metrics"] == config["metrics"]
-    assert sorted(plan["cases"]) == sorted(itertools.product(config["scenes"], config["spp"]))
-    assert plan["spps"] == sorted(config["spp"])
-    assert set(plan["reference_spp"]) == set(config["scenes"])
-    assert all(spp > max(config["spp"]) for spp in plan["reference_spp"].values())
-    assert plan["oracle_scene"] in config["scenes"]
+        assert list(plan.ranking.ranked), "no candidate to rank"
+    assert set(own) <= set(plan.methods)
+    assert list(plan.ranking.candidates) == list(plan.methods)
+    assert sorted(list(plan.ranking.ranked) + list(plan.ranking.extras)) == sorted(list(plan.ranking.candidates))
+    assert not set(list(plan.ranking.ranked)) & set(list(plan.ranking.extras))
+    assert list(plan.ranking.metrics) == config["metrics"]
+    assert sorted(plan.cases.pairs) == sorted(itertools.product(config["scenes"], config["spp"]))
+    assert list(plan.cases.spps) == sorted(config["spp"])
+    assert set(dict(plan.cases.reference_spp)) == set(config["scenes"])
+    assert all(spp > max(config["spp"]) for spp in dict(plan.cases.reference_spp).values())
+    assert plan.side.oracle_scene in config["scenes"]
     # what the plan accepts, the jobs can run: the decisions of mcbench.pipeline.plan
     assert config["study"]["ensembles"] is None or set(config["study"]["ensembles"]) <= set(ENSEMBLE_IDS)
     assert all(s <= 2048 or s % 2048 == 0 and s <= 2048 * 1024 for s in config["spp"])
-    for spec in plan["methods"].values():
-        assert len(spec["inputs"]) == len(set(spec["inputs"]))
-        expected = CATALOGUE[spec["module"]]["inputs"]
-        assert expected is None or len(spec["inputs"]) == expected, spec
+    for spec in plan.methods.values():
+        assert len(spec.inputs) == len(set(spec.inputs))
+        expected = CATALOGUE[spec.module]["inputs"]
+        assert expected is None or len(spec.inputs) == expected, spec
     training = config["training"]
     assert training["first_seed"] + training["count"] <= 32768
     assert all(s & (s - 1) == 0 and s <= 32768 for s in training["spp"])
     assert training["crop"] <= min(training["resolution"])
-    labels = list(plan["labels"].values())
+    labels = list(plan.ranking.labels.values())
     assert len(labels) == len(set(labels))
-    for name, spec in plan["methods"].items():
-        position = plan["candidates"].index(name)
-        assert all(plan["candidates"].index(i) < position for i in spec["inputs"])
+    for name, spec in plan.methods.items():
+        position = list(plan.ranking.candidates).index(name)
+        assert all(list(plan.ranking.candidates).index(i) < position for i in spec.inputs)
 
 
 COMMON = dict(deadline=None, derandomize=True, database=None, print_blob=True,
@@ -703,16 +703,16 @@ def test_snakemake_dry_run_of_generated_configs_plans_what_the_planner_says(tmp_
     result = _dry_run(tmp_path_factory.mktemp("generated"), config)
     text = result.stdout + result.stderr
     assert result.returncode == 0, text[-4000:]
-    cases = plan["cases"]
+    cases = plan.cases.pairs
     for scene, spp in cases:
         assert f"results/cases/{scene}/spp{spp}.json" in text, (scene, spp)
     counts = dict(re.findall(r"^(\w+)\s+(\d+)$", text, flags=re.MULTILINE))
     assert int(counts["render_noisy"]) == len(cases) and int(counts["run_case"]) == len(cases)
-    assert int(counts["ranking_table"]) == len(plan["metrics"]) == int(counts["extras_table"])
-    assert int(counts["merge_reference"]) == len(plan["scenes"])
+    assert int(counts["ranking_table"]) == len(list(plan.ranking.metrics)) == int(counts["extras_table"])
+    assert int(counts["merge_reference"]) == len(list(plan.cases.scenes))
     # one job per case (its methods, evaluations and tables), whatever exists
-    assert ("study_tables" in counts) == plan["pool_study"]
-    assert ("progressive_tables" in counts) == bool(plan["progressive"])
+    assert ("study_tables" in counts) == plan.ranking.pool_study
+    assert ("progressive_tables" in counts) == bool(plan.side.progressive)
 
 
 # --------------------------------------------------------------------------- the defects, one by one
@@ -861,11 +861,11 @@ def test_yaml_oddities_stop_naming_the_key(text, expected):
 
 
 @pytest.mark.parametrize("text, check", [
-    ("spp: [0x10, 040]\n", lambda p: p["spps"] == [16, 32]),   # YAML 1.1 hex, octal
-    ("spp: [1_024]\n", lambda p: p["spps"] == [1024]),
-    ("add_denoisers: [jbf]\ndenoisers: [oidn]\ncombiners: []\nstudy: {pool: no}\n", lambda p: list(p["methods"]) == ["oidn", "jbf"]),
-    ("resolution: ~\n", lambda p: p["oracle_downscale"] == 2),
-    ("study: {ensembles: [10, 15], pool: yes}\n", lambda p: "ens10" in p["ranked"] and "ens15" in p["ranked"]),
+    ("spp: [0x10, 040]\n", lambda p: list(p.cases.spps) == [16, 32]),   # YAML 1.1 hex, octal
+    ("spp: [1_024]\n", lambda p: list(p.cases.spps) == [1024]),
+    ("add_denoisers: [jbf]\ndenoisers: [oidn]\ncombiners: []\nstudy: {pool: no}\n", lambda p: list(p.methods) == ["oidn", "jbf"]),
+    ("resolution: ~\n", lambda p: p.side.oracle_downscale == 2),
+    ("study: {ensembles: [10, 15], pool: yes}\n", lambda p: "ens10" in p.ranking.ranked and "ens15" in p.ranking.ranked),
 ])
 def test_yaml_oddities_that_mean_something_plan_it(text, check):
     config = parse_config_text(text, source=SOURCE)
@@ -891,8 +891,8 @@ def test_the_schema_holds_the_checks_the_code_names():
 def test_a_reference_above_every_spp_plans():
     plan = _plans({"spp": [4, 64], "reference": {"spp": 128, "chunks": 1}, **OWN, "denoisers": ["oidn"],
                    "oracle": {"spp": 4}})
-    assert plan["reference_spp"] == {scene: 128 for scene in DEFAULTS["scenes"]}
-    assert plan["cases"][:2] == [("cornell_box", 4), ("cornell_box", 64)]
+    assert dict(plan.cases.reference_spp) == {scene: 128 for scene in DEFAULTS["scenes"]}
+    assert plan.cases.pairs[:2] == [("cornell_box", 4), ("cornell_box", 64)]
 
 
 def test_the_plan_of_every_shipped_config_matches_what_the_snakefile_read_before():
@@ -904,4 +904,4 @@ def test_the_plan_of_every_shipped_config_matches_what_the_snakefile_read_before
     for path, numbers in expected.items():
         config = yaml.safe_load((REPO / path).read_text())
         plan = plan_study(resolve_config(config, source=path), written=config, source=path)
-        assert (len(plan["cases"]), len(plan["candidates"]), len(plan["ranked"]), len(plan["extras"])) == numbers, path
+        assert (len(plan.cases.pairs), len(list(plan.ranking.candidates)), len(list(plan.ranking.ranked)), len(list(plan.ranking.extras))) == numbers, path

@@ -77,10 +77,10 @@ def plan(**overrides):
 
 def test_a_single_image_denoiser_is_planned_on_renders_without_halves(folder_scenes):
     result = plan()
-    assert set(result["render_folders"]) == {"kitchen"} and result["reference_spp"]["kitchen"] is None
-    assert result["oracle_scene"] == "cornell_box"
-    assert plan(scenes=["kitchen", "cornell_box"])["oracle_scene"] == "cornell_box"   # the first one rendered
-    assert plan(scenes=["kitchen"])["oracle_scene"] is None
+    assert set(result.cases.render_folders) == {"kitchen"} and result.cases.reference_spp["kitchen"] is None
+    assert result.side.oracle_scene == "cornell_box"
+    assert plan(scenes=["kitchen", "cornell_box"]).side.oracle_scene == "cornell_box"   # the first one rendered
+    assert plan(scenes=["kitchen"]).side.oracle_scene is None
 
 
 @pytest.mark.parametrize("overrides, message", [
@@ -111,7 +111,7 @@ def test_a_folder_with_every_layer_takes_every_method(folder_scenes):
     result = plan(scenes=["cornell_box", "attic"], denoisers=["oidn", "jbf", nfor],
                   combiners=[{"name": "ens", "method": "ensemble", "inputs": ["oidn", "nfor"]}],
                   metrics=["relmse", "relmse_corrected"])
-    assert list(result["render_folders"]) == ["attic"]
+    assert list(result.cases.render_folders) == ["attic"]
     (folder_scenes / "authors" / "spp16" / "colorB.exr").unlink()
     with pytest.raises(BenchError, match=r"the case at 16 spp .* lacks .*spp16/colorB.exr"):
         plan(scenes=["cornell_box", "attic"])
@@ -209,4 +209,4 @@ def test_a_combiner_is_refused_without_halves_even_if_it_reads_no_render_layer_o
     denoisers = ["oidn", {"name": "oidn_fast", "method": "oidn", "params": {"quality": "fast"}}]
     with pytest.raises(BenchError, match=r"method 'avg' \(naive_average\) reads render layer\(s\) \['color_a', 'color_b'\]"):
         plan(denoisers=denoisers, combiners=combiners)
-    assert plan(scenes=["cornell_box", "attic"], denoisers=denoisers, combiners=combiners)["render_folders"]
+    assert plan(scenes=["cornell_box", "attic"], denoisers=denoisers, combiners=combiners).cases.render_folders

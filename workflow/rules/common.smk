@@ -42,26 +42,27 @@ WEIGHTS_DIR = config["weights_dir"] or str(COMMITTED_WEIGHTS)
 # (mcbench.pipeline.plan.plan_study; the tests call the same function). Errors name the file and
 # the key, and say so when the key holds a schema default the config never wrote.
 PLAN = plan_study(config, written=_WRITTEN, source=_CONFIG_SOURCE, is_learned=is_learned_method)
-METHODS = PLAN["methods"]
-SCENES = PLAN["scenes"]
-SPPS = PLAN["spps"]
-CANDIDATES = PLAN["candidates"]
+# The names the rules read, as plain lists and dicts (what Snakemake records in params).
+METHODS = PLAN.methods   # name -> mcbench.pipeline.study_plan.MethodPlan, in dependency order
+SCENES = list(PLAN.cases.scenes)
+SPPS = list(PLAN.cases.spps)
+CANDIDATES = list(PLAN.ranking.candidates)
 # The ranking pool. With study.pool: exactly the 39 candidates of Zheng et al. Sec. 5.3.1 the
 # config runs (mcbench.analysis.pool), in ID order; otherwise every candidate but the comparison methods
 # of Sec. 5.2 (one-hot selection, naive averages, ablations; ranked in comparisons.smk). Every
 # other method is an extra, scored in a pool that adds it alone (rule extras_table).
-POOL_STUDY = PLAN["pool_study"]
-RANKED = PLAN["ranked"]
-EXTRAS = PLAN["extras"]
-POOL_NOTE = PLAN["pool_note"]
+POOL_STUDY = PLAN.ranking.pool_study
+RANKED = list(PLAN.ranking.ranked)
+EXTRAS = list(PLAN.ranking.extras)
+POOL_NOTE = PLAN.ranking.pool_note
 # progressive denoising's entries (combiners of module progressive) -> the method each mixes with
 # the noisy render (progressive.smk)
-PROGRESSIVE = PLAN["progressive"]
-LABELS = PLAN["labels"]
-METRIC_NAMES = PLAN["metrics"]
-REFERENCE_CHUNKS = PLAN["reference_chunks"]
+PROGRESSIVE = dict(PLAN.side.progressive)
+LABELS = dict(PLAN.ranking.labels)
+METRIC_NAMES = list(PLAN.ranking.metrics)
+REFERENCE_CHUNKS = PLAN.cases.reference_chunks
 # reference spp per configured scene: reference.scene_spp[scene] or reference.spp
-REFERENCE_SPP = PLAN["reference_spp"]
+REFERENCE_SPP = dict(PLAN.cases.reference_spp)
 
 
 wildcard_constraints:
@@ -90,67 +91,38 @@ def run_in_pool(step, *args, log, **kwargs):
              paths=[str(Path(workflow.basedir))], **kwargs)
 
 
-# A case's files (mcbench.pipeline.cases): each method's output and timing record, each entry's
-# metric values and viewer images. They are made by the case's one job (rule run_case), which
-# keeps what its records say is up to date and makes the rest; they are not Snakemake outputs.
-METHOD_EXR = f"{RESULTS}/outputs/{{scene}}/spp{{spp}}/{{method}}.exr"
-METHOD_TIMING = f"{RESULTS}/outputs/{{scene}}/spp{{spp}}/{{method}}.json"
-ENTRY_VALUES = f"{RESULTS}/metrics/{{scene}}/spp{{spp}}/values/{{entry}}.json"
-ENTRY_VIEWER = f"{RESULTS}/viewer_entries/{{scene}}/spp{{spp}}/{{entry}}"
+# A case's files (mcbench.pipeline.cases, paths: mcbench.pipeline.study_plan.StudyPaths): each
+# method's output and timing record, each entry's metric values and viewer images. They are made
+# by the case's one job (rule run_case), which keeps what its records say is up to date and makes
+# the rest; they are not Snakemake outputs.
 #: A case's entries: the noisy input and every candidate.
-ENTRIES = [NOISY] + CANDIDATES
-def _path(pattern, scene, spp, **names):
-    return pattern.format(scene=scene, spp=spp, **names)
+ENTRIES = PLAN.ranking.entries
 
 
-def method_output(name, wildcards, kind="exr"):
-    """Output path (``exr`` or ``timing``) of method ``name`` in the case of ``wildcards``."""
-    return _path(METHOD_EXR if kind == "exr" else METHOD_TIMING, wildcards.scene, wildcards.spp, method=name)
-
-
-def entry_image(entry, wildcards):
-    """The image an entry's evaluation reads: the render for the noisy input, else the method's output."""
-    if entry == NOISY:
-        return rules.render_noisy.output[0].format(scene=wildcards.scene, spp=wildcards.spp)
-    return method_output(entry, wildcards)
+def method_output(name, wildcards):
+    """The output EXR of method ``name`` in the case of ``wildcards``."""
+    return PLAN.paths.method_output(wildcards.scene, wildcards.spp, name)
 
 
 def case_plan(wildcards=None):
-    """What a case's job depends on besides its files (rule run_case's params, the same for every
-    case): the methods in dependency order with their settings and, for a learned method, its
-    weights' SHA-256 (new weights rerun every case, whose job reruns the methods they belong
-    to), the entries, the metrics. Checks that every learned method has its weights."""
+    """Rule run_case's params (mcbench.pipeline.study_plan.StudyPlan.case_plan): the same for
+    every case; new weights rerun every case, whose job reruns the methods they belong to.
+    Checks that every learned method has its weights."""
     return _case_plan()
 
 
 @functools.lru_cache(maxsize=None)
 def _case_plan():
-    methods = []
     for name, spec in METHODS.items():
-        if spec["learned"]:
+        if spec.learned:
             check_weights(name)
-        methods.append({"name": name, "module": spec["module"], "params": spec["params"],
-                        "inputs": list(spec["inputs"]),
-                        **({"weights_sha256": weights_digest_of(spec["module"])} if spec["learned"] else {})})
-    return {"methods": methods, "entries": ENTRIES, "metrics": METRIC_NAMES}
+    return PLAN.case_plan({module: weights_digest_of(module) for module in PLAN.learned_modules()})
 
 
-def case_job(wildcards, input, output):
-    """What run_case's job makes in one case (mcbench.pipeline.cases.run_case): its methods with
-    their paths and weights, its entries' evaluations, its outputs."""
-    scene, spp = wildcards.scene, int(wildcards.spp)
-    methods = [{"name": plan["name"], "module": plan["module"], "params": plan["params"], "inputs": plan["inputs"],
-                "weights": weights_file(plan["module"]) if "weights_sha256" in plan else None,
-                "exr": method_output(plan["name"], wildcards), "timing": method_output(plan["name"], wildcards, "timing")}
-               for plan in case_plan()["methods"]]
-    entries = [{"entry": entry, "image": entry_image(entry, wildcards),
-                "values": _path(ENTRY_VALUES, scene, spp, entry=entry),
-                "viewer": _path(ENTRY_VIEWER, scene, spp, entry=entry),
-                "weight_inputs": list(METHODS[entry]["inputs"]) if entry in METHODS else []}
-               for entry in ENTRIES]
-    return {"scene": scene, "spp": spp, "render": input.render, "reference": input.reference,
-            "metrics": list(METRIC_NAMES), "methods": methods, "entries": entries,
-            "outputs": {"metrics": output.metrics, "viewer": output.viewer, "record": output.record}}
+def case_job(wildcards, output):
+    """What run_case's job makes in one case (mcbench.pipeline.study_plan.StudyPlan.case_job)."""
+    return PLAN.case_job(wildcards.scene, int(wildcards.spp), weights_dir=WEIGHTS_DIR,
+                         outputs={"metrics": output.metrics, "viewer": output.viewer, "record": output.record})
 
 
 def feature_params():
@@ -174,11 +146,11 @@ def check_weights(name):
     DAG with the folder named (a mistyped ``weights_dir`` would otherwise plan hours of training
     renders); `snakemake train_<name>` is the one way to make them."""
     spec = METHODS[name]
-    if spec["learned"] and not Path(weights_file(spec["module"])).exists():
-        raise BenchError(f"no weights for {spec['module']} in {WEIGHTS_DIR} (weights_dir); train them "
-                         f"with `snakemake --cores 2 train_{spec['module']}` or fix weights_dir")
-    if spec["learned"]:
-        check_trained_features(Path(WEIGHTS_DIR) / f"{spec['module']}.json", config["features"], name=spec["module"])
+    if spec.learned and not Path(weights_file(spec.module)).exists():
+        raise BenchError(f"no weights for {spec.module} in {WEIGHTS_DIR} (weights_dir); train them "
+                         f"with `snakemake --cores 2 train_{spec.module}` or fix weights_dir")
+    if spec.learned:
+        check_trained_features(Path(WEIGHTS_DIR) / f"{spec.module}.json", config["features"], name=spec.module)
 
 
 def weights_digest_of(module):
@@ -244,7 +216,7 @@ def all_case_metrics(wildcards=None):
 
 # Scenes of renders made elsewhere (scenes/<name>.yaml): their cases and references are imported
 # from the folder (rules render_noisy, merge_reference), not rendered.
-RENDER_FOLDERS = PLAN["render_folders"]
+RENDER_FOLDERS = dict(PLAN.cases.render_folders)
 
 
 def imported_case_files(wildcards):
@@ -280,15 +252,15 @@ def render_cost_records(wildcards=None):
 
 # Training data and learned methods (rules in training.smk). Defaults: the schema's.
 
-TRAINING = PLAN["training"]
-TRAINING_OVERRIDES = PLAN["training_overrides"]
-TRAINING_SEEDS = PLAN["training_seeds"]
+TRAINING = dict(PLAN.training.settings)
+TRAINING_OVERRIDES = dict(PLAN.training.overrides)
+TRAINING_SEEDS = list(PLAN.training.seeds)
 # train_<name> rules for the learned methods the config names (no other method module is imported)
-NETWORKS = PLAN["networks"]
+NETWORKS = list(PLAN.training.networks)
 # The crops of the learned combiners: a subset of the training scenes, checked by the plan when
 # the config has a learned combiner (a smaller training set for the denoisers alone stays valid).
-COMBINER_TRAINING = PLAN["combiner_training"]
-COMBINER_SEEDS = PLAN["combiner_seeds"]
+COMBINER_TRAINING = dict(PLAN.training.combiner_settings)
+COMBINER_SEEDS = list(PLAN.training.combiner_seeds)
 
 
 def training_crop_files():
@@ -364,7 +336,7 @@ def case_resources():
         pixels = scene_pixels(wildcards.scene)
         seconds, rss_mb = 0.0, 0.0
         for spec in METHODS.values():
-            cost = JOB_COSTS.get(f"run_method/{spec['module']}") or JOB_COSTS.get("run_method", JobCost())
+            cost = JOB_COSTS.get(f"run_method/{spec.module}") or JOB_COSTS.get("run_method", JobCost())
             method_seconds, method_mb = estimate_job(cost, pixels=pixels, entries=1, spp=0)
             seconds, rss_mb = seconds + method_seconds, max(rss_mb, method_mb)
         evaluation_seconds, evaluation_mb = estimate_job(JOB_COSTS.get("evaluate_entry", JobCost()), pixels=pixels,
@@ -387,9 +359,9 @@ def study_targets(wildcards=None):
 def oracle_targets(wildcards=None):
     """The oracle study (oracle.smk) of its scene; nothing when every scene of the config is a
     folder of renders made elsewhere (the study renders its scene again)."""
-    if PLAN["oracle_scene"] is None:
+    if PLAN.side.oracle_scene is None:
         return []
-    return expand(rules.oracle_study.output, scene=PLAN["oracle_scene"])
+    return expand(rules.oracle_study.output, scene=PLAN.side.oracle_scene)
 
 
 def progressive_targets(wildcards=None):

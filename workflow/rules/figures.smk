@@ -50,7 +50,7 @@ rule speed_error:
         ),
     params:
         labels=LABELS,
-        inputs={name: list(spec["inputs"]) for name, spec in METHODS.items()},
+        inputs={name: list(spec.inputs) for name, spec in METHODS.items()},
         metric=SPEED_METRIC,
     threads: 1
     resources:

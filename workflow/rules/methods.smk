@@ -29,5 +29,5 @@ rule run_case:
     log:
         f"{RESULTS}/logs/cases/{{scene}}/spp{{spp}}.log",
     run:
-        run_in_pool("mcbench.pipeline.cases:run_case", case_job(wildcards, input, output), log=log[0],
+        run_in_pool("mcbench.pipeline.cases:run_case", case_job(wildcards, output), log=log[0],
                     threads=threads)

@@ -7,8 +7,8 @@ ORACLE = config["oracle"]
 # the scene: oracle.scene, or the config's first scene that Mitsuba renders when null (the
 # default); oracle.downscale, reduced where the harness's resolution is too small for it
 # (mcbench.pipeline.oracle.usable_downscale); both checked by the plan
-ORACLE_SCENE = PLAN["oracle_scene"]
-ORACLE_DOWNSCALE = PLAN["oracle_downscale"]
+ORACLE_SCENE = PLAN.side.oracle_scene
+ORACLE_DOWNSCALE = PLAN.side.oracle_downscale
 
 
 rule oracle_study:

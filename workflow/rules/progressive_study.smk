@@ -8,8 +8,8 @@ PROGRESSIVE_DIR = f"{RESULTS}/tables/progressive"
 PROGRESSIVE_CURVE = config["progressive_curve"]
 # the curve's scene: progressive_curve.scene, or the config's first scene that Mitsuba renders
 # when null (cornell_box), and its downscale: checked by the plan
-PROGRESSIVE_SCENE = PLAN["progressive_scene"]
-PROGRESSIVE_DOWNSCALE = PLAN["progressive_downscale"]
+PROGRESSIVE_SCENE = PLAN.side.progressive_scene
+PROGRESSIVE_DOWNSCALE = PLAN.side.progressive_downscale
 
 
 rule progressive_tables:

@@ -112,7 +112,7 @@ rule study_figures:
     params:
         candidates=[NOISY] + RANKED,
         labels=LABELS,
-        inputs={name: list(spec["inputs"]) for name, spec in METHODS.items()},
+        inputs={name: list(spec.inputs) for name, spec in METHODS.items()},
     threads: 1
     resources:
         **job_resources("study_figures"),

@@ -1,0 +1,191 @@
+"""The plan of a study as typed values: what ``workflow/rules/*.smk`` read from a resolved config.
+
+:func:`mcbench.pipeline.plan.plan_study` builds a :class:`StudyPlan` (every check that stops a
+config before any job happens there); the rules read their names from it and build each case's
+job with :meth:`StudyPlan.case_job`. Everything here is a frozen value computed from the config
+alone: nothing is read from ``results/`` and nothing is written, so the rules are the same in
+the main Snakemake process, a SLURM job and a spawned job, whatever exists.
+
+Vocabulary (``docs/architecture.md``): a *case* is a scene at one spp; a *method* is a base
+denoiser or a combiner of the config; a *candidate* is a method whose output is scored (every
+method of the config); an *entry* is a row of a case's tables: the noisy input or a candidate.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Mapping
+
+from mcbench import NOISY
+
+__all__ = ["frozen_mapping", "MethodPlan", "CasePlan", "RankingPlan", "TrainingPlan", "SideStudyPlan", "StudyPaths", "StudyPlan"]
+
+
+def frozen_mapping(mapping: Mapping) -> Mapping:
+    """A read-only view of a copy of ``mapping`` (a plan's tables are not edited after planning)."""
+    return MappingProxyType(dict(mapping))
+
+
+@dataclass(frozen=True)
+class MethodPlan:
+    """One method of the config: ``kind`` ("denoiser" or "combiner"), its ``module`` (plugin
+    file name), ``params``, ``inputs`` (method names, earlier in the plan), table ``label``,
+    whether it is ``learned`` (reads weights) and the ``config_key`` it comes from."""
+
+    name: str
+    kind: str
+    module: str
+    params: Mapping
+    inputs: tuple[str, ...]
+    label: str
+    learned: bool
+    config_key: str = ""
+
+    def as_dict(self) -> dict:
+        """The method as plain data (for a script's params or a table)."""
+        return {"kind": self.kind, "module": self.module, "params": dict(self.params), "inputs": list(self.inputs),
+                "label": self.label, "learned": self.learned}
+
+
+@dataclass(frozen=True)
+class CasePlan:
+    """The test cases: ``scenes`` (config order) x ``spps`` (sorted); the reference spp of each
+    rendered scene (None for a folder of renders made elsewhere), its chunks, and the folders
+    of imported scenes."""
+
+    scenes: tuple[str, ...]
+    spps: tuple[int, ...]
+    reference_spp: Mapping
+    reference_chunks: int
+    render_folders: Mapping
+
+    @property
+    def pairs(self) -> list[tuple[str, int]]:
+        """(scene, spp) of every case, scene-major."""
+        return [(scene, spp) for scene in self.scenes for spp in self.spps]
+
+    @property
+    def rendered_scenes(self) -> list[str]:
+        return [scene for scene in self.scenes if scene not in self.render_folders]
+
+
+@dataclass(frozen=True)
+class RankingPlan:
+    """What the tables rank: every ``candidate`` (plan order), the ``ranked`` pool and the
+    ``extras`` scored beside it, whether the pool is the paper's (``pool_study``) and its note,
+    the table ``labels`` of every entry and the ``metrics``."""
+
+    candidates: tuple[str, ...]
+    ranked: tuple[str, ...]
+    extras: tuple[str, ...]
+    pool_study: bool
+    pool_note: str
+    labels: Mapping
+    metrics: tuple[str, ...]
+
+    @property
+    def entries(self) -> list[str]:
+        """A case's entries: the noisy input, then every candidate."""
+        return [NOISY, *self.candidates]
+
+
+@dataclass(frozen=True)
+class TrainingPlan:
+    """The training crops' ``settings`` and ``seeds``, per-network ``overrides``, the learned
+    ``networks`` of the config, and the learned combiners' crops (``combiner_settings``,
+    ``combiner_seeds``)."""
+
+    settings: Mapping
+    seeds: tuple[int, ...]
+    overrides: Mapping
+    networks: tuple[str, ...]
+    combiner_settings: Mapping
+    combiner_seeds: tuple[int, ...]
+
+
+@dataclass(frozen=True)
+class SideStudyPlan:
+    """The oracle study's and progressive denoising's scenes and downscale factors (None when the
+    config has none), and progressive denoising's entries (entry -> the method it mixes)."""
+
+    oracle_scene: str | None
+    oracle_downscale: int | None
+    progressive: Mapping
+    progressive_scene: str | None
+    progressive_downscale: int | None
+
+
+@dataclass(frozen=True)
+class StudyPaths:
+    """Where a study's files go, relative to the working directory: a case's render and
+    reference, each method's output and timing record, each entry's kept metric values and viewer
+    images, and the case job's outputs."""
+
+    results: str = "results"
+
+    def render(self, scene: str, spp: int) -> str:
+        return f"{self.results}/renders/{scene}/spp{spp}.exr"
+
+    def reference(self, scene: str) -> str:
+        return f"{self.results}/references/{scene}.exr"
+
+    def method_output(self, scene: str, spp: int, method: str) -> str:
+        return f"{self.results}/outputs/{scene}/spp{spp}/{method}.exr"
+
+    def method_timing(self, scene: str, spp: int, method: str) -> str:
+        return f"{self.results}/outputs/{scene}/spp{spp}/{method}.json"
+
+    def entry_values(self, scene: str, spp: int, entry: str) -> str:
+        return f"{self.results}/metrics/{scene}/spp{spp}/values/{entry}.json"
+
+    def entry_viewer(self, scene: str, spp: int, entry: str) -> str:
+        return f"{self.results}/viewer_entries/{scene}/spp{spp}/{entry}"
+
+    def entry_image(self, scene: str, spp: int, entry: str) -> str:
+        """The image an entry's evaluation reads: the render for the noisy input, else the method's output."""
+        return self.render(scene, spp) if entry == NOISY else self.method_output(scene, spp, entry)
+
+
+@dataclass(frozen=True)
+class StudyPlan:
+    """Everything the rules plan for a resolved config (:func:`mcbench.pipeline.plan.plan_study`)."""
+
+    methods: Mapping  # name -> MethodPlan, in dependency order
+    cases: CasePlan
+    ranking: RankingPlan
+    training: TrainingPlan
+    side: SideStudyPlan
+    paths: StudyPaths = field(default_factory=StudyPaths)
+
+    def case_plan(self, weights_sha256: Mapping) -> dict:
+        """What a case's job depends on besides its files (the same for every case; rule
+        run_case's params): the methods in dependency order with their settings and, for a
+        learned method, its weights' SHA-256 (``weights_sha256``: module -> digest), the
+        entries, the metrics."""
+        return {"methods": [{"name": m.name, "module": m.module, "params": dict(m.params), "inputs": list(m.inputs),
+                             **({"weights_sha256": weights_sha256[m.module]} if m.learned else {})}
+                            for m in self.methods.values()],
+                "entries": self.ranking.entries, "metrics": list(self.ranking.metrics)}
+
+    def case_job(self, scene: str, spp: int, *, weights_dir: str, outputs: Mapping) -> dict:
+        """The description of one case's job (:func:`mcbench.pipeline.cases.run_case`): its
+        render and reference, its methods in dependency order with their files and weights
+        (``<weights_dir>/<module>.pt`` for a learned method), its entries' evaluations and the
+        job's ``outputs`` (``metrics``, ``viewer``, ``record``)."""
+        paths, spp = self.paths, int(spp)
+        methods = [{"name": m.name, "module": m.module, "params": dict(m.params), "inputs": list(m.inputs),
+                    "weights": f"{weights_dir}/{m.module}.pt" if m.learned else None,
+                    "exr": paths.method_output(scene, spp, m.name), "timing": paths.method_timing(scene, spp, m.name)}
+                   for m in self.methods.values()]
+        entries = [{"entry": entry, "image": paths.entry_image(scene, spp, entry),
+                    "values": paths.entry_values(scene, spp, entry), "viewer": paths.entry_viewer(scene, spp, entry),
+                    "weight_inputs": list(self.methods[entry].inputs) if entry in self.methods else []}
+                   for entry in self.ranking.entries]
+        return {"scene": scene, "spp": spp, "render": paths.render(scene, spp), "reference": paths.reference(scene),
+                "metrics": list(self.ranking.metrics), "methods": methods, "entries": entries,
+                "outputs": {key: str(outputs[key]) for key in ("metrics", "viewer", "record")}}
+
+    def learned_modules(self) -> list[str]:
+        """The modules of the learned methods, each once, in plan order."""
+        return list(dict.fromkeys(m.module for m in self.methods.values() if m.learned))

@@ -1,0 +1,64 @@
+"""The typed plan (mcbench.pipeline.study_plan), built from a config without Snakemake: its
+values are read-only, its case job names every file of a case in the layout the rules use, and
+a case's plan follows the methods' settings and weights."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import pytest
+
+from mcbench import NOISY
+from mcbench.pipeline.config import resolve_config
+from mcbench.pipeline.plan import plan_study
+
+CONFIG = {"scenes": ["cornell_box", "glass_caustics"], "spp": [16, 4], "resolution": [16, 16],
+          "denoisers": ["jbf", "oidn", "kpcn"], "study": {"pool": False}, "metrics": ["relmse", "smape"],
+          "combiners": [{"name": "ens", "method": "ensemble", "inputs": ["jbf", "oidn"]},
+                        {"name": "avg", "method": "naive_average", "inputs": ["ens", "kpcn"]}]}
+
+
+@pytest.fixture(scope="module")
+def plan():
+    return plan_study(resolve_config(dict(CONFIG)), written=dict(CONFIG), source="test.yaml")
+
+
+def test_the_plan_holds_the_configs_cases_and_methods_in_dependency_order(plan):
+    assert plan.cases.pairs == [("cornell_box", 4), ("cornell_box", 16), ("glass_caustics", 4), ("glass_caustics", 16)]
+    assert list(plan.methods) == ["jbf", "oidn", "kpcn", "ens", "avg"]
+    assert plan.methods["avg"].inputs == ("ens", "kpcn") and plan.methods["avg"].kind == "combiner"
+    assert plan.ranking.entries == [NOISY, "jbf", "oidn", "kpcn", "ens", "avg"]
+    assert plan.learned_modules() == ["kpcn"]
+
+
+def test_the_plan_is_read_only(plan):
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        plan.cases = None
+    with pytest.raises(TypeError):
+        plan.methods["new"] = plan.methods["jbf"]
+    with pytest.raises(TypeError):
+        plan.methods["jbf"].params["radius"] = 3
+
+
+def test_a_case_job_names_every_file_of_the_case(plan):
+    job = plan.case_job("glass_caustics", 4, weights_dir="w", outputs={"metrics": "m.csv", "viewer": "v", "record": "r.json"})
+    assert job["render"] == "results/renders/glass_caustics/spp4.exr"
+    assert job["reference"] == "results/references/glass_caustics.exr"
+    by_name = {m["name"]: m for m in job["methods"]}
+    assert [m["name"] for m in job["methods"]] == list(plan.methods)
+    assert by_name["kpcn"]["weights"] == "w/kpcn.pt" and by_name["jbf"]["weights"] is None
+    assert by_name["ens"]["exr"] == "results/outputs/glass_caustics/spp4/ens.exr"
+    assert by_name["ens"]["timing"] == "results/outputs/glass_caustics/spp4/ens.json"
+    entries = {e["entry"]: e for e in job["entries"]}
+    assert entries[NOISY]["image"] == job["render"] and entries[NOISY]["weight_inputs"] == []
+    assert entries["ens"]["image"] == by_name["ens"]["exr"] and entries["ens"]["weight_inputs"] == ["jbf", "oidn"]
+    assert entries["avg"]["values"] == "results/metrics/glass_caustics/spp4/values/avg.json"
+    assert entries["avg"]["viewer"] == "results/viewer_entries/glass_caustics/spp4/avg"
+    assert job["outputs"] == {"metrics": "m.csv", "viewer": "v", "record": "r.json"}
+
+
+def test_a_case_plan_carries_the_learned_methods_weights_digest(plan):
+    one = plan.case_plan({"kpcn": "a" * 64})
+    other = plan.case_plan({"kpcn": "b" * 64})
+    assert one != other and one["metrics"] == ["relmse", "smape"]
+    assert [m.get("weights_sha256") for m in one["methods"]] == [None, None, "a" * 64, None, None]
