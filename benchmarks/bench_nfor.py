@@ -9,8 +9,8 @@ CPU seconds of both, the speed-ups and the relMSE of the current outputs against
 and against the baseline with the current code's one behaviour change (``baseline_fix``: feature
 differences within 1e-9 relative of zero count as 0, see methods/nfor.py). The baseline predates
 the Tungsten switches, so this comparison runs the current code with its former settings
-(``nfor.OURS``, ``new``); a second line per size times NFOR's defaults (Tungsten's behaviour,
-``tungsten``) against ``nfor.OURS`` (``ours``) on the same input.
+(``nfor.PAPER_READING``, ``new``); a second line per size times NFOR's defaults (Tungsten's behaviour,
+``tungsten``) against ``nfor.PAPER_READING`` (``ours``) on the same input.
 The DAG runs methods at one thread: ``NUMBA_NUM_THREADS=1``.
 
     NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/bench_nfor.py [--sizes 128 512] [--repeats 1] [--no-baseline]
@@ -53,7 +53,7 @@ def main(argv=None) -> None:
     parser.add_argument("--no-baseline", action="store_true", help="time the current implementation only")
     args = parser.parse_args(argv)
 
-    ours = functools.partial(nfor.denoise, **nfor.OURS)
+    ours = functools.partial(nfor.denoise, **nfor.PAPER_READING)
     denoisers = {"new": ours}
     if not args.no_baseline:
         denoisers["baseline"] = load_baseline("methods/nfor.py").denoise

@@ -7,7 +7,8 @@ Rg = ``Regression.cpp``): every switch of :func:`denoise` defaults to Tungsten's
 relMSE <= 2.3e-5, its intermediates (pass-1 regressions, MSE and selection maps, r^A, r^B) to
 relMSE <= 5.8e-5 (``tests/methods/test_nfor_golden.py``,
 ``tests/methods/test_nfor_golden_intermediates.py``, ``docs/fidelity_nfor.md``). The paper's text was not available; where it might differ from
-Tungsten, Tungsten is followed. :data:`OURS` holds this module's former settings.
+Tungsten, Tungsten is followed. :data:`PAPER_READING` holds a reading of the paper with the conventions
+of :mod:`mcbench.filters.nlmeans`, kept for comparison.
 
 Pipeline (section numbers of Bitterli et al., CGF 35(4) 2016):
 
@@ -62,8 +63,8 @@ Constants we chose (implementation, not Tungsten's):
 * ``CHUNK_ROWS = 8``: rows per parallel work item of the regression (weights of one chunk are
   8 x W x 361 float64, pixel-major, ~12 MB at W = 512); affects speed only.
 
-Former settings (:data:`OURS`, defaults until 2026-12-04; each a switch of :func:`denoise`, with
-the reason it was chosen; their effects against Tungsten in ``docs/fidelity_nfor.md``):
+The paper reading (:data:`PAPER_READING`; each a switch of :func:`denoise`, with its reason; their
+effects against Tungsten in ``docs/fidelity_nfor.md``):
 
 * ``nlm_epsilon = NLM_EPSILON = 1e-10``: the epsilon of :mod:`mcbench.filters.nlmeans`, so
   zero-variance inputs give weight 1 for identical colours and 0 otherwise.
@@ -84,7 +85,7 @@ the reason it was chosen; their effects against Tungsten in ``docs/fidelity_nfor
   "replicate"``, ``filter_clamp = False``: the conventions of :mod:`mcbench.filters.nlmeans`.
 * ``second_pass_variance_scale = 1``: the variance of the mean of the halves, (r^A - r^B)^2 / 4.
 
-The helpers :func:`collaborative_regression` and :func:`prefilter_features` keep these former
+The helpers :func:`collaborative_regression` and :func:`prefilter_features` keep these paper-reading
 values as their own keyword defaults (their tests compare with brute force at those values);
 :func:`denoise` passes every switch explicitly.
 
@@ -136,12 +137,11 @@ TUNGSTEN = dict(second_pass_variance_scale=2.0, regression_channels="min", filte
                 nlm_epsilon=1e-7, feature_variance="buffer", color_variance="buffer", patch_borders="truncate",
                 filter_clamp=True, feature_resolution=0.0, rank_threshold=float(np.finfo(np.float32).eps),
                 pivot_tolerance=float(np.finfo(np.float32).eps) ** 2)
-#: The switches at this module's former defaults (until 2026-12-04): our reading of the paper with
-#: the conventions of :mod:`mcbench.filters.nlmeans`, before the comparison with Tungsten's program.
-#: Kept for comparison (``tools/golden/tungsten_nfor_departures.py``); each entry's reason is in
+#: The switches as a reading of the paper with the conventions of :mod:`mcbench.filters.nlmeans`
+#: (where Tungsten's program, the default, differs). Kept for comparison (``tools/golden/tungsten_nfor_departures.py``); each entry's reason is in
 #: the module docstring, its measured effect in ``docs/fidelity_nfor.md``. Not a default anywhere:
 #: ``feature_variance="halves"`` has no source and moves the output by relMSE 8e-3 at 8 spp.
-OURS = dict(second_pass_variance_scale=1.0, regression_channels="mean", filter_channels="mean",
+PAPER_READING = dict(second_pass_variance_scale=1.0, regression_channels="mean", filter_channels="mean",
             nlm_epsilon=NLM_EPSILON, feature_variance="halves", color_variance="halves", patch_borders="replicate",
             filter_clamp=False, feature_resolution=FEATURE_RESOLUTION, rank_threshold=0.0,
             pivot_tolerance=PIVOT_TOLERANCE)
@@ -394,7 +394,7 @@ def _feature_variance(buffers: RenderBuffers) -> np.ndarray:
     if missing:
         raise ValueError(f"NFOR's feature_variance='buffer' (the default, Tungsten's) needs the layers {missing}, "
                          "which every render of mcbench.render.renderer holds; for buffers without them pass "
-                         "feature_variance='halves' (methods.nfor.OURS)")
+                         "feature_variance='halves' (methods.nfor.PAPER_READING)")
     depth = np.asarray(layers["depth_variance"], dtype=np.float64)
     if depth.ndim == 3:
         depth = depth[..., 0]
@@ -446,7 +446,7 @@ def denoise(buffers: RenderBuffers, *, second_pass_variance_scale: float = 2.0, 
 
     Keyword switches. The defaults are Tungsten's behaviour (tunabrain/tungsten 88ea020,
     ``src/denoiser/``: D = ``denoiser.cpp``, N = ``NlMeans.hpp``, Rg = ``Regression.cpp``), the
-    same values as :data:`TUNGSTEN`; :data:`OURS` sets each to this module's former setting
+    same values as :data:`TUNGSTEN`; :data:`PAPER_READING` sets each to the paper reading
     (``docs/fidelity_nfor.md`` measures each). Layers read: ``color``, ``color_a``, ``color_b``,
     ``variance`` and the features ``normal``, ``albedo``, ``depth`` with their ``_a``/``_b``
     halves; with the defaults also ``normal_variance``, ``albedo_variance``, ``depth_variance``

@@ -57,8 +57,7 @@ Switches (keyword-only; defaults are the authors'):
 * ``nonfinite="authors"``: NaN/inf in the render layers are left as they are, but for a NaN in the
   normal layers, which becomes 0 after the (n + 1) / 2 map with variance 0 (the authors skip NaN
   normal samples, F:135-138,160-164, and guard nothing else); the output is not sanitised either.
-  ``"zero"``: ``np.nan_to_num`` on every layer read and on the output (this module's former
-  behaviour), which keeps the output finite for a broken input. Renders reaching the pipeline are
+  ``"zero"``: ``np.nan_to_num`` on every layer read and on the output, which keeps the output finite for a broken input. Renders reaching the pipeline are
   finite (``mcbench.render.renderer`` raises on NaN/inf in any pass), where both agree exactly.
 
 Departures without a switch (each with its reason; docs/fidelity_rdfc.md):

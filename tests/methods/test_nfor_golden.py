@@ -30,7 +30,7 @@ So per-pixel agreement cannot be asked on such scenes; the few pixels it concern
 <= 2.3e-5 on every case (4x below 1e-4), while every change below exceeds a bound 10x somewhere.
 
 The test can fail: regression radius 9 -> 8, any of the switches that change numbers at its
-former value (``nfor.OURS``), each k of Tungsten's program (0.5 / 1.0) in the other's place, or
+paper-reading value (``nfor.PAPER_READING``), each k of Tungsten's program (0.5 / 1.0) in the other's place, or
 the MSE estimate without its -(F_A - F_B)^2 / 4 term exceeds one of the bounds by at least 10x on
 some case (:func:`test_a_wrong_constant_fails`, :func:`test_each_switch_off_fails`,
 :func:`test_a_wrong_k_or_mse_term_fails`). The switches
@@ -120,11 +120,11 @@ def _defaults():
 
 
 def test_defaults_are_tungsten():
-    """NFOR's defaults are Tungsten's behaviour; OURS (the former defaults) differs in every switch."""
+    """NFOR's defaults are Tungsten's behaviour; PAPER_READING (the former defaults) differs in every switch."""
     defaults = _defaults()
     assert defaults == nfor.TUNGSTEN
-    assert set(nfor.OURS) == set(nfor.TUNGSTEN)
-    assert all(nfor.OURS[k] != v for k, v in nfor.TUNGSTEN.items())
+    assert set(nfor.PAPER_READING) == set(nfor.TUNGSTEN)
+    assert all(nfor.PAPER_READING[k] != v for k, v in nfor.TUNGSTEN.items())
 
 
 def test_a_wrong_constant_fails(monkeypatch):
@@ -168,5 +168,5 @@ def test_a_wrong_k_or_mse_term_fails(label, monkeypatch):
                                     "nlm_epsilon", "feature_variance", "color_variance", "patch_borders",
                                     "rank_threshold"])
 def test_each_switch_off_fails(switch):
-    """Each switch that changes numbers, at its former setting (OURS), exceeds the bounds by >= 10x on some case."""
-    assert any(excess(name, ours(name, **{switch: nfor.OURS[switch]})) > FAIL_FACTOR for name in _strict_first()), switch
+    """Each switch that changes numbers, at its paper-reading setting (PAPER_READING), exceeds the bounds by >= 10x on some case."""
+    assert any(excess(name, ours(name, **{switch: nfor.PAPER_READING[switch]})) > FAIL_FACTOR for name in _strict_first()), switch

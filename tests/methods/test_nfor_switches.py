@@ -43,9 +43,9 @@ def small_buffers(h=12, w=13, feature_variance=True):
     return RenderBuffers(layers, spp=8)
 
 
-def test_former_settings_run_and_differ_from_the_defaults():
+def test_the_paper_reading_settings_run_and_differ_from_the_defaults():
     buffers = small_buffers()
-    ours = nfor.denoise(buffers, **nfor.OURS).full
+    ours = nfor.denoise(buffers, **nfor.PAPER_READING).full
     tungsten = nfor.denoise(buffers).full
     assert np.isfinite(tungsten).all() and tungsten.shape == ours.shape
     assert np.abs(tungsten - ours).max() > 1e-4

@@ -170,7 +170,7 @@ def combiner_validation_scene(tmp_path_factory):
 
 
 STALE_WEIGHTS = {"deep_combiner": (
-    "its committed weights were trained on NFOR's former settings (nfor.OURS); NFOR now runs Tungsten's by "
+    "its committed weights were trained on NFOR's former settings (nfor.PAPER_READING); NFOR now runs Tungsten's by "
     "default, so its training inputs changed (loss 0.057 against the recorded 0.248): retrain it "
     "(snakemake --cores 2 train_deep_combiner, docs/methods.md) and drop this mark")}
 

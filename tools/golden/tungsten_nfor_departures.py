@@ -2,8 +2,8 @@
 
 For every case in ``tests/data/golden/tungsten_nfor/`` (made by ``tools/golden/tungsten_nfor.py``)
 our NFOR runs with every switch at Tungsten's behaviour (its defaults, ``methods.nfor.TUNGSTEN``),
-then with each switch at its former setting (``methods.nfor.OURS``) in turn, then with all of
-``OURS`` (the former NFOR). Per variant it
+then with each switch at its paper-reading setting (``methods.nfor.PAPER_READING``) in turn, then with all of
+``PAPER_READING``. Per variant it
 reports the relMSE (:func:`mcbench.analysis.metrics.relmse`) of our output against Tungsten's
 output (the golden) and against the scene's reference render, averaged over the cases, per spp
 level. Prints a Markdown table (``--out`` also writes it)::
@@ -31,7 +31,7 @@ from methods import nfor  # noqa: E402
 GOLDEN = ROOT / "tests" / "data" / "golden" / "tungsten_nfor"
 OUTPUT_FILE = "tungsten_nfor.pfm"
 
-#: switch -> what setting it to its former value (``nfor.OURS``) does (the row label).
+#: switch -> what setting it to its former value (``nfor.PAPER_READING``) does (the row label).
 SWITCHES = {
     "regression_channels": "regression weights from the channel-mean distance (not min over channels)",
     "filter_channels": "MSE/selection filter weights from the channel-mean distance (not per channel)",
@@ -61,12 +61,12 @@ def load_cases(folder: Path) -> list[dict]:
 
 
 def variants() -> list[tuple[str, dict]]:
-    """(label, switches) for Tungsten (the defaults), each switch at its former value, and all of OURS."""
-    former = nfor.OURS
+    """(label, switches) for Tungsten (the defaults), each switch at its former value, and all of PAPER_READING."""
+    former = nfor.PAPER_READING
     rows = [("all switches at Tungsten's behaviour (the defaults)", dict(nfor.TUNGSTEN))]
     for switch, label in SWITCHES.items():
         rows.append((f"`{switch}={former[switch]!r}`: {label}", dict(nfor.TUNGSTEN, **{switch: former[switch]})))
-    rows.append(("all switches at their former values (`nfor.OURS`, the former NFOR)", dict(former)))
+    rows.append(("all switches at their former values (`nfor.PAPER_READING`, the former NFOR)", dict(former)))
     return rows
 
 
