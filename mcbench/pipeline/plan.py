@@ -159,7 +159,10 @@ def _plan(config: dict, is_learned) -> StudyPlan:
                                           config_key=spec.get("config_key", ""))
                          for name, spec in methods.items()}),
         cases=CasePlan(scenes=tuple(scenes), spps=tuple(spps), reference_spp=frozen_mapping(reference_spp),
-                       reference_chunks=reference_chunks, render_folders=frozen_mapping(render_folders)),
+                       reference_chunks=reference_chunks, render_folders=frozen_mapping(render_folders),
+                       resolutions=frozen_mapping({scene: tuple(int(n) for n in (config["resolution"] or
+                                                                                 load_scene(scene).RESOLUTION))
+                                                   for scene in scenes})),
         ranking=RankingPlan(candidates=tuple(candidates), ranked=tuple(ranked), extras=tuple(extras),
                             pool_study=bool(pool_study), pool_note=pool_note, labels=frozen_mapping(labels),
                             metrics=tuple(config["metrics"])),

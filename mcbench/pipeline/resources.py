@@ -42,13 +42,14 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
+from typing import Mapping
 
 import numpy as np
 import yaml
 
 from mcbench import BenchError
 
-__all__ = ["JobCost", "JOB_COSTS_PATH", "MEMORY_MARGIN", "RUNTIME_MARGIN", "MIN_MEM_MB",
+__all__ = ["StudyRequests", "GPU_RULES", "JobCost", "JOB_COSTS_PATH", "MEMORY_MARGIN", "RUNTIME_MARGIN", "MIN_MEM_MB",
            "MIN_RUNTIME_MIN", "JOB_MEMORY_LIMIT_MB", "load_job_costs", "write_job_costs",
            "estimate_job", "job_request", "fit_job_cost"]
 
@@ -198,3 +199,65 @@ first. Seconds are fitted against ``[1, P, P E, P S / 1000]``, memory
     base_mb, mb_px, mb_px_entry = solve([mpx, mpx * entries], rss)
     return JobCost(base_s=base_s, s_per_mpx=s_px, s_per_mpx_entry=s_px_entry, s_per_gsample=s_sample,
                    base_mb=base_mb, mb_per_mpx=mb_px, mb_per_mpx_entry=mb_px_entry)
+
+
+#: Rules whose jobs render with Mitsuba and can use a GPU (variant auto or cuda_ad_rgb).
+GPU_RULES = frozenset({"render_noisy", "render_reference_chunk", "training_example", "oracle_study"})
+
+
+@dataclass(frozen=True)
+class StudyRequests:
+    """The resource requests of a study's jobs: mem_mb and runtime (minutes) from the fitted
+    ``costs`` (:func:`load_job_costs`) at each job's size in the ``plan``
+    (:class:`mcbench.pipeline.study_plan.StudyPlan`), times the attempt (a retry asks for
+    ``attempt`` times as much); ``gpus`` (and ``gpu_model``) for the rules that can use one."""
+
+    plan: object
+    costs: Mapping
+    gpus: int = 0
+    gpu_model: str = ""
+    variant: str = "auto"
+
+    def job_size(self, rule: str, *, scene: str | None = None, spp: int | None = None) -> tuple[int, int, int]:
+        """``(pixels, entries, spp)`` of one job of ``rule`` (the cost model's size)."""
+        cases = self.plan.cases
+        pixels = cases.pixels(scene) if scene else 0
+        if rule == "render_noisy":
+            return pixels, 1, int(spp)
+        if rule == "render_reference_chunk":
+            return pixels, 1, int(cases.reference_spp[scene]) // cases.reference_chunks
+        if rule == "viewer":
+            entries = len(self.plan.ranking.entries)
+            return max(cases.pixels(s) for s in cases.scenes), len(cases.pairs) * entries, 0
+        return pixels, 1, 0
+
+    def request(self, rule: str, *, scene: str | None = None, spp: int | None = None, network: str | None = None,
+                attempt: int = 1) -> dict[str, int]:
+        """mem_mb and runtime of one job of ``rule`` (a network's own cost, e.g.
+        ``train_network/kpcn``, where measured; the floors for a rule without records)."""
+        cost = (network and self.costs.get(f"{rule}/{network}")) or self.costs.get(rule, JobCost())
+        pixels, entries, samples = self.job_size(rule, scene=scene, spp=spp)
+        request = job_request(*estimate_job(cost, pixels=pixels, entries=entries, spp=samples))
+        return {key: value * attempt for key, value in request.items()}
+
+    def case_request(self, scene: str, *, attempt: int = 1) -> dict[str, int]:
+        """mem_mb and runtime of a case's job (rule run_case): the sum of its methods' fitted
+        costs (``run_method/<module>``, else ``run_method``) and of its entries' evaluations
+        (``evaluate_entry``), the whole case made (an incremental run makes less)."""
+        pixels = self.plan.cases.pixels(scene)
+        seconds, rss_mb = 0.0, 0.0
+        for method in self.plan.methods.values():
+            cost = self.costs.get(f"run_method/{method.module}") or self.costs.get("run_method", JobCost())
+            method_seconds, method_mb = estimate_job(cost, pixels=pixels)
+            seconds, rss_mb = seconds + method_seconds, max(rss_mb, method_mb)
+        evaluation_seconds, evaluation_mb = estimate_job(self.costs.get("evaluate_entry", JobCost()), pixels=pixels)
+        request = job_request(seconds + evaluation_seconds * len(self.plan.ranking.entries),
+                              max(rss_mb, evaluation_mb))
+        return {key: value * attempt for key, value in request.items()}
+
+    def gpu_resources(self, rule: str) -> dict:
+        """``gpu`` (and ``gpu_model``) for a rule that renders with Mitsuba when the config asks
+        for GPUs and its variant can use one; else nothing."""
+        if rule not in GPU_RULES or not self.gpus or self.variant not in ("auto", "cuda_ad_rgb"):
+            return {}
+        return {"gpu": self.gpus, **({"gpu_model": self.gpu_model} if self.gpu_model else {})}

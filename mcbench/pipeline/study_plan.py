@@ -51,14 +51,20 @@ class MethodPlan:
 @dataclass(frozen=True)
 class CasePlan:
     """The test cases: ``scenes`` (config order) x ``spps`` (sorted); the reference spp of each
-    rendered scene (None for a folder of renders made elsewhere), its chunks, and the folders
-    of imported scenes."""
+    rendered scene (None for a folder of renders made elsewhere), its chunks, the folders of
+    imported scenes and each scene's image size."""
 
     scenes: tuple[str, ...]
     spps: tuple[int, ...]
     reference_spp: Mapping
     reference_chunks: int
     render_folders: Mapping
+    resolutions: Mapping = field(default_factory=lambda: frozen_mapping({}))   # scene -> (width, height)
+
+    def pixels(self, scene: str) -> int:
+        """Pixels of a scene's images (the config's resolution, else the scene's own)."""
+        width, height = self.resolutions[scene]
+        return int(width) * int(height)
 
     @property
     def pairs(self) -> list[tuple[str, int]]:

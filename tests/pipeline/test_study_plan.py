@@ -62,3 +62,22 @@ def test_a_case_plan_carries_the_learned_methods_weights_digest(plan):
     other = plan.case_plan({"kpcn": "b" * 64})
     assert one != other and one["metrics"] == ["relmse", "smape"]
     assert [m.get("weights_sha256") for m in one["methods"]] == [None, None, "a" * 64, None, None]
+
+
+def test_the_resource_requests_follow_each_jobs_size(plan):
+    """A case's job asks for the sum of its methods' and evaluations' fitted costs; a bigger scene
+    or more samples ask for more; GPUs only for the rules that render, when the config asks."""
+    from mcbench.pipeline.resources import JobCost, StudyRequests
+
+    costs = {"run_method": JobCost(base_s=600.0, s_per_mpx=1e5, base_mb=100.0),
+             "evaluate_entry": JobCost(base_s=60.0, base_mb=50.0),
+             "render_noisy": JobCost(base_s=1.0, s_per_gsample=1e6, base_mb=100.0)}
+    requests = StudyRequests(plan, costs, gpus=1, variant="auto")
+    one_method = StudyRequests(dataclasses.replace(plan, methods={"jbf": plan.methods["jbf"]}), costs)
+    assert requests.case_request("cornell_box")["runtime"] > one_method.case_request("cornell_box")["runtime"]
+    low = requests.request("render_noisy", scene="cornell_box", spp=4)
+    high = requests.request("render_noisy", scene="cornell_box", spp=4096)
+    assert high["runtime"] > low["runtime"]
+    assert requests.request("render_noisy", scene="cornell_box", spp=4, attempt=2)["mem_mb"] == 2 * low["mem_mb"]
+    assert requests.gpu_resources("render_noisy") == {"gpu": 1} and requests.gpu_resources("run_case") == {}
+    assert StudyRequests(plan, costs, gpus=1, variant="llvm_ad_rgb").gpu_resources("render_noisy") == {}

@@ -18,7 +18,7 @@ from mcbench.pipeline.plan import plan_study  # noqa: E402
 from mcbench.pipeline.render import folder_case_files, folder_reference_files  # noqa: E402
 from mcbench.analysis.metrics import ALL_METRICS  # noqa: E402
 from mcbench.analysis.study.figures import STUDY_FIGURES as STUDY_FIGURE_KEYS, curve_candidates, paper_recommended  # noqa: E402
-from mcbench.pipeline.resources import JobCost, estimate_job, job_request, load_job_costs  # noqa: E402
+from mcbench.pipeline.resources import StudyRequests, load_job_costs  # noqa: E402
 from mcbench.io.method_spec import method_spec  # noqa: E402
 from mcbench.io.weights import COMMITTED_WEIGHTS, check_trained_features, file_sha256, is_learned_method  # noqa: E402
 from mcbench.pipeline.registry import load_method, load_scene  # noqa: E402
@@ -275,77 +275,28 @@ def training_crop_files():
 # config `gpus` of them (0 by default; profiles/slurm-gpu sets 1); the networks' training and
 # inference run on the CPU (mcbench.nn selects no device), so their rules ask for none.
 
-JOB_COSTS = load_job_costs()
-GPU_RULES = {"render_noisy", "render_reference_chunk", "training_example", "oracle_study"}
+REQUESTS = StudyRequests(PLAN, load_job_costs(), gpus=config["gpus"], gpu_model=config["gpu_model"] or "",
+                         variant=config["variant"])
 # Rules that only read finished results and write tables, figures or pages, and the target rules,
 # say `localrule: True`: on a cluster the submitting Snakemake runs them itself (never queued).
 
 
-def scene_pixels(scene):
-    """Pixels of a scene's images: config resolution, else the scene's own RESOLUTION."""
-    width, height = config["resolution"] or load_scene(scene).RESOLUTION
-    return int(width) * int(height)
-
-
-def case_entries(wildcards=None):
-    """A case's images: every candidate plus the noisy input."""
-    return len(CANDIDATES) + 1
-
-
-def _job_size(rule_name, wildcards):
-    """``(pixels, entries, spp)`` of one job of rule ``rule_name`` (mcbench.pipeline.resources' cost model)."""
-    scene = getattr(wildcards, "scene", None)
-    pixels = scene_pixels(scene) if scene else 0
-    if rule_name == "render_noisy":
-        return pixels, 1, int(wildcards.spp)
-    if rule_name == "render_reference_chunk":
-        return pixels, 1, reference_chunk_spp(wildcards)
-    if rule_name == "viewer":
-        return max(scene_pixels(s) for s in SCENES), len(SCENES) * len(SPPS) * case_entries(), 0
-    return pixels, 1, 0
-
-
 def job_resources(rule_name):
-    """The ``resources:`` of the rule's jobs: mem_mb and runtime from its fitted cost (a
-    network's own, e.g. train_network/kpcn, where measured; the floors for a rule without
-    records), times the attempt; ``gpu`` for the rules that can use one."""
+    """The ``resources:`` of a rule's jobs (mcbench.pipeline.resources.StudyRequests.request)."""
 
     def request(wildcards, attempt):
-        network = getattr(wildcards, "network", None)
-        cost = (network and JOB_COSTS.get(f"{rule_name}/{network}")) or JOB_COSTS.get(rule_name, JobCost())
-        pixels, entries, spp = _job_size(rule_name, wildcards)
-        seconds, rss_mb = estimate_job(cost, pixels=pixels, entries=entries, spp=spp)
-        request = job_request(seconds, rss_mb)
-        return {key: value * attempt for key, value in request.items()}
+        return REQUESTS.request(rule_name, scene=getattr(wildcards, "scene", None), spp=getattr(wildcards, "spp", None),
+                                network=getattr(wildcards, "network", None), attempt=attempt)
 
-    resources = {"mem_mb": lambda wildcards, attempt: request(wildcards, attempt)["mem_mb"],
-                 "runtime": lambda wildcards, attempt: request(wildcards, attempt)["runtime"]}
-    if rule_name in GPU_RULES and config["gpus"] and config["variant"] in ("auto", "cuda_ad_rgb"):
-        resources["gpu"] = config["gpus"]
-        if config["gpu_model"]:
-            resources["gpu_model"] = config["gpu_model"]
-    return resources
+    return {"mem_mb": lambda wildcards, attempt: request(wildcards, attempt)["mem_mb"],
+            "runtime": lambda wildcards, attempt: request(wildcards, attempt)["runtime"],
+            **REQUESTS.gpu_resources(rule_name)}
 
 
 def case_resources():
-    """The ``resources`` of a case's job, run_case's: the sum of its methods' fitted costs
-    (run_method/<module>, else run_method) and of its entries' evaluations (evaluate_entry), the
-    whole case made (an incremental run makes less), times the attempt."""
-
-    def request(wildcards, attempt):
-        pixels = scene_pixels(wildcards.scene)
-        seconds, rss_mb = 0.0, 0.0
-        for spec in METHODS.values():
-            cost = JOB_COSTS.get(f"run_method/{spec.module}") or JOB_COSTS.get("run_method", JobCost())
-            method_seconds, method_mb = estimate_job(cost, pixels=pixels, entries=1, spp=0)
-            seconds, rss_mb = seconds + method_seconds, max(rss_mb, method_mb)
-        evaluation_seconds, evaluation_mb = estimate_job(JOB_COSTS.get("evaluate_entry", JobCost()), pixels=pixels,
-                                                         entries=1, spp=0)
-        request = job_request(seconds + evaluation_seconds * case_entries(), max(rss_mb, evaluation_mb))
-        return {key: value * attempt for key, value in request.items()}
-
-    return {"mem_mb": lambda wildcards, attempt: request(wildcards, attempt)["mem_mb"],
-            "runtime": lambda wildcards, attempt: request(wildcards, attempt)["runtime"]}
+    """The ``resources:`` of a case's job (mcbench.pipeline.resources.StudyRequests.case_request)."""
+    return {"mem_mb": lambda wildcards, attempt: REQUESTS.case_request(wildcards.scene, attempt=attempt)["mem_mb"],
+            "runtime": lambda wildcards, attempt: REQUESTS.case_request(wildcards.scene, attempt=attempt)["runtime"]}
 
 
 def study_targets(wildcards=None):
