@@ -28,6 +28,8 @@ once) is checked by :func:`mcbench.pipeline.plan.plan_study`.
 
 from __future__ import annotations
 
+import re
+
 import copy
 import math
 from functools import lru_cache
@@ -97,11 +99,15 @@ def schema_defaults(path: str | Path = SCHEMA_PATH) -> dict:
 
 
 def key_path(parts) -> str:
-    """``["combiners", 3, "params", "solvr"]`` -> ``"combiners[3].params.solvr"``."""
+    """``["combiners", 3, "params", "solvr"]`` -> ``"combiners[3].params.solvr"``; a key that is
+    not a plain name (a space, a dot, a quote, empty) in brackets as Python writes it, e.g.
+    ``reference.scene_spp['spp ']``, so that no two keys read alike."""
     text = ""
     for part in parts:
         if isinstance(part, int):
             text += f"[{part}]"
+        elif not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_-]*", str(part)):
+            text += f"[{str(part)!r}]"
         else:
             text += f".{part}" if text else str(part)
     return text or "<config>"

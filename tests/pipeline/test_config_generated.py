@@ -331,11 +331,12 @@ def valid_configs(draw, *, max_scenes: int = 4, max_spp: int = 4, max_denoisers:
 # --------------------------------------------------------------------------- the properties
 
 _LEADING_KEY = re.compile(r"^(?:config key '(?P<quoted>[^']+)'|(?P<plain><config>|[A-Za-z_][A-Za-z0-9_]*"
-                          r"(?:\[\d+\]|\.[^\s:.\[\]()']+)*))")
+                          r"(?:\[\d+\]|\['[^']*'\]|\.[^\s:.\[\]()']+)*))")
 
 
 def _parts(key: str) -> list:
-    return [int(i) if i else n for i, n in re.findall(r"\[(\d+)\]|\.?([^.\[\]]+)", key)]
+    return [int(i) if i else (q if q or not n else n) for i, q, n in
+            re.findall(r"\[(\d+)\]|\['([^']*)'\]|\.?([^.\[\]]+)", key)]
 
 
 def leading_key(message: str) -> list:
@@ -531,7 +532,7 @@ def mutated_configs(draw):
             value = {"wrong_type": st.sampled_from(WRONG_VALUES), "non_finite": st.sampled_from(
                 [float("nan"), float("inf"), -float("inf")]), "odd_string": st.sampled_from(ODD_STRINGS),
                 "huge": st.sampled_from(HUGE)}[kind]
-            _set(config, path, draw(value))
+            _set(config, path, copy.deepcopy(draw(value)))      # never the shared list or dict itself
         elif kind == "out_of_range":
             numbers = [p for p in leaves if isinstance(_get(config, p), int) and not isinstance(_get(config, p), bool)]
             if numbers:
