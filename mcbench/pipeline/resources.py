@@ -1,14 +1,15 @@
 """Per-job resources for a cluster: memory and run time of each rule's jobs, from measured costs.
 
 Every rule of the workflow declares ``threads``, ``mem_mb`` and ``runtime`` (minutes), and the
-rules that can use a GPU declare ``gpu`` (``workflow/rules/common.smk``: ``job_resources``). A
+rules that can use a GPU declare ``gpu`` (:class:`StudyRequests`, which ``workflow/rules/common.smk``
+wraps). A
 local run ignores ``mem_mb`` and ``runtime`` unless ``--resources`` limits them; the SLURM
 executor turns them into ``--mem`` and ``-t`` (``profiles/slurm``).
 
 Cost model (one job)
 --------------------
-With ``P`` the job's megapixels (width x height / 1e6), ``E`` the methods a batch job runs (1
-for other jobs) and ``S`` the samples per pixel the job renders (0 for jobs that render
+With ``P`` the job's megapixels (width x height / 1e6), ``E`` the entries the job handles (the
+viewer's images; 1 for other jobs) and ``S`` the samples per pixel the job renders (0 for jobs that render
 nothing)::
 
     seconds = base_s + s_per_mpx * P + s_per_mpx_entry * P * E + s_per_gsample * P * S / 1000
@@ -24,7 +25,9 @@ of finished runs at two resolutions by ``python benchmarks/job_costs.py RESULTS.
 writes that file; its header names the runs it was fitted to. Two fits per rule: to the largest
 job of each size (section ``rules``: requests) and to the mean one (``typical``: the CPU-hour
 estimates of ``benchmarks/cluster_estimate.py``); ``run_method`` also per method module
-(``run_method/nfor``), since the methods' costs within that rule differ widely (NFOR, OIDN).
+(``run_method/nfor``), since the methods' costs differ widely (NFOR, OIDN): a case's job
+(``run_case``) asks for the sum of its methods' and its entries' evaluations
+(:meth:`StudyRequests.case_request`).
 
 Requests
 --------
@@ -126,7 +129,7 @@ def write_job_costs(sections: dict[str, dict[str, JobCost]], path: str | Path, *
 
 def estimate_job(cost: JobCost, *, pixels: int, entries: int = 1, spp: int = 0) -> tuple[float, float]:
     """Estimated ``(seconds, rss_mb)`` of one job: ``pixels`` per image (width x height),
-    ``entries`` methods in a batch job, ``spp`` samples per pixel rendered."""
+    ``entries`` the job handles, ``spp`` samples per pixel rendered."""
     if pixels < 0 or entries < 0 or spp < 0:
         raise BenchError(f"job estimate: pixels {pixels}, entries {entries}, spp {spp} must be >= 0")
     mpx = pixels / 1e6
