@@ -74,7 +74,7 @@ wildcard_constraints:
     metric="|".join(ALL_METRICS),
 
 
-# The case jobs (rule run_case) run in warm worker processes (mcbench.pipeline.pool): their
+# The case jobs (run_case) run in warm worker processes (mcbench.pipeline.pool): their
 # rule's `run:` block calls run_in_pool in Snakemake's own process, which needs Snakemake's
 # threads for `run:` jobs (force-use-threads, set by the workflow profile profiles/default;
 # without it each such job would start a whole Snakemake process: the same results, far slower).
