@@ -302,19 +302,3 @@ def read_metric_values(path: str | Path, sources: dict) -> dict[str, float]:
         return {}
     return {str(metric): float(value) for metric, value in values.items()
             if isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)}
-
-
-def assemble_case_metrics(paths: dict[str, str], output_path: str, *, scene: str, spp: int,
-                          metric_names: list[str]) -> pd.DataFrame:
-    """One case's metrics CSV from its entries' (``paths``: {entry: CSV of :func:`evaluate_entry`}),
-    in that order, each refused (naming its file) unless it holds exactly its entry's rows of
-    this case, one per metric of ``metric_names`` with a finite value."""
-    import pandas as pd
-
-    frames = []
-    for entry, path in paths.items():
-        frames.append(read_case_metrics(path, candidates=[entry], metric_names=metric_names,
-                                        case=(scene, int(spp))))
-    frame = pd.concat(frames, ignore_index=True)
-    write_csv(output_path, frame)
-    return frame
