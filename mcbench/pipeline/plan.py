@@ -74,6 +74,7 @@ def plan_study(config: dict, *, written: dict | None = None, source: str = "conf
     if is_learned is None:
         from mcbench.io.weights import is_learned_method as is_learned
     try:
+        _check_metrics(config["metrics"])
         return _plan(config, is_learned)
     except BenchError as error:
         message = str(error)
@@ -88,7 +89,6 @@ def _plan(config: dict, is_learned) -> StudyPlan:
     for index, scene in enumerate(config["scenes"]):
         load_scene(scene, config_key=f"scenes[{index}]")
     scenes = list(config["scenes"])
-    _check_metrics(config["metrics"])
     for index, spp in enumerate(config["spp"]):
         try:
             spp_code(spp)
