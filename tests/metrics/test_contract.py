@@ -179,3 +179,29 @@ def test_a_metric_where_higher_is_better_is_refused_when_the_study_is_planned(sc
     config = resolve_config({"scenes": ["cornell_box"], "metrics": ["relmse", "psnr"]}, source="my.yaml")
     with pytest.raises(BenchError, match=r"my\.yaml: metrics\[1\]: metrics/psnr\.py declares lower_is_better=False"):
         plan_study(config, source="my.yaml", is_learned=lambda module: False)
+
+
+def test_the_report_captions_name_a_metric_by_its_plugins_label():
+    """No caption lists the metrics' labels: a caption about one metric renders the label its rule
+    passes (``params.metric_label``, from the metric's plugin), so an added metric is named right."""
+    import re
+    import types
+
+    import jinja2
+
+    captions = sorted((REPO / "workflow" / "report").glob("*.rst"))
+    rules = "\n".join(p.read_text() for p in sorted((REPO / "workflow" / "rules").glob("*.smk")))
+    labelled = [p for p in captions if "snakemake.params.metric_label" in p.read_text()]
+    assert {p.name for p in labelled} >= {"ranking.rst", "extras.rst", "comparisons_onehot.rst",
+                                          "comparisons_ranking.rst", "error_curves.rst", "speed_error.rst"}
+    stand_in = types.SimpleNamespace(params=types.SimpleNamespace(metric_label="Mean absolute error", metric="mae"),
+                                     wildcards=types.SimpleNamespace(metric="mae"), config={})
+    for path in captions:
+        text = path.read_text()
+        assert not re.search(r"set names\s*=|\"relmse\"\s*:", text), f"{path.name} lists metric labels"
+        if path in labelled:
+            assert "Mean absolute error" in jinja2.Template(text).render(snakemake=stand_in), path.name
+    for block in re.split(r"\nrule ", rules):
+        uses = {name for name in re.findall(r'caption="\.\./report/(\w+\.rst)"', block)}
+        if uses & {p.name for p in labelled}:
+            assert "metric_label=" in block, f"rule {block.split(':')[0]} renders a metric label it does not pass"
