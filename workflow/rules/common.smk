@@ -16,12 +16,11 @@ from mcbench import NOISY, BenchError  # noqa: E402
 from mcbench.pipeline.config import config_digest, resolve_config  # noqa: E402
 from mcbench.pipeline.plan import plan_study  # noqa: E402
 from mcbench.pipeline.render import folder_case_files, folder_reference_files  # noqa: E402
-from mcbench.analysis.metrics import ALL_METRICS  # noqa: E402
 from mcbench.analysis.study.figures import STUDY_FIGURES as STUDY_FIGURE_KEYS, curve_candidates, paper_recommended  # noqa: E402
 from mcbench.pipeline.resources import StudyRequests, load_job_costs  # noqa: E402
 from mcbench.io.method_spec import method_spec  # noqa: E402
 from mcbench.io.weights import COMMITTED_WEIGHTS, check_trained_features, file_sha256, is_learned_method  # noqa: E402
-from mcbench.pipeline.registry import load_method, load_scene  # noqa: E402
+from mcbench.pipeline.registry import available_metrics, load_method, load_metric, load_scene  # noqa: E402
 
 
 # The whole configuration: the config file (config.yaml or the --configfile) plus the schema's
@@ -60,6 +59,8 @@ POOL_NOTE = PLAN.ranking.pool_note
 PROGRESSIVE = dict(PLAN.side.progressive)
 LABELS = dict(PLAN.ranking.labels)
 METRIC_NAMES = list(PLAN.ranking.metrics)
+# how the report's captions name each metric: the label its plugin metrics/<name>.py declares
+METRIC_LABELS = {name: load_metric(name).label for name in METRIC_NAMES}
 REFERENCE_CHUNKS = PLAN.cases.reference_chunks
 # reference spp per configured scene: reference.scene_spp[scene] or reference.spp
 REFERENCE_SPP = dict(PLAN.cases.reference_spp)
@@ -71,7 +72,7 @@ wildcard_constraints:
     spp=r"\d+",
     chunk=r"\d+",
     seed=r"\d+",
-    metric="|".join(ALL_METRICS),
+    metric="|".join(available_metrics()),
 
 
 # The case jobs (run_case) run in warm worker processes (mcbench.pipeline.pool): their

@@ -28,6 +28,7 @@ rule comparison_onehot:
         ),
         table2_md=f"{RESULTS}/tables/comparisons/table2_{{metric}}.md",
     params:
+        metric_label=lambda wildcards: METRIC_LABELS[wildcards.metric],
         methods=COMPARISON_METHODS,
         labels=LABELS,
     threads: 1
@@ -83,6 +84,7 @@ rule comparison_ranking:
         ),
         md=f"{RESULTS}/tables/comparisons/ranking_{{metric}}.md",
     params:
+        metric_label=lambda wildcards: METRIC_LABELS[wildcards.metric],
         methods=COMPARISON_METHODS,
         labels=LABELS,
     threads: 1

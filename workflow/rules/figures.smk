@@ -22,6 +22,7 @@ rule error_curves:
             labels={"metric": "{metric}", "figure": "error against spp, per scene"},
         ),
     params:
+        metric_label=lambda wildcards: METRIC_LABELS[wildcards.metric],
         labels=LABELS,
         candidates=[NOISY] + CURVES,
     threads: 1
@@ -52,6 +53,7 @@ rule speed_error:
         labels=LABELS,
         inputs={name: list(spec.inputs) for name, spec in METHODS.items()},
         metric=SPEED_METRIC,
+        metric_label=METRIC_LABELS[SPEED_METRIC],
     threads: 1
     resources:
         **job_resources("speed_error"),

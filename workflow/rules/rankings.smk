@@ -17,6 +17,7 @@ rule ranking_table:
         md=f"{RESULTS}/tables/ranking_{{metric}}.md",
         tex=f"{RESULTS}/tables/ranking_{{metric}}.tex",
     params:
+        metric_label=lambda wildcards: METRIC_LABELS[wildcards.metric],
         candidates=[NOISY] + RANKED,
         labels=LABELS,
         order=RANKED + [NOISY] if POOL_STUDY else None,
@@ -49,6 +50,7 @@ rule extras_table:
         md=f"{RESULTS}/tables/extras_{{metric}}.md",
         tex=f"{RESULTS}/tables/extras_{{metric}}.tex",
     params:
+        metric_label=lambda wildcards: METRIC_LABELS[wildcards.metric],
         pool=[NOISY] + RANKED,
         extras=EXTRAS,
         labels=LABELS,
