@@ -95,12 +95,13 @@ def run_case(case: dict, *, threads: int = 1) -> dict:
     ``case`` (built by ``workflow/rules/common.smk``, JSON-able):
     ``scene``, ``spp``, ``render``, ``reference`` (paths), ``metrics`` (metric names),
     ``methods``: ``[{name, module, params, inputs, weights, exr, timing}]`` in dependency order
-    (``inputs``: method names; ``weights``: the weights file of a learned method, else None),
+    (``inputs``: method names; ``weights``: the weights file of a learned method, else None: the
+    file its key's digest covers is the file the method is handed),
     ``entries``: ``[{entry, image, values, viewer, weight_inputs}]`` (the noisy input first),
     ``outputs``: ``{metrics, viewer, record}`` (the case's metrics CSV, viewer folder, record).
     """
     from mcbench.io.weights import file_sha256
-    from mcbench.pipeline.methods import run_methods
+    from mcbench.pipeline.method_runs import run_methods
 
     scene, spp = case["scene"], int(case["spp"])
     render = content_checksum(case["render"])
@@ -119,7 +120,7 @@ def run_case(case: dict, *, threads: int = 1) -> dict:
     by_name = {method["name"]: method for method in case["methods"]}
     if stale:
         run_methods([{"name": m["name"], "module": m["module"], "params": m["params"], "key": keys[m["name"]],
-                      "input_paths": [by_name[i]["exr"] for i in m["inputs"]], "exr": m["exr"], "timing": m["timing"]}
+                      "weights": m.get("weights"), "input_paths": [by_name[i]["exr"] for i in m["inputs"]], "exr": m["exr"], "timing": m["timing"]}
                      for m in stale], case["render"], scene=scene, spp=spp, threads=threads)
     evaluated = _evaluate_case(case)
     _assemble_case(case, evaluated)

@@ -207,7 +207,8 @@ def valid_configs(draw, *, max_scenes: int = 4, max_spp: int = 4, max_denoisers:
             params = draw(params_strategy(module))
             if module == "ensemble" and not params and frozenset(inputs) in pool_sets:
                 continue
-            role = comparison_role({"module": module, "inputs": inputs, "params": params})
+            role = comparison_role({"module": module, "inputs": inputs, "params": params,
+                                    "comparison_role": methods.method_spec(methods.load_method(module)).comparison_role})
             if role is not None:
                 if (frozenset(inputs), role) in roles:
                     continue

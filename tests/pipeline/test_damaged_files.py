@@ -68,7 +68,7 @@ def _benchmark_record(path: Path, cpu_time: float) -> None:
 
 def build_case(tree: Path) -> None:
     """The finished case every damage starts from (see the module docstring)."""
-    from mcbench.pipeline.methods import run_methods
+    from mcbench.pipeline.method_runs import run_methods
     from mcbench.pipeline.metrics import compute_case_metrics, gather_tables
     from mcbench.pipeline.viewer import write_viewer_case
 
@@ -102,7 +102,7 @@ def build_case(tree: Path) -> None:
 # --- the jobs that read the case's files: name -> (files it reads, run(tree, out)) -----------------
 
 def _run_combiner(tree: Path, out: Path) -> None:
-    from mcbench.pipeline.methods import run_methods
+    from mcbench.pipeline.method_runs import run_methods
 
     entry = _entry(tree, "naive", "naive_average", BASES)
     entry.update(exr=str(out / "naive.exr"), timing=str(out / "naive.json"))
@@ -110,7 +110,7 @@ def _run_combiner(tree: Path, out: Path) -> None:
 
 
 def _run_ensemble(tree: Path, out: Path) -> None:   # reads its render and inputs by rows
-    from mcbench.pipeline.methods import run_methods
+    from mcbench.pipeline.method_runs import run_methods
 
     entry = _entry(tree, "ens", "ensemble", BASES)
     entry.update(exr=str(out / "ens.exr"), timing=str(out / "ens.json"))
@@ -118,7 +118,7 @@ def _run_ensemble(tree: Path, out: Path) -> None:   # reads its render and input
 
 
 def _run_base(tree: Path, out: Path) -> None:
-    from mcbench.pipeline.methods import run_methods
+    from mcbench.pipeline.method_runs import run_methods
 
     entry = _entry(tree, "jbf", "jbf")
     entry.update(exr=str(out / "jbf.exr"), timing=str(out / "jbf.json"))

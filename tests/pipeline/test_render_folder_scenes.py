@@ -118,7 +118,7 @@ def test_a_folder_with_every_layer_takes_every_method(folder_scenes):
 
 
 def test_imported_case_is_denoised_and_scored_like_a_render(folder_scenes, tmp_path):
-    from mcbench.pipeline.methods import run_methods
+    from mcbench.pipeline.method_runs import run_methods
     from mcbench.pipeline.metrics import compute_case_metrics
     from mcbench.pipeline.render import merge_reference, render_noisy
 

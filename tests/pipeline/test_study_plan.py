@@ -14,6 +14,7 @@ from mcbench.pipeline.plan import plan_study
 
 CONFIG = {"scenes": ["cornell_box", "glass_caustics"], "spp": [16, 4], "resolution": [16, 16],
           "denoisers": ["jbf", "oidn", "kpcn"], "study": {"pool": False}, "metrics": ["relmse", "smape"],
+          "weights_dir": "w",
           "combiners": [{"name": "ens", "method": "ensemble", "inputs": ["jbf", "oidn"]},
                         {"name": "avg", "method": "naive_average", "inputs": ["ens", "kpcn"]}]}
 
@@ -41,7 +42,7 @@ def test_the_plan_is_read_only(plan):
 
 
 def test_a_case_job_names_every_file_of_the_case(plan):
-    job = plan.case_job("glass_caustics", 4, weights_dir="w", outputs={"metrics": "m.csv", "viewer": "v", "record": "r.json"})
+    job = plan.case_job("glass_caustics", 4, outputs={"metrics": "m.csv", "viewer": "v", "record": "r.json"})
     assert job["render"] == "results/renders/glass_caustics/spp4.exr"
     assert job["reference"] == "results/references/glass_caustics.exr"
     by_name = {m["name"]: m for m in job["methods"]}
@@ -55,6 +56,15 @@ def test_a_case_job_names_every_file_of_the_case(plan):
     assert entries["avg"]["values"] == "results/metrics/glass_caustics/spp4/values/avg.json"
     assert entries["avg"]["viewer"] == "results/viewer_entries/glass_caustics/spp4/avg"
     assert job["outputs"] == {"metrics": "m.csv", "viewer": "v", "record": "r.json"}
+
+
+def test_the_weights_folder_comes_from_the_config_and_defaults_to_the_committed_one(plan):
+    from mcbench.io.weights import COMMITTED_WEIGHTS
+
+    assert plan.paths.weights_dir == "w" and plan.paths.weights("kpcn") == "w/kpcn.pt"
+    config = {key: value for key, value in CONFIG.items() if key != "weights_dir"}
+    default = plan_study(resolve_config(dict(config)), written=dict(config), source="test.yaml")
+    assert default.paths.weights("kpcn") == f"{COMMITTED_WEIGHTS}/kpcn.pt"
 
 
 def test_a_case_plan_carries_the_learned_methods_weights_digest(plan):
