@@ -9,6 +9,7 @@ import collections.abc
 import dataclasses
 import difflib
 import functools
+import re
 import typing
 from typing import Callable, Literal
 
@@ -95,4 +96,4 @@ def fits(value, hint) -> bool:
 
 def _type_name(hint) -> str:
     """``hint`` as written in the dataclass: ``bool``, ``Optional[tuple[str, ...]]``, ..."""
-    return hint.__name__ if isinstance(hint, type) else str(hint).replace("typing.", "").replace("collections.abc.", "")
+    return hint.__name__ if isinstance(hint, type) else re.sub(r"\b(?:[a-z_]\w*\.)+(?=\w)", "", str(hint))

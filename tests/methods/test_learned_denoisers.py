@@ -187,7 +187,7 @@ def test_committed_weights_reproduce_their_validation_loss(name, validation_scen
 def test_no_test_scene_is_a_training_scene():
     from mcbench.render.variants import pick_variant
     from mcbench.training_data import scene_fingerprint, training_scene_fingerprint
-    from scenes import available_scenes, load_scene
+    from scenes import available_scenes, load_scene, scene_spec
 
     seeds = set()
     for name in LEARNED_METHODS:      # the learned combiners too
@@ -197,5 +197,5 @@ def test_no_test_scene_is_a_training_scene():
         assert data["source"] == "procedural training scenes of mcbench.training_data (no test scene)"
         seeds.update(used)
     pick_variant("auto")
-    tests = {scene_fingerprint(load_scene(scene).build(16, 12)) for scene in available_scenes()}
+    tests = {scene_fingerprint(scene_spec(load_scene(scene)).build(16, 12)) for scene in available_scenes()}
     assert not tests & {training_scene_fingerprint(seed) for seed in seeds}

@@ -10,6 +10,8 @@ from mcbench import BenchError
 from mcbench.io.buffers import ALL_LAYERS, BIN_LAYERS, SUB_OUTPUTS, Denoised, RenderBuffers
 from mcbench.io.exr import read_layers, write_layers
 from mcbench.nn.data import BUFFER_KEYS, crop_render_layers, load_combiner_crops
+from mcbench.io.weights import COMMITTED_WEIGHTS
+from mcbench.pipeline.method_runs import method_function
 from mcbench.pipeline.training import write_correlated_training_inputs
 from methods import available_methods, load_method, method_spec
 
@@ -38,21 +40,21 @@ def test_kpcn_applies_each_image_kernel_to_its_sub_buffers(make_render_buffers):
     """KPCN's kernel is linear in the colour it filters and color = (sub0 + sub1) / 2, so its
     results on the two sub-buffers average to its result on the image (A from bins 0-1 with A's
     kernel, never B's samples); renders without bins get no sub-buffer results."""
-    kpcn = load_method("kpcn")
+    kpcn = method_function(load_method("kpcn"), weights_dir=COMMITTED_WEIGHTS)
     buffers = make_render_buffers(height=16, width=12, seed=5, bins=True, half_std=0.01)
     assert all(buffers.layers[n].min() >= 0 for n in BIN_LAYERS)   # radiance: KPCN clamps at 0
-    result = kpcn.denoise(buffers)
+    result = kpcn(buffers)
     for which in ("full", "a", "b"):
         sub0, sub1 = result.sub_outputs(which)
         np.testing.assert_allclose((sub0.astype(np.float64) + sub1) / 2, result.image(which), rtol=2e-4, atol=1e-5)
         assert not np.allclose(sub0, sub1)
     plain = make_render_buffers(height=16, width=12, seed=5)
-    plain_result = kpcn.denoise(plain)
+    plain_result = kpcn(plain)
     assert not plain_result.extras
     with pytest.raises(BenchError, match="sub-buffer"):
         plain_result.sub_outputs("a")
     # the same network and input: the image results do not depend on the sub-buffers
-    again = kpcn.denoise(RenderBuffers(layers={k: v for k, v in buffers.layers.items() if k not in BIN_LAYERS},
+    again = kpcn(RenderBuffers(layers={k: v for k, v in buffers.layers.items() if k not in BIN_LAYERS},
                                        spp=buffers.spp))
     np.testing.assert_array_equal(again.full, result.full)
 

@@ -97,7 +97,7 @@ def test_scene_renders_finite_at_every_spp(scene):
     """All of the paper's spp levels (and 2, one sample per half buffer) at 16x12 pixels."""
     module = load_scene(scene)
     pick_variant("auto")
-    described = repr(module.build(16, 12))
+    described = repr(scene_spec(module).build(16, 12))
     uses_medium = "'homogeneous'" in described or "'heterogeneous'" in described
     for spp in (2, 4, 8, 16, 32, 64, 128, 256, 512, 1024):
         layers, metadata = render_buffers(module, spp, resolution=(16, 12))

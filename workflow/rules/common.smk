@@ -19,7 +19,7 @@ from mcbench.pipeline.render import folder_case_files, folder_reference_files  #
 from mcbench.analysis.metrics import ALL_METRICS  # noqa: E402
 from mcbench.analysis.study.figures import STUDY_FIGURES as STUDY_FIGURE_KEYS, curve_candidates, paper_recommended  # noqa: E402
 from mcbench.pipeline.resources import StudyRequests, load_job_costs  # noqa: E402
-from mcbench.io.method_spec import method_spec  # noqa: E402
+from mcbench.contracts.method import method_spec  # noqa: E402
 from mcbench.io.weights import check_trained_features, file_sha256, is_learned_method  # noqa: E402
 from mcbench.pipeline.registry import load_method, load_scene  # noqa: E402
 
@@ -187,7 +187,7 @@ def train_network_inputs(wildcards):
 
 def combiner_bases(network):
     """The base denoisers a learned combiner is trained on (its declared ``correlated_bases``); () for a denoiser."""
-    return (method_spec(load_method(network)).correlated_bases or ()) if network in NETWORKS else ()
+    return (method_spec(load_method(network)).learned.correlated_bases or ()) if network in NETWORKS else ()
 
 
 def combiner_crop_files():
