@@ -57,11 +57,7 @@ def write_correlated_training_inputs(base: str, crop_paths: list[str], output_pa
 
     if threads:
         set_threads(threads)
-        try:
-            import torch
-            torch.set_num_threads(int(threads))
-        except ImportError:
-            pass
+        _torch_threads(int(threads))
     name, with_sure = (base[:-len(SURE_SUFFIX)], True) if base.endswith(SURE_SUFFIX) else (base, False)
     folder = weights_folder(weights_dir)
     denoise = method_function(load_method(name, kind="denoiser", config_key=f"base '{base}'"), weights_dir=folder)
@@ -98,6 +94,15 @@ def write_correlated_training_inputs(base: str, crop_paths: list[str], output_pa
         write_layers(output_path, out, metadata={"base": base, "seed": meta.get("seed", ""),
                                                  "crop": meta.get("crop", ""), "spp_levels": meta["spp_levels"],
                                                  "seconds": f"{time.perf_counter() - start:.3f}"})
+
+
+def _torch_threads(threads: int) -> None:
+    """torch's thread count, where torch is installed."""
+    try:
+        import torch
+    except ImportError:
+        return
+    torch.set_num_threads(threads)
 
 
 def learned_method(name: str):
