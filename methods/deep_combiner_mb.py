@@ -92,6 +92,7 @@ METHOD = MethodSpec(
         build_network=build_network,
         # tensors forward() needs beyond color, variance, albedo, normal, depth: name -> channels
         training_keys={"correlated": 3, "albedo_variance": 3, "normal_variance": 3, "depth_variance": 1,
-                       "color_sub": 3 * SUB_BUFFERS, "variance_sub": 3 * SUB_BUFFERS, "correlated_sub": 3 * SUB_BUFFERS},
+                       "color_sub": 3 * SUB_BUFFERS, "variance_sub": 3 * SUB_BUFFERS,
+                       "correlated_sub": 3 * SUB_BUFFERS},
         # bases that provide results on sub-buffers (Denoised.sub_outputs): only a kernel method can
         correlated_bases=("kpcn",)))

@@ -418,7 +418,8 @@ def main(argv: list[str] | None = None, *, load_method: Callable[[str], ModuleTy
     parser.add_argument("--data", default="results/training", help="folder of training crops")
     parser.add_argument("--steps", type=int, default=None, help="override the steps of its training settings")
     parser.add_argument("--checkpoint", default=None)
-    parser.add_argument("--weights-dir", default=None, help="folder of the weights (default: the committed methods/weights)")
+    parser.add_argument("--weights-dir", default=None,
+                        help="folder of the weights (default: the committed methods/weights)")
     args = parser.parse_args(argv)
     folder = weights_folder(args.weights_dir)
     try:

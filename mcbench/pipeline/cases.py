@@ -120,7 +120,8 @@ def run_case(case: dict, *, threads: int = 1) -> dict:
     by_name = {method["name"]: method for method in case["methods"]}
     if stale:
         run_methods([{"name": m["name"], "module": m["module"], "params": m["params"], "key": keys[m["name"]],
-                      "weights": m.get("weights"), "input_paths": [by_name[i]["exr"] for i in m["inputs"]], "exr": m["exr"], "timing": m["timing"]}
+                      "weights": m.get("weights"), "input_paths": [by_name[i]["exr"] for i in m["inputs"]],
+                      "exr": m["exr"], "timing": m["timing"]}
                      for m in stale], case["render"], scene=scene, spp=spp, threads=threads)
     evaluated = _evaluate_case(case)
     _assemble_case(case, evaluated)

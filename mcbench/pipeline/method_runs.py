@@ -199,9 +199,9 @@ def render_layers(modules) -> tuple[str, ...] | None:
 def needed_layers(module, *, halves: bool = True, params: dict | None = None) -> tuple[str, ...]:
     """The render layers a method cannot run without, checked against an imported render's when
     the DAG is parsed (:mod:`mcbench.pipeline.plan`): its declared ``render_layers``; or, for a
-    single-image denoiser declaring ``image_quantities`` (:class:`mcbench.contracts.method.MethodSpec`), those quantities
-    of the full image plus the halves' own colour (and variance, if it reads variance) when
-    ``halves`` (half-buffer features fall back to the full image's,
+    single-image denoiser declaring ``image_quantities`` (:class:`mcbench.contracts.method.MethodSpec`),
+    those quantities of the full image plus the halves' own colour (and variance, if it reads
+    variance) when ``halves`` (half-buffer features fall back to the full image's,
     :meth:`mcbench.io.buffers.RenderBuffers.image`); else every layer of
     :data:`mcbench.io.buffers.REQUIRED_LAYERS`; plus, with ``params``, the layers its
     ``params_layers`` hook names for them."""

@@ -41,8 +41,8 @@ What is rendered
 The renderer never looks up a scene by name (core does not import ``scenes/``): callers pass
 
 * a scene *module* (its declaration ``SCENE``, a :class:`mcbench.contracts.scene.SceneSpec`:
-  ``resolution``, ``build(width, height)``; see ``scenes/__init__.py``) to :func:`render_buffers` and :func:`render_reference_chunk`, which
-  use the test render seeds of :func:`mcbench.render.seeds.render_seed`; or
+  ``resolution``, ``build(width, height)``; see ``scenes/__init__.py``) to :func:`render_buffers`
+  and :func:`render_reference_chunk`, which use the test render seeds of :func:`mcbench.render.seeds.render_seed`; or
 * a Mitsuba scene *dict* (integrator and sensor included) with a caller-chosen ``key`` and
   seeds to :func:`render_dict_buffers` (noisy full/A/B buffers) or :func:`render_scene_sums`
   (float64 moment sums of one run of passes); the training data uses these.

@@ -5,11 +5,12 @@ Mitsuba scene dict (``scenes/__init__.py``). A Mitsuba 3 XML file ``scenes/<name
 assets beside it, paths relative to it) is a scene too: :func:`scene_module` gives it the same
 declaration, a :class:`mcbench.contracts.scene.SceneSpec` -- ``description`` (the file's first
 comment line, or its name), ``category`` ("xml"), ``resolution`` (its film's size) and
-``build(width, height)``, which returns an :class:`XmlScene` instead of a dict. The renderer (:mod:`mcbench.render.renderer`) wraps an XML scene as it wraps
-a dict (:func:`wrapped_xml`): the scene's own ``<integrator>`` goes inside ``moment(aov(...))``
-(sample moments and the albedo, normal and depth features), the film gets the requested size and
-a box filter (crop windows removed), the sensor an ``independent`` sampler; then Mitsuba loads
-the text with the file's folder on its search path. The file must hold one ``<sensor>`` with a
+``build(width, height)``, which returns an :class:`XmlScene` instead of a dict. The renderer
+(:mod:`mcbench.render.renderer`) wraps an XML scene as it wraps a dict (:func:`wrapped_xml`): the
+scene's own ``<integrator>`` goes inside ``moment(aov(...))`` (sample moments and the albedo,
+normal and depth features), the film gets the requested size and a box filter (crop windows
+removed), the sensor an ``independent`` sampler; then Mitsuba loads the text with the file's
+folder on its search path. The file must hold one ``<sensor>`` with a
 ``<film>`` and its own top-level ``<integrator>``; ``$name`` parameters keep their ``<default>``s.
 """
 
