@@ -40,6 +40,9 @@ def checked(cls: type | None = None, *, elsewhere: dict[str, str] | None = None)
         unknown = [key for key in fields if key not in field_names(cls)]
         if unknown:
             raise SpecError("; ".join(refusal(key) for key in unknown))
+        missing = [name for name in _required(cls) if name not in fields]
+        if missing and not args:
+            raise SpecError(f"{cls.__name__} needs the field(s) {', '.join(missing)}")
         init(self, *args, **fields)
         if post_init is None:           # the generated __init__ calls __post_init__ only if the class has one
             check(self)
@@ -56,6 +59,13 @@ def checked(cls: type | None = None, *, elsewhere: dict[str, str] | None = None)
     if post_init is not None:
         cls.__post_init__ = check
     return cls
+
+
+@functools.cache
+def _required(cls: type) -> tuple[str, ...]:
+    """The fields of dataclass ``cls`` without a default."""
+    return tuple(f.name for f in dataclasses.fields(cls)
+                 if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING)
 
 
 @functools.cache

@@ -317,6 +317,10 @@ def test_fields_that_go_together_and_misplaced_fields_are_refused():
         LearnedSpec(**_learned_fields(), critic={})
     with pytest.raises(SpecError, match="inputs, comparison_role are for a combiner"):
         MethodSpec(**_valid_fields(), inputs=1)
+    with pytest.raises(SpecError, match=r"MethodSpec needs the field\(s\) run"):
+        MethodSpec(kind="denoiser", label="Scratch")
+    with pytest.raises(SpecError, match=r"LearnedSpec needs the field\(s\) training"):
+        LearnedSpec(network={}, build_network=lambda **arch: None)
     with pytest.raises(SpecError, match="'label' must not be empty"):
         MethodSpec(**{**_valid_fields(), "label": ""})
     with pytest.raises(SpecError, match="field 'warm_up' must be bool"):
