@@ -248,7 +248,7 @@ def valid_configs(draw, *, max_scenes: int = 4, max_spp: int = 4, max_denoisers:
         "scene": st.one_of(st.none(), st.sampled_from(scenes)),
         "spp": st.lists(st.integers(1, 4096).map(lambda k: 2 * k), min_size=2, max_size=6, unique=True),
         "base": st.sampled_from(DENOISERS),
-        "divergence": st.sampled_from(SCHEMA["properties"]["progressive_curve"]["properties"]["divergence"]["enum"]),
+        "divergence": st.sampled_from(("none", *methods.single_image_methods())),
         "downscale": st.integers(1, 4)}))
     if curve or draw(st.booleans()):
         config["progressive_curve"] = curve
