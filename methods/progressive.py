@@ -97,7 +97,7 @@ from mcbench.filters import sure as sure_module
 from mcbench.filters.sure import divergence_map
 from mcbench.io.buffers import BUFFER_SUFFIXES, IMAGE_INDEX, Denoised, RenderBuffers
 from mcbench.contracts.method import LearnedSpec, MethodSpec, SingleImageDenoiser
-from methods import single_image_function
+from methods import load_method, method_spec, single_image_function
 
 # The base whose single-image function re-runs for the divergence, or none (module docstring).
 DivergenceBase = Literal["none"] | SingleImageDenoiser
@@ -126,11 +126,27 @@ def augment_batch(buffers: dict, rng) -> dict:
 
 # --------------------------------------------------------------------------- combination
 
+def _variant_suffix(*, sure_input: bool, f_act: bool) -> str:
+    return "" if sure_input and f_act else "_no_sure" if f_act else "_no_fact" if sure_input else "_no_sure_no_fact"
+
+
 def ablation_weights_path(weights_file: str | Path, *, sure_input: bool, f_act: bool) -> Path:
     """The weights of the network variant beside the full model's ``weights_file`` (``progressive.pt``)."""
-    suffix = "" if sure_input and f_act else "_no_sure" if f_act else "_no_fact" if sure_input else "_no_sure_no_fact"
     path = Path(weights_file)
-    return path.with_name(path.stem + suffix + path.suffix)
+    return path.with_name(path.stem + _variant_suffix(sure_input=sure_input, f_act=f_act) + path.suffix)
+
+
+def weights_read(params: dict) -> tuple[str, ...]:
+    """The weights files :func:`combine` reads with ``params``: its network variant's (none
+    without the network) and a learned divergence base's (re-run only with the SURE input)."""
+    network, sure_input = params.get("network", True), params.get("sure_input", True)
+    if not network:
+        return ()
+    own = (__name__.rsplit(".", 1)[-1] + _variant_suffix(sure_input=sure_input, f_act=params.get("f_act", True)),)
+    divergence = params.get("divergence", "none")
+    if sure_input and divergence != "none" and method_spec(load_method(divergence)).learned is not None:
+        return (*own, divergence)
+    return own
 
 
 def load_variant(weights_file: str | Path, *, sure_input: bool, f_act: bool):
@@ -236,6 +252,7 @@ METHOD = MethodSpec(
         training_keys={"correlated": 3, "divergence": 3},
         # trained on OIDN's results with their divergence term ("+sure": mcbench.pipeline.training
         # writes the divergence layers too, into results/training/correlated/oidn+sure/)
-        correlated_bases=("oidn+sure",)),
+        correlated_bases=("oidn+sure",),
+        weights_read=weights_read),
     render_layers=tuple(q + s for q in ("color", "variance", "albedo", "normal", "depth")
                         for s in BUFFER_SUFFIXES.values()))

@@ -53,6 +53,9 @@ class LearnedSpec:
       crops it is trained on.
     * ``training_keys`` -- a learned combiner's extra network inputs ``{key: channels}``
       (``mcbench.nn.data``).
+    * ``weights_read`` -- ``f(params) -> tuple[str, ...]``: the weights files (names in the
+      weights folder, without ``.pt``) the method reads with these params, when that is not just
+      its own (a variant's network, a learned base it re-runs); the case's key covers each.
 
     The method's ``run`` takes the keyword ``weights_file`` (:data:`WEIGHTS_ARGUMENT`): the runner
     passes the weights the case's key covers (``<weights_dir>/<name>.pt``).
@@ -66,6 +69,7 @@ class LearnedSpec:
     augment_batch: Optional[Callable] = None
     correlated_bases: Optional[tuple[str, ...]] = None
     training_keys: Optional[dict[str, int]] = None
+    weights_read: Optional[Callable] = None
 
     def __post_init__(self) -> None:
         if (self.critic is None) != (self.build_critic is None):

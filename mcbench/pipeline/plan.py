@@ -160,7 +160,7 @@ def _plan(config: dict, is_learned) -> StudyPlan:
                                           params=frozen_mapping(spec["params"]), inputs=tuple(spec["inputs"]),
                                           label=spec["label"], learned=spec["learned"],
                                           config_key=spec.get("config_key", ""),
-                                          comparison_role=spec.get("comparison_role"))
+                                          comparison_role=spec.get("comparison_role"), weights=_weights_read(spec))
                          for name, spec in methods.items()}),
         cases=CasePlan(scenes=tuple(scenes), spps=tuple(spps), reference_spp=frozen_mapping(reference_spp),
                        reference_chunks=reference_chunks, render_folders=frozen_mapping(render_folders),
@@ -356,6 +356,17 @@ def _oracle(config: dict, scenes: list[str], rendered: list[str],
                          f"('{scene}': {reference_spp[scene]} spp averaged over {downscale}x{downscale} blocks); "
                          f"lower oracle.spp or raise {_reference_key(config, scene)}")
     return scene, downscale
+
+
+def _weights_read(spec: dict) -> tuple[str, ...]:
+    """The weights files (names in the weights folder) a method of the method table reads: a
+    learned method's own, or what its declaration's ``weights_read`` says for its params."""
+    if not spec["learned"]:
+        return ()
+    declared = method_spec(load_method(spec["module"])).learned
+    if declared is None or declared.weights_read is None:
+        return (spec["module"],)
+    return tuple(declared.weights_read(dict(spec["params"])))
 
 
 def _progressive_curve(config: dict, scenes: list[str], rendered: list[str], reference_spp: dict[str, int],

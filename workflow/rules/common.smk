@@ -115,7 +115,7 @@ def _case_plan():
     for name, spec in METHODS.items():
         if spec.learned:
             check_weights(name)
-    return PLAN.case_plan({module: weights_digest_of(module) for module in PLAN.learned_modules()})
+    return PLAN.case_plan({name: weights_digest_of(name) for name in PLAN.weights_names()})
 
 
 def case_job(wildcards, output):
