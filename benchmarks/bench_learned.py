@@ -21,6 +21,7 @@ sys.path.insert(0, str(ROOT))
 import torch  # noqa: E402
 
 from mcbench.io.buffers import RenderBuffers  # noqa: E402
+from mcbench.io.weights import COMMITTED_WEIGHTS, weights_path  # noqa: E402
 from mcbench.nn.inference import load_network, run_network  # noqa: E402
 from mcbench.render.renderer import render_buffers  # noqa: E402
 from methods import load_method, oidn  # noqa: E402
@@ -39,7 +40,7 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3)
     args = parser.parse_args()
 
-    networks = {name: load_network(load_method(name)) for name in NETWORKS}
+    networks = {name: load_network(load_method(name).METHOD, weights_path(COMMITTED_WEIGHTS, name)) for name in NETWORKS}
     print(f"{'size':>5} {'threads':>7} {'method':>9} {'seconds':>9} {'vs OIDN':>8}")
     for size in args.sizes:
         layers, _ = render_buffers(load_scene(args.scene), args.spp, resolution=(size, size))

@@ -28,7 +28,7 @@ from mcbench.pipeline.config import read_config_file  # noqa: E402
 from mcbench.pipeline.resources import JobCost, estimate_job, job_request, load_job_costs  # noqa: E402
 from mcbench.io.weights import is_learned_method  # noqa: E402
 from methods import config_method_table  # noqa: E402
-from scenes import load_scene  # noqa: E402
+from scenes import load_scene, scene_spec  # noqa: E402
 
 MEASURED_RENDER_THREADS = 1
 
@@ -41,7 +41,7 @@ def planned_jobs(config: dict) -> list[dict]:
     chunks = config["reference"]["chunks"]
     jobs = []
     for scene in config["scenes"]:
-        width, height = config["resolution"] or load_scene(scene).RESOLUTION
+        width, height = config["resolution"] or scene_spec(load_scene(scene)).size
         pixels = int(width) * int(height)
         reference_spp = int(config["reference"]["scene_spp"].get(scene, config["reference"]["spp"]))
         jobs += [{"rule": "render_reference_chunk", "pixels": pixels, "entries": 1, "spp": reference_spp // chunks,
@@ -53,11 +53,11 @@ def planned_jobs(config: dict) -> list[dict]:
                       "spp": 0, "threads": 1} for name in methods]
             jobs += [{"rule": "evaluate_entry", "pixels": pixels, "entries": 1, "spp": 0, "threads": 1}] * (len(methods) + 1)
     oracle_scene = config["oracle"]["scene"] or config["scenes"][0]
-    width, height = config["resolution"] or load_scene(oracle_scene).RESOLUTION
+    width, height = config["resolution"] or scene_spec(load_scene(oracle_scene)).size
     jobs.append({"rule": "oracle_study", "pixels": int(width) * int(height), "entries": 1, "spp": 0, "threads": 1})
     if any(spec["module"] == "progressive" for spec in methods.values()):
         curve_scene = config["progressive_curve"]["scene"] or config["scenes"][0]
-        width, height = config["resolution"] or load_scene(curve_scene).RESOLUTION
+        width, height = config["resolution"] or scene_spec(load_scene(curve_scene)).size
         jobs.append({"rule": "progressive_curve", "pixels": int(width) * int(height), "entries": 1, "spp": 0,
                      "threads": 1})
     return jobs

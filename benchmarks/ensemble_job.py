@@ -2,7 +2,7 @@
 
     python benchmarks/ensemble_job.py RENDER.exr OUT.exr INPUT1.exr ... [--eager] [--param key=value ...]
 
-Like :func:`mcbench.pipeline.methods.run_methods` for a batch of ensembles: the render's
+Like :func:`mcbench.pipeline.method_runs.run_methods` for a batch of ensembles: the render's
 ``render_layers`` (declared in ``methods.ensemble.METHOD``) and each input's three images,
 ``methods.ensemble.combine``, write the output EXR (``write_layers``). Two ways to read them:
 

@@ -24,7 +24,7 @@ import pandas as pd
 from mcbench.pipeline.config import read_config_file
 from mcbench.render.renderer import REFERENCE_FEATURE_SPP, render_buffers, render_reference_chunk
 from mcbench.render.variants import pick_variant, set_threads
-from scenes import load_scene
+from scenes import load_scene, scene_spec
 
 CONVENTIONS = ("first_hit", "tungsten")
 
@@ -38,7 +38,7 @@ def _cpu_and_wall(function) -> tuple[float, float]:
 def measure_scene(scene: str, *, spp: int, repeats: int, resolution, variant: str) -> dict:
     """Best-of-``repeats`` CPU and wall seconds of one render of ``spp`` samples per convention."""
     module = load_scene(scene)
-    size = tuple(resolution) if resolution else tuple(module.RESOLUTION)
+    size = tuple(resolution) if resolution else scene_spec(module).size
     best = {c: (float("inf"), float("inf")) for c in CONVENTIONS}
     for features in CONVENTIONS:
         render_buffers(module, 4, resolution=size, variant=variant, features=features)

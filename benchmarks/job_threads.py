@@ -10,7 +10,7 @@ configuration runs ``--concurrent`` identical jobs at once (default 2, the defau
 CPU time (user + system, from ``wait4``), and the peak number of OS threads (``/proc/<pid>/status``
 polled every 20 ms). Two jobs:
 
-* ``methods`` -- :func:`mcbench.pipeline.methods.run_methods` on the case: OIDN, JBF and the
+* ``methods`` -- :func:`mcbench.pipeline.method_runs.run_methods` on the case: OIDN, JBF and the
   ensemble of both (OIDN's TBB pool, numba's OpenMP pool);
 * ``metrics`` -- the case job :func:`mcbench.pipeline.cases.run_case` with no method, evaluating the
   noisy input with every metric and its viewer images (HDR-FLIP's OpenMP pool, OpenBLAS under SciPy).
@@ -40,7 +40,7 @@ from mcbench.pipeline.threads import THREAD_COUNT_VARIABLES, WAIT_VARIABLES, thr
 JOBS = {
     "methods": """
 import json, sys
-from mcbench.pipeline.methods import run_methods
+from mcbench.pipeline.method_runs import run_methods
 render, out = sys.argv[1], sys.argv[2]
 entries = [dict(name=n, module=n, params={}, input_paths=[], exr=f"{out}/{n}.exr", timing=f"{out}/{n}.json")
            for n in ("oidn", "jbf")]

@@ -19,7 +19,7 @@ import yaml
 
 from mcbench.render.renderer import render_buffers
 from mcbench.render.variants import pick_variant, set_threads
-from scenes import load_scene
+from scenes import load_scene, scene_spec
 
 
 def main() -> None:
@@ -35,7 +35,7 @@ def main() -> None:
     rows = []
     for scene in config["scenes"]:
         module = load_scene(scene)
-        resolution = tuple(config["resolution"]) if config.get("resolution") else tuple(module.RESOLUTION)
+        resolution = tuple(config["resolution"]) if config.get("resolution") else scene_spec(module).size
         render_buffers(module, 2, resolution=resolution, variant=variant)
         start = time.perf_counter()
         render_buffers(module, args.spp, resolution=resolution, variant=variant)

@@ -47,7 +47,7 @@ def repeated(paths: list, count: int) -> list:
 def child(args: argparse.Namespace) -> None:
     """Train one network as the job does; print one JSON line (items, seconds, files read)."""
     sys.path.insert(0, str(Path(args.code).resolve()))
-    from mcbench.io.method_spec import method_spec
+    from mcbench.contracts.method import method_spec
     from mcbench.nn.data import crop_paths
     from mcbench.nn.train import correlated_paths
     from mcbench.pipeline.training import learned_method, train_learned_method
@@ -57,7 +57,7 @@ def child(args: argparse.Namespace) -> None:
     correlated = None
     count = args.crops
     if spec.kind == "combiner":
-        files, correlated = correlated_paths(args.data, spec.correlated_bases, files)
+        files, correlated = correlated_paths(args.data, spec.learned.correlated_bases, files)
         count = args.combiner_crops
     available = len(files)
     files = repeated(files, count)

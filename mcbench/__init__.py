@@ -7,8 +7,9 @@ higher one. The declaration is the import-linter contracts of ``pyproject.toml``
 
 * ``mcbench`` itself: :class:`BenchError`, :mod:`mcbench.jit` (numba with an on-disk cache),
   :mod:`mcbench.progress` (progress lines of long jobs); every layer may use them;
-* :mod:`mcbench.io` -- EXR files, render buffers, tables and JSON records, network-weight files,
-  the method plugin contract (:mod:`mcbench.io.method_spec`);
+* :mod:`mcbench.contracts` -- the plugins' declarations: a method's ``MethodSpec`` (a learned
+  method's ``LearnedSpec``), a scene's ``SceneSpec``;
+* :mod:`mcbench.io` -- EXR files, render buffers, tables and JSON records, network-weight files;
 * :mod:`mcbench.filters` -- image filters any method may use: bilateral, NL-means, SURE;
 * :mod:`mcbench.render` -- Mitsuba rendering, seeds, scene geometry, hair curves, variants;
 * :mod:`mcbench.combine` -- per-pixel weighting of several images: simplex solvers,

@@ -1,8 +1,8 @@
 """Method registry: one module per base denoiser or combiner.
 
 A method module declares itself in one module-level object, ``METHOD``, a
-:class:`mcbench.io.method_spec.MethodSpec` (the contract: every hook and flag with its type,
-default and meaning is a field there), e.g.::
+:class:`mcbench.contracts.method.MethodSpec` (the contract: every hook and flag with its type,
+default and meaning is a field there; a learned method adds ``learned=LearnedSpec(...)``), e.g.::
 
     METHOD = MethodSpec(kind="denoiser", label="#6 OIDN", run=denoise, denoise_image=denoise_image,
                         image_quantities=("color", "albedo", "normal"))
@@ -25,11 +25,12 @@ Config parameters are the keyword-only parameters of ``run``, each annotated (``
 then the declaration's ``check_config``), so a misspelt key or a value outside the choices stops
 the run before any job, naming e.g. ``combiners[3].params.solvr``.
 
-A learned method (``network``, ``training``, ``build_network`` declared) imports torch only inside
-``build_network``/``denoise``: its ``nn.Module`` classes are defined by a cached
+A learned method (``learned=LearnedSpec(network=..., build_network=..., training=...)``) imports
+torch only inside ``build_network``/``denoise``: its ``nn.Module`` classes are defined by a cached
 ``network_classes()`` function on first use, so importing the module (as parsing the DAG does)
-never imports torch; its ``denoise`` calls
-``mcbench.nn.inference.denoise_with_network(sys.modules[__name__], buffers)``.
+never imports torch. Its ``run`` takes the keyword ``weights_file`` (the runner passes it) and
+hands it with ``METHOD`` to the shared inference of :mod:`mcbench.nn.inference`
+(``denoise_with_network(METHOD, buffers, weights_file)``).
 
 Adding a method is one new file here plus one line in ``config.yaml``.
 """
@@ -48,11 +49,13 @@ from typing import Callable
 
 from mcbench import NOISY, NOISY_LABEL, BenchError  # NOISY*: re-exported
 from mcbench.io.buffers import denoise_each_buffer  # re-exported: single-image methods call it
-from mcbench.io.method_spec import KINDS, MethodSpec, MethodSpecError, method_spec, stray_hooks  # re-exported
+from mcbench.contracts.fields import SpecError
+from mcbench.contracts.method import KINDS, WEIGHTS_ARGUMENT, MethodSpec, SingleImageDenoiser, method_spec, stray_hooks
 from mcbench.analysis.pool import candidate, expand_methods
 
 __all__ = ["KINDS", "MethodSpec", "method_spec", "NOISY", "NOISY_LABEL", "UnknownMethodError", "available_methods", "load_method",
-           "denoise_each_buffer", "single_image_function", "method_parameters", "check_params", "method_table", "config_method_table"]
+           "denoise_each_buffer", "single_image_methods", "single_image_function", "method_parameters", "check_params",
+           "method_table", "config_method_table"]
 
 class UnknownMethodError(BenchError):
     """A config key names a method that has no module in ``methods/``."""
@@ -75,7 +78,7 @@ def load_method(name: str, kind: str | None = None, config_key: str = "config") 
             f"{config_key}: unknown method '{name}'; available: {', '.join(available_methods())}")
     try:
         module = importlib.import_module(f"{__name__}.{name}")
-    except MethodSpecError as exc:       # raised by the declaration while the module imports
+    except SpecError as exc:       # raised by the declaration while the module imports
         raise UnknownMethodError(f"{config_key}: methods/{name}.py: {exc}") from None
     try:
         spec = method_spec(module)
@@ -90,23 +93,31 @@ def load_method(name: str, kind: str | None = None, config_key: str = "config") 
     return module
 
 
-def single_image_function(name: str, *, choices=None) -> Callable:
+@functools.cache
+def single_image_methods() -> tuple[str, ...]:
+    """The denoisers that run on one image alone (:attr:`MethodSpec.single_image`: a declared
+    ``denoise_image`` or a learned denoiser's network), from every module's declaration."""
+    return tuple(name for name in available_methods()
+                 if method_spec(load_method(name, config_key=f"methods/{name}.py")).single_image)
+
+
+def single_image_function(name: str, *, weights_dir) -> Callable:
     """Base denoiser ``name`` as a function of one :class:`mcbench.io.buffers.ImageBuffers` ->
     (H, W, 3) radiance: its declared ``denoise_image`` (default params), or a learned denoiser's
-    committed network (:func:`mcbench.nn.inference.run_network`). A :class:`BenchError` for a method
-    without one (NFOR and RDFC filter the half buffers jointly; combiners), naming ``choices``
-    (the names a caller supports) when given."""
+    network with the weights ``<weights_dir>/<name>.pt`` (:func:`mcbench.nn.inference.image_function`).
+    A :class:`BenchError` naming the single-image denoisers for any other method."""
     module = load_method(name, kind="denoiser", config_key=f"single-image base '{name}'")
     spec = method_spec(module)
     if spec.denoise_image is not None:
         return spec.denoise_image
-    if spec.learned:
-        from mcbench.nn.inference import load_network, run_network
+    if spec.learned is not None:
+        from pathlib import Path
 
-        network = load_network(module)
-        return lambda image: run_network(network, image)
-    known = f"; one of {', '.join(c for c in choices if c != 'none')}" if choices else ""
-    raise BenchError(f"{name} has no single-image function (it filters the half buffers jointly){known}")
+        from mcbench.nn.inference import image_function
+
+        return image_function(spec, Path(weights_dir) / f"{name}.pt")
+    raise BenchError(f"{name} has no single-image function (it filters the half buffers jointly); "
+                     f"one of {', '.join(single_image_methods())}")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -117,16 +128,21 @@ _POSITIONAL = {"denoiser": 1, "combiner": 2}   # denoise(buffers, ...), combine(
 
 def method_parameters(module: ModuleType) -> dict[str, inspect.Parameter]:
     """The config parameters of a method: the keyword parameters of its declared ``run``
-    (``denoise``/``combine``) after the positional ``buffers`` (and ``inputs``)."""
+    (``denoise``/``combine``) after the positional ``buffers`` (and ``inputs``), but for the
+    weights a learned method receives from the runner (``weights_file``)."""
     spec = method_spec(module)
     parameters = list(inspect.signature(spec.run).parameters.values())[_POSITIONAL[spec.kind]:]
-    return {p.name: p for p in parameters if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)}
+    return {p.name: p for p in parameters
+            if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY) and p.name != WEIGHTS_ARGUMENT}
 
 
 def _allowed(value, hint) -> bool:
     """Whether ``value`` (from YAML) fits the annotation ``hint``: ``Literal[...]`` values,
-    ``bool``, ``int`` (not bool), ``float`` (int or float, not bool), ``str``, unions of these;
+    ``bool``, ``int`` (not bool), ``float`` (int or float, not bool), ``str``,
+    :data:`SingleImageDenoiser` (a name of :func:`single_image_methods`), unions of these;
     any other annotation is not checked here."""
+    if hint is SingleImageDenoiser:
+        return isinstance(value, str) and value in single_image_methods()
     origin = typing.get_origin(hint)
     if origin is typing.Literal:
         return any(value == choice and type(value) is type(choice) for choice in typing.get_args(hint))
@@ -149,6 +165,10 @@ def _allowed(value, hint) -> bool:
 
 
 def _describe(hint) -> str:
+    if hint is SingleImageDenoiser:
+        return "a single-image denoiser (" + ", ".join(single_image_methods()) + ")"
+    if typing.get_origin(hint) in (typing.Union, types.UnionType):
+        return " or ".join(_describe(arg) for arg in typing.get_args(hint))
     if typing.get_origin(hint) is typing.Literal:
         return "one of " + ", ".join(repr(v) for v in typing.get_args(hint))
     if typing.get_origin(hint) is list:
@@ -254,7 +274,8 @@ def method_table(denoisers: list, combiners: list, *, is_learned: Callable[[Modu
                              f"input(s), got {len(inputs)}")
         table[name] = {"kind": kind, "module": module.__name__.split(".")[-1], "params": params,
                        "inputs": inputs, "label": entry.get("label") or _default_label(module, inputs, params),
-                       "learned": bool(is_learned(module)), "config_key": key}
+                       "learned": bool(is_learned(module)), "config_key": key,
+                       "comparison_role": method_spec(module).comparison_role}
         explicit_label[name] = bool(entry.get("label"))
     labels = {NOISY_LABEL: NOISY}
     for name, spec in table.items():

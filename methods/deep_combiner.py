@@ -9,7 +9,7 @@ estimate z (the base's output on the same image),
 ``β_c = z_c + Σ_{i∈Ω'_c} w_i (y_i − z_i) / W_c`` (:func:`mcbench.nn.combination.combine_single`;
 the weights are a softmax, so positive with W_c = 1). The combination works on linear radiance;
 the network sees log-compressed inputs. One network serves every base in
-``METHOD.correlated_bases`` (the paper trains one network for all its correlated inputs).
+``METHOD.learned.correlated_bases`` (the paper trains one network for all its correlated inputs).
 
 Network inputs (24 channels, :func:`mcbench.nn.combination.image_inputs`): log(1+y), log(1+z),
 log(1+y) − log(1+z), y's log-space noise level, albedo, normal, normalised depth, and the
@@ -40,12 +40,10 @@ Training: 2000 steps of batch 8, 48² patches, relMSE.
 
 from __future__ import annotations
 
-import sys
 from functools import cache
 from types import SimpleNamespace
 
-from mcbench import BenchError
-from mcbench.io.method_spec import MethodSpec
+from mcbench.contracts.method import LearnedSpec, MethodSpec
 
 @cache
 def network_classes() -> SimpleNamespace:
@@ -58,7 +56,7 @@ def network_classes() -> SimpleNamespace:
         logit_network
 
     class DeepCombinerNetwork(nn.Module):
-        """batch (dict of (N, C, H, W): color, variance, albedo, normal, depth and METHOD.training_keys)
+        """batch (dict of (N, C, H, W): color, variance, albedo, normal, depth and METHOD.learned.training_keys)
         -> combined radiance (N, 3, H, W)."""
 
         def __init__(self, channels: int = 48, layers: int = 6, dilated_layers: int = 2, window: int = 15):
@@ -76,27 +74,26 @@ def network_classes() -> SimpleNamespace:
 
 
 def build_network(**arch):
-    """A ``torch.nn.Module`` deep combiner of architecture ``arch`` (keys of METHOD.network)."""
+    """A ``torch.nn.Module`` deep combiner of architecture ``arch`` (keys of METHOD.learned.network)."""
     return network_classes().DeepCombinerNetwork(**arch)
 
 
-def combine(buffers, inputs):
+def combine(buffers, inputs, *, weights_file):
     """The deep combiner on the full image and on each half buffer; ``inputs`` is exactly one
     base's :class:`mcbench.io.buffers.Denoised`. Each image uses only its own noisy samples and the
     base's result on that image (A never sees B's samples)."""
-    if len(inputs) != METHOD.inputs:
-        raise BenchError(f"deep_combiner combines exactly {METHOD.inputs} base denoiser, got {len(inputs)} inputs")
     from mcbench.nn.inference import combine_with_network
 
-    return combine_with_network(sys.modules[__name__], buffers, inputs)
+    return combine_with_network(METHOD, buffers, inputs, weights_file)
 
 
 METHOD = MethodSpec(
     kind="combiner", label="Deep combiner† (ours, scaled, trained on our scenes)", run=combine, inputs=1,
-    network={"channels": 48, "layers": 6, "dilated_layers": 2, "window": 15},
-    training={"steps": 2000, "batch_size": 8, "patch": 48, "learning_rate": 5e-4, "loss": "relmse"},
-    build_network=build_network,
-    # tensors forward() needs beyond color, variance, albedo, normal, depth: name -> channels
-    training_keys={"correlated": 3, "albedo_variance": 3, "normal_variance": 3, "depth_variance": 1},
-    # the bases whose outputs the network is trained on as z (one network for all of them)
-    correlated_bases=("nfor", "kpcn", "oidn"))
+    learned=LearnedSpec(
+        network={"channels": 48, "layers": 6, "dilated_layers": 2, "window": 15},
+        training={"steps": 2000, "batch_size": 8, "patch": 48, "learning_rate": 5e-4, "loss": "relmse"},
+        build_network=build_network,
+        # tensors forward() needs beyond color, variance, albedo, normal, depth: name -> channels
+        training_keys={"correlated": 3, "albedo_variance": 3, "normal_variance": 3, "depth_variance": 1},
+        # the bases whose outputs the network is trained on as z (one network for all of them)
+        correlated_bases=("nfor", "kpcn", "oidn")))

@@ -31,12 +31,10 @@ the single-buffer combiner's).
 
 from __future__ import annotations
 
-import sys
 from functools import cache
 from types import SimpleNamespace
 
-from mcbench import BenchError
-from mcbench.io.method_spec import MethodSpec
+from mcbench.contracts.method import LearnedSpec, MethodSpec
 
 SUB_BUFFERS = 2
 
@@ -52,7 +50,7 @@ def network_classes() -> SimpleNamespace:
         combine_multi, image_inputs, logit_network, split_sub_buffers, sub_buffer_inputs
 
     class MultiBufferCombinerNetwork(nn.Module):
-        """batch (dict of (N, C, H, W): color, variance, albedo, normal, depth and METHOD.training_keys)
+        """batch (dict of (N, C, H, W): color, variance, albedo, normal, depth and METHOD.learned.training_keys)
         -> combined radiance (N, 3, H, W)."""
 
         def __init__(self, channels: int = 48, layers: int = 6, dilated_layers: int = 2, window: int = 15):
@@ -73,28 +71,28 @@ def network_classes() -> SimpleNamespace:
 
 
 def build_network(**arch):
-    """A ``torch.nn.Module`` multi-buffer deep combiner of architecture ``arch`` (keys of METHOD.network)."""
+    """A ``torch.nn.Module`` multi-buffer deep combiner of architecture ``arch`` (keys of METHOD.learned.network)."""
     return network_classes().MultiBufferCombinerNetwork(**arch)
 
 
-def combine(buffers, inputs):
+def combine(buffers, inputs, *, weights_file):
     """The multi-buffer deep combiner on the full image and on each half buffer, each from its
     own two sub-buffers and ``inputs[0]``'s results on them (exactly one base, e.g. kpcn)."""
-    if len(inputs) != METHOD.inputs:
-        raise BenchError(f"deep_combiner_mb combines exactly {METHOD.inputs} base denoiser, got {len(inputs)} inputs")
     from mcbench.nn.inference import combine_with_network
 
-    return combine_with_network(sys.modules[__name__], buffers, inputs)
+    return combine_with_network(METHOD, buffers, inputs, weights_file)
 
 
 METHOD = MethodSpec(
     kind="combiner", label="Deep combiner, multi-buffer† (ours, scaled, trained on our scenes)", run=combine,
     inputs=1,
-    network={"channels": 48, "layers": 6, "dilated_layers": 2, "window": 15},
-    training={"steps": 1100, "batch_size": 8, "patch": 48, "learning_rate": 5e-4, "loss": "relmse"},
-    build_network=build_network,
-    # tensors forward() needs beyond color, variance, albedo, normal, depth: name -> channels
-    training_keys={"correlated": 3, "albedo_variance": 3, "normal_variance": 3, "depth_variance": 1,
-                   "color_sub": 3 * SUB_BUFFERS, "variance_sub": 3 * SUB_BUFFERS, "correlated_sub": 3 * SUB_BUFFERS},
-    # bases that provide results on sub-buffers (Denoised.sub_outputs): only a kernel method can
-    correlated_bases=("kpcn",))
+    learned=LearnedSpec(
+        network={"channels": 48, "layers": 6, "dilated_layers": 2, "window": 15},
+        training={"steps": 1100, "batch_size": 8, "patch": 48, "learning_rate": 5e-4, "loss": "relmse"},
+        build_network=build_network,
+        # tensors forward() needs beyond color, variance, albedo, normal, depth: name -> channels
+        training_keys={"correlated": 3, "albedo_variance": 3, "normal_variance": 3, "depth_variance": 1,
+                       "color_sub": 3 * SUB_BUFFERS, "variance_sub": 3 * SUB_BUFFERS,
+                       "correlated_sub": 3 * SUB_BUFFERS},
+        # bases that provide results on sub-buffers (Denoised.sub_outputs): only a kernel method can
+        correlated_bases=("kpcn",)))

@@ -88,7 +88,7 @@ from mcbench.combine.simplex_solvers.problem import SOLVERS
 from mcbench.combine.weight_filter import FILTER_PARAMETERS
 from mcbench.filters.bilateral import COLOUR_DISTANCES
 from mcbench.io.buffers import Denoised, RenderBuffers
-from mcbench.io.method_spec import MethodSpec
+from mcbench.contracts.method import MethodSpec
 
 # the choices combine() validates (owned by mcbench.combine; here for its annotations):
 # SOLVERS, STARTS, WEIGHTS, CHANNELS, GUIDE_VARIANCE_BLURS, COLOUR_DISTANCES, OUTLIER_PASSES,
@@ -166,7 +166,7 @@ def check_config(params: dict, *, config_key: str) -> None:
 
 
 METHOD = MethodSpec(
-    kind="combiner", label="Ensemble", run=combine, check_config=check_config,
+    kind="combiner", label="Ensemble", run=combine, check_config=check_config, comparison_role="ensemble",
     # what combine() reads of the render: the noisy halves (Eq. 11-14) and the filter's features
     render_layers=("color_a", "color_b", "albedo", "normal"),
     # combine() only ever indexes the render's layers and the inputs' images by rows (x[y0:y1]), so a

@@ -31,7 +31,7 @@ from pathlib import Path
 from mcbench.io.buffers import BUFFER_SUFFIXES, Denoised, RenderBuffers
 from mcbench.io.case_folders import write_case, write_image
 from mcbench.io.external_program import check_command, expand_command, read_results, run_program
-from mcbench.io.method_spec import MethodSpec
+from mcbench.contracts.method import MethodSpec
 
 _IMAGE_FILES = {"full": "{name}.exr", "a": "{name}A.exr", "b": "{name}B.exr"}
 _seconds: list[float] = []

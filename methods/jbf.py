@@ -32,7 +32,7 @@ import numpy as np
 from mcbench.filters.bilateral import cross_bilateral_filter
 from mcbench.io.buffers import ImageBuffers, RenderBuffers
 from methods import denoise_each_buffer
-from mcbench.io.method_spec import MethodSpec
+from mcbench.contracts.method import MethodSpec
 
 
 

@@ -36,10 +36,9 @@ training data          600 production frames,       our 112 procedural scenes, 2
 
 from __future__ import annotations
 
-import sys
 from functools import cache
 from types import SimpleNamespace
-from mcbench.io.method_spec import MethodSpec
+from mcbench.contracts.method import LearnedSpec, MethodSpec
 
 INPUT_CHANNELS = 31
 
@@ -93,11 +92,11 @@ def network_classes() -> SimpleNamespace:
 
 
 def build_network(**arch):
-    """A ``torch.nn.Module`` KPCN of architecture ``arch`` (keys of METHOD.network)."""
+    """A ``torch.nn.Module`` KPCN of architecture ``arch`` (keys of METHOD.learned.network)."""
     return network_classes().KernelPredictingNetwork(**arch)
 
 
-def denoise(buffers):
+def denoise(buffers, *, weights_file):
     """KPCN on the full buffer and on each half buffer (three inferences, as Zheng et al. ran it);
     for renders with sample bins also each image's kernel applied to its two sub-buffers."""
     from mcbench.io.buffers import SUB_OUTPUTS, Denoised
@@ -105,8 +104,8 @@ def denoise(buffers):
                                       load_network, tensor_image)
 
     if not buffers.has_sub_buffers():
-        return denoise_with_network(sys.modules[__name__], buffers)
-    network = load_network(sys.modules[__name__])
+        return denoise_with_network(METHOD, buffers, weights_file)
+    network = load_network(METHOD, weights_file)
     images, extras = {}, {}
     with deterministic_inference():
         for which in ("full", "a", "b"):
@@ -119,6 +118,6 @@ def denoise(buffers):
 
 METHOD = MethodSpec(
     kind="denoiser", label="#1 KPCN† (ours, scaled, trained on our scenes)", run=denoise,
-    network={"channels": 48, "layers": 9, "kernel_size": 13},
-    training={"steps": 6000, "batch_size": 8, "patch": 64, "learning_rate": 5e-4, "loss": "l1_log"},
-    build_network=build_network)
+    learned=LearnedSpec(network={"channels": 48, "layers": 9, "kernel_size": 13}, build_network=build_network,
+                        training={"steps": 6000, "batch_size": 8, "patch": 64, "learning_rate": 5e-4,
+                                  "loss": "l1_log"}))

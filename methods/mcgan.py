@@ -26,10 +26,9 @@ deeper and wider, with 256² patches); one critic step per generator step.
 
 from __future__ import annotations
 
-import sys
 from functools import cache
 from types import SimpleNamespace
-from mcbench.io.method_spec import MethodSpec
+from mcbench.contracts.method import LearnedSpec, MethodSpec
 
 
 
@@ -106,25 +105,26 @@ def network_classes() -> SimpleNamespace:
 
 
 def build_network(**arch):
-    """The generator (a ``torch.nn.Module``) of architecture ``arch`` (keys of METHOD.network)."""
+    """The generator (a ``torch.nn.Module``) of architecture ``arch`` (keys of METHOD.learned.network)."""
     return network_classes().Generator(**arch)
 
 
 def build_critic(**arch):
-    """The WGAN-GP critic of architecture ``arch`` (keys of METHOD.critic)."""
+    """The WGAN-GP critic of architecture ``arch`` (keys of METHOD.learned.critic)."""
     return network_classes().Critic(**arch)
 
 
-def denoise(buffers):
+def denoise(buffers, *, weights_file):
     """MCGAN's generator on the full buffer and on each half buffer."""
     from mcbench.nn.inference import denoise_with_network
 
-    return denoise_with_network(sys.modules[__name__], buffers)
+    return denoise_with_network(METHOD, buffers, weights_file)
 
 
 METHOD = MethodSpec(
     kind="denoiser", label="#3 MCGAN† (ours, scaled, trained on our scenes)", run=denoise,
-    network={"channels": 32, "blocks": 6, "condition_channels": 32},
-    training={"steps": 5000, "batch_size": 8, "patch": 64, "learning_rate": 5e-4, "loss": "l1_log",
-              "adversarial_weight": 0.005, "gradient_penalty": 10.0, "critic_learning_rate": 1e-4},
-    build_network=build_network, critic={"channels": 32}, build_critic=build_critic)
+    learned=LearnedSpec(
+        network={"channels": 32, "blocks": 6, "condition_channels": 32}, build_network=build_network,
+        training={"steps": 5000, "batch_size": 8, "patch": 64, "learning_rate": 5e-4, "loss": "l1_log",
+                  "adversarial_weight": 0.005, "gradient_penalty": 10.0, "critic_learning_rate": 1e-4},
+        critic={"channels": 32}, build_critic=build_critic))

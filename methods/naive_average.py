@@ -12,7 +12,7 @@ import numpy as np
 
 from mcbench.io.buffers import Denoised, RenderBuffers
 from mcbench.combine.selection import check_finite_arrays
-from mcbench.io.method_spec import MethodSpec
+from mcbench.contracts.method import MethodSpec
 
 
 
@@ -34,4 +34,4 @@ def combine(buffers: RenderBuffers, inputs: list[Denoised]) -> Denoised:
     return Denoised(full=means["full"], a=means["a"], b=means["b"])
 
 
-METHOD = MethodSpec(kind="combiner", label="Naive average", run=combine)
+METHOD = MethodSpec(kind="combiner", label="Naive average", run=combine, comparison_role="naive average")

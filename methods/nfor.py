@@ -115,7 +115,7 @@ from mcbench.jit import cached_njit
 from mcbench.filters.nlmeans import (BORDER_MODES, CHANNEL_MODES, guide_planes, nl_means_filter,
                                      nl_means_window_weights)
 from mcbench.progress import StageLog
-from mcbench.io.method_spec import MethodSpec
+from mcbench.contracts.method import MethodSpec
 
 NLM_EPSILON = 1e-10
 NLM_ALPHA = 1.0

@@ -14,7 +14,7 @@ import numpy as np
 
 from mcbench.io.buffers import ImageBuffers, RenderBuffers
 from methods import denoise_each_buffer
-from mcbench.io.method_spec import MethodSpec
+from mcbench.contracts.method import MethodSpec
 
 Quality = Literal["high", "balanced", "fast", "default"]   # OIDN's filter qualities
 

@@ -43,7 +43,7 @@ import numpy as np
 
 from mcbench.combine import selection as sel
 from mcbench.io.buffers import Denoised, RenderBuffers
-from mcbench.io.method_spec import MethodSpec
+from mcbench.contracts.method import MethodSpec
 
 PREFILTERS = ("none", "sbf", "nfor", "post")
 IMAGES = ("full", "a", "b")
@@ -91,4 +91,4 @@ def combine(buffers: RenderBuffers, inputs: list[Denoised], *,
     return Denoised(full=out["full"], a=out["a"], b=out["b"], extras=extras)
 
 
-METHOD = MethodSpec(kind="combiner", label="One-hot selection", run=combine)
+METHOD = MethodSpec(kind="combiner", label="One-hot selection", run=combine, comparison_role="one-hot selection")

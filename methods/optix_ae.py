@@ -24,10 +24,9 @@ Scaling against Chaitanya et al.: single frames, no recurrent connections (our r
 
 from __future__ import annotations
 
-import sys
 from functools import cache
 from types import SimpleNamespace
-from mcbench.io.method_spec import MethodSpec
+from mcbench.contracts.method import LearnedSpec, MethodSpec
 
 INPUT_CHANNELS = 11
 
@@ -82,19 +81,19 @@ def network_classes() -> SimpleNamespace:
 
 
 def build_network(**arch):
-    """The autoencoder (a ``torch.nn.Module``) of architecture ``arch`` (keys of METHOD.network)."""
+    """The autoencoder (a ``torch.nn.Module``) of architecture ``arch`` (keys of METHOD.learned.network)."""
     return network_classes().DenoisingAutoencoder(**arch)
 
 
-def denoise(buffers):
+def denoise(buffers, *, weights_file):
     """The autoencoder on the full buffer and on each half buffer."""
     from mcbench.nn.inference import denoise_with_network
 
-    return denoise_with_network(sys.modules[__name__], buffers)
+    return denoise_with_network(METHOD, buffers, weights_file)
 
 
 METHOD = MethodSpec(
     kind="denoiser", label="#7 OptiX† (our autoencoder, a stand-in)", run=denoise,
-    network={"widths": [32, 48, 64, 80], "bottleneck": 96},
-    training={"steps": 10000, "batch_size": 8, "patch": 64, "learning_rate": 5e-4, "loss": "l1_log_gradient"},
-    build_network=build_network)
+    learned=LearnedSpec(network={"widths": [32, 48, 64, 80], "bottleneck": 96}, build_network=build_network,
+                        training={"steps": 10000, "batch_size": 8, "patch": 64, "learning_rate": 5e-4,
+                                  "loss": "l1_log_gradient"}))

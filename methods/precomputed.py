@@ -19,7 +19,7 @@ import numpy as np
 
 from mcbench.io.buffers import Denoised, RenderBuffers
 from mcbench.io.case_folders import RESULT_PATTERN, check_result_pattern, read_image, result_files
-from mcbench.io.method_spec import MethodSpec
+from mcbench.contracts.method import MethodSpec
 
 _seconds: list[float] = [0.0]
 

@@ -18,11 +18,12 @@ sees B's samples, as the deep combiner): x, σ² (the render's variance of the m
 
 **The divergence needs F on an arbitrary image.** A combiner receives only its input's three
 images, so ``divergence`` names the single-image denoiser to re-run (:func:`methods.single_image_function`:
-a method module's ``denoise_image(ImageBuffers)``, or a learned denoiser's network through
-:func:`mcbench.nn.inference.run_network`), only the colour perturbed (variance and features as
-rendered). Supported: ``oidn``, ``jbf``, ``kpcn``, ``mcgan``, ``optix_ae``, ``wskpn`` (each call
-costs what one image of the base costs; K + 1 calls per image, 3 images per case). NFOR and RDFC have no single-image function (they
-cross-filter the two half buffers), nor have combiners. For an input that is not itself one of
+a method module's ``denoise_image(ImageBuffers)``, or a learned denoiser's network with the weights
+beside PD's own), only the colour perturbed (variance and features as rendered). Supported: every
+denoiser whose declaration makes it single-image (``MethodSpec.single_image``; the config check
+names them), each call costing what one image of the base costs; K + 1 calls per image, 3 images
+per case. NFOR and RDFC have no single-image function (they cross-filter the two half buffers),
+nor have combiners. For an input that is not itself one of
 these -- an ensemble, a deep combiner -- we do not re-run it (the exact divergence of an ensemble
 would re-run every member K times on perturbed full, A and B images and then the ensemble's
 weights, roughly (K + 1)× the ensemble's whole cost): ``divergence`` may name a member as a
@@ -84,7 +85,6 @@ and seconds; ``docs/measurements.md`` lists them.
 
 from __future__ import annotations
 
-import sys
 from functools import cache
 from pathlib import Path
 from types import SimpleNamespace
@@ -96,11 +96,11 @@ from mcbench import BenchError
 from mcbench.filters import sure as sure_module
 from mcbench.filters.sure import divergence_map
 from mcbench.io.buffers import BUFFER_SUFFIXES, IMAGE_INDEX, Denoised, RenderBuffers
-from methods import single_image_function
-from mcbench.io.method_spec import MethodSpec
+from mcbench.contracts.method import LearnedSpec, MethodSpec, SingleImageDenoiser
+from methods import load_method, method_spec, single_image_function
 
-# Bases whose single-image function re-runs for the divergence (module docstring).
-DivergenceBase = Literal["none", "oidn", "jbf", "kpcn", "mcgan", "optix_ae", "wskpn"]
+# The base whose single-image function re-runs for the divergence, or none (module docstring).
+DivergenceBase = Literal["none"] | SingleImageDenoiser
 
 
 @cache
@@ -112,7 +112,7 @@ def network_classes() -> SimpleNamespace:
 
 
 def build_network(**arch):
-    """A ``torch.nn.Module`` h_NN of architecture ``arch`` (keys of METHOD.network)."""
+    """A ``torch.nn.Module`` h_NN of architecture ``arch`` (keys of METHOD.learned.network)."""
     return network_classes().MixingNetwork(**arch)
 
 
@@ -126,20 +126,35 @@ def augment_batch(buffers: dict, rng) -> dict:
 
 # --------------------------------------------------------------------------- combination
 
-def ablation_weights_path(*, sure_input: bool, f_act: bool) -> Path:
-    """The weights of the network variant (full model: ``progressive.pt``)."""
-    from mcbench.io.weights import weights_path
-
-    suffix = "" if sure_input and f_act else "_no_sure" if f_act else "_no_fact" if sure_input else "_no_sure_no_fact"
-    return Path(weights_path("progressive" + suffix))
+def _variant_suffix(*, sure_input: bool, f_act: bool) -> str:
+    return "" if sure_input and f_act else "_no_sure" if f_act else "_no_fact" if sure_input else "_no_sure_no_fact"
 
 
-def load_variant(*, sure_input: bool, f_act: bool):
-    """The trained h_NN of a variant (committed weights; an error naming the missing file)."""
+def ablation_weights_path(weights_file: str | Path, *, sure_input: bool, f_act: bool) -> Path:
+    """The weights of the network variant beside the full model's ``weights_file`` (``progressive.pt``)."""
+    path = Path(weights_file)
+    return path.with_name(path.stem + _variant_suffix(sure_input=sure_input, f_act=f_act) + path.suffix)
+
+
+def weights_read(params: dict) -> tuple[str, ...]:
+    """The weights files :func:`combine` reads with ``params``: its network variant's (none
+    without the network) and a learned divergence base's (re-run only with the SURE input)."""
+    network, sure_input = params.get("network", True), params.get("sure_input", True)
+    if not network:
+        return ()
+    own = (__name__.rsplit(".", 1)[-1] + _variant_suffix(sure_input=sure_input, f_act=params.get("f_act", True)),)
+    divergence = params.get("divergence", "none")
+    if sure_input and divergence != "none" and method_spec(load_method(divergence)).learned is not None:
+        return (*own, divergence)
+    return own
+
+
+def load_variant(weights_file: str | Path, *, sure_input: bool, f_act: bool):
+    """The trained h_NN of a variant (beside ``weights_file``; an error naming a missing file)."""
     from mcbench.nn.inference import load_network
 
-    path = ablation_weights_path(sure_input=sure_input, f_act=f_act)
-    network = load_network(sys.modules[__name__], path)
+    path = ablation_weights_path(weights_file, sure_input=sure_input, f_act=f_act)
+    network = load_network(METHOD, path)
     if bool(network.sure_input) != sure_input or bool(network.use_f_act) != f_act:
         raise BenchError(f"{path}: weights of another variant (sure_input={network.sure_input}, "
                          f"f_act={network.use_f_act})")
@@ -147,14 +162,16 @@ def load_variant(*, sure_input: bool, f_act: bool):
 
 
 def combine_images(buffers: RenderBuffers, inputs: list[Denoised], *, net=None, divergence: str = "none",
-                   t_test: bool = True, iterations: int = sure_module.ITERATIONS, seed: int = 0) -> Denoised:
+                   t_test: bool = True, iterations: int = sure_module.ITERATIONS, seed: int = 0,
+                   weights_dir: str | Path | None = None) -> Denoised:
     """Progressive denoising of each image with network ``net`` (an h_NN module in eval mode, or
-    None for α = 1) -- :func:`combine` without loading weights (tests pass a random network)."""
+    None for α = 1) -- :func:`combine` without loading weights (tests pass a random network);
+    a learned ``divergence`` base's weights come from ``weights_dir``."""
     if len(inputs) != METHOD.inputs:
         raise BenchError(f"progressive combines exactly {METHOD.inputs} input, got {len(inputs)}")
     base = inputs[0]
     needs_divergence = net is not None and net.sure_input and divergence != "none"
-    denoise_image = single_image_function(divergence, choices=DivergenceBase.__args__) if needs_divergence else None
+    denoise_image = single_image_function(divergence, weights_dir=weights_dir) if needs_divergence else None
     results, extras = {}, {}
     for which in BUFFER_SUFFIXES:
         image = buffers.image(which)
@@ -191,14 +208,15 @@ def network_alpha(net, x: np.ndarray, y: np.ndarray, variance: np.ndarray, diver
 
 
 def combine(buffers, inputs, *, divergence: DivergenceBase = "none", sure_input: bool = True, f_act: bool = True,
-            t_test: bool = True, network: bool = True, iterations: int = 1, seed: int = 0):
+            t_test: bool = True, network: bool = True, iterations: int = 1, seed: int = 0, weights_file):
     """Progressive denoising of ``inputs[0]`` (one method's :class:`Denoised`) with the noisy
-    render, on the full image and on each half buffer (module docstring)."""
+    render, on the full image and on each half buffer (module docstring); the networks (h_NN's
+    variant, a learned divergence base) are read from the folder of ``weights_file``."""
     if iterations < 1:
         raise BenchError(f"progressive: iterations (K of Eq. 2) must be at least 1, got {iterations}")
-    net = load_variant(sure_input=sure_input, f_act=f_act) if network else None
+    net = load_variant(weights_file, sure_input=sure_input, f_act=f_act) if network else None
     return combine_images(buffers, inputs, net=net, divergence=divergence, t_test=t_test,
-                          iterations=iterations, seed=seed)
+                          iterations=iterations, seed=seed, weights_dir=Path(weights_file).parent)
 
 
 # --------------------------------------------------------------------------- ablation training
@@ -217,22 +235,24 @@ def variant_module(variant: str):
     if variant not in VARIANTS:
         raise BenchError(f"unknown progressive variant '{variant}'; known: {', '.join(VARIANTS)}")
     module = types.ModuleType(f"methods.progressive_{variant}")
-    module.METHOD = dataclasses.replace(METHOD, label=f"{METHOD.label}, ablation {variant}",
-                                        network={**METHOD.network, **VARIANTS[variant]})
+    learned = dataclasses.replace(METHOD.learned, network={**METHOD.learned.network, **VARIANTS[variant]})
+    module.METHOD = dataclasses.replace(METHOD, label=f"{METHOD.label}, ablation {variant}", learned=learned)
     return module
 
 
 METHOD = MethodSpec(
     kind="combiner", label="PD† progressive denoising (ours, scaled, trained on our scenes)", run=combine,
     inputs=1,
-    network={"channels": 48, "first_kernel": 5, "sure_input": True, "f_act": True},
-    training={"steps": 1500, "batch_size": 8, "patch": 48, "learning_rate": 1e-3, "loss": "smape",
-              "validate_every": 500},
-    build_network=build_network, augment_batch=augment_batch,
-    # tensors forward() needs beyond the render's: the base's result and its σ²f′ (Eq. 2)
-    training_keys={"correlated": 3, "divergence": 3},
-    # trained on OIDN's results with their divergence term ("+sure": mcbench.pipeline.training writes
-    # the divergence layers too, into results/training/correlated/oidn+sure/)
-    correlated_bases=("oidn+sure",),
+    learned=LearnedSpec(
+        network={"channels": 48, "first_kernel": 5, "sure_input": True, "f_act": True},
+        training={"steps": 1500, "batch_size": 8, "patch": 48, "learning_rate": 1e-3, "loss": "smape",
+                  "validate_every": 500},
+        build_network=build_network, augment_batch=augment_batch,
+        # tensors forward() needs beyond the render's: the base's result and its σ²f′ (Eq. 2)
+        training_keys={"correlated": 3, "divergence": 3},
+        # trained on OIDN's results with their divergence term ("+sure": mcbench.pipeline.training
+        # writes the divergence layers too, into results/training/correlated/oidn+sure/)
+        correlated_bases=("oidn+sure",),
+        weights_read=weights_read),
     render_layers=tuple(q + s for q in ("color", "variance", "albedo", "normal", "depth")
                         for s in BUFFER_SUFFIXES.values()))

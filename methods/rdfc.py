@@ -84,7 +84,7 @@ from mcbench.filters.rdfc_filter import (MAX_D2, Feature, clamp_derivative as cl
                                          finite_difference_derivative, nl_means, scaled_sample_variance,
                                          select_candidate, sure)
 from mcbench.io.buffers import Denoised, RenderBuffers
-from mcbench.io.method_spec import MethodSpec
+from mcbench.contracts.method import MethodSpec
 from mcbench.progress import StageLog
 
 WINDOW_RADIUS = 10                       # README "wnd_rad [10]"; fbksd M:31 uses 20

@@ -35,10 +35,9 @@ extraction); no temporal accumulation (single frames); batch 8 of 64² patches i
 
 from __future__ import annotations
 
-import sys
 from functools import cache
 from types import SimpleNamespace
-from mcbench.io.method_spec import MethodSpec
+from mcbench.contracts.method import LearnedSpec, MethodSpec
 
 INPUT_CHANNELS = 11
 
@@ -157,21 +156,21 @@ def network_classes() -> SimpleNamespace:
 
 
 def build_network(**arch):
-    """WSKPN (a ``torch.nn.Module``) of architecture ``arch`` (keys of METHOD.network)."""
+    """WSKPN (a ``torch.nn.Module``) of architecture ``arch`` (keys of METHOD.learned.network)."""
     return network_classes().WeightSharingKPN(**arch)
 
 
-def denoise(buffers):
+def denoise(buffers, *, weights_file):
     """WSKPN on the full buffer and on each half buffer."""
     from mcbench.nn.inference import denoise_with_network
 
-    return denoise_with_network(sys.modules[__name__], buffers)
+    return denoise_with_network(METHOD, buffers, weights_file)
 
 
 METHOD = MethodSpec(
     kind="denoiser", label="WSKPN† (Fan et al. 2021; ours, trained on our scenes)", run=denoise,
-    network={"channels": 32, "blocks": 6, "kernel_sizes": [1, 3, 5, 7, 9, 11, 13]},
-    # 5000 steps: validation SMAPE gains little after step 5000 of a longer training, and fewer
-    # steps keep a retraining (e.g. with new training scenes) short
-    training={"steps": 5000, "batch_size": 8, "patch": 64, "learning_rate": 1e-3, "loss": "smape"},
-    build_network=build_network)
+    learned=LearnedSpec(
+        network={"channels": 32, "blocks": 6, "kernel_sizes": [1, 3, 5, 7, 9, 11, 13]}, build_network=build_network,
+        # 5000 steps: validation SMAPE gains little after step 5000 of a longer training, and fewer
+        # steps keep a retraining (e.g. with new training scenes) short
+        training={"steps": 5000, "batch_size": 8, "patch": 64, "learning_rate": 1e-3, "loss": "smape"}))

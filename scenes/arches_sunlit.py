@@ -4,11 +4,8 @@ on three sides; sunlight enters only through the openings of the arcade on one s
 from __future__ import annotations
 
 from mcbench.render.geometry import perspective_sensor
+from mcbench.contracts.scene import SceneSpec
 
-DESCRIPTION = ("sunlit interior lit mostly indirectly: small sharp sun patches, the rest of the "
-               "hall lit by multi-bounce diffuse light and sky light through the arcade")
-CATEGORY = "diffuse/interior"
-RESOLUTION = (128, 128)
 
 HALL = (6.0, 4.0, 12.0)    # width (x), height (y), length (z); floor at y = 0, centred in x and z
 BAYS = 5                   # arcade openings on the sunlit (+x) side
@@ -73,3 +70,9 @@ def build(width: int, height: int) -> dict:
     scene["inner_lintel"] = {"type": "cube", "to_world": T().translate([0.6, h - 0.15, 0]).scale([0.3, 0.15, l / 2]),
                              "bsdf": stone}
     return scene
+
+
+SCENE = SceneSpec(
+    description="sunlit interior lit mostly indirectly: small sharp sun patches, the rest of the "
+                "hall lit by multi-bounce diffuse light and sky light through the arcade",
+    category="diffuse/interior", resolution=(128, 128), build=build)

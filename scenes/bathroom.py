@@ -6,11 +6,8 @@ from __future__ import annotations
 import numpy as np
 
 from mcbench.render.geometry import perspective_sensor
+from mcbench.contracts.scene import SceneSpec
 
-DESCRIPTION = ("interior with a mirror and small bright bulbs: mirrored view of the room, glossy "
-               "ceramic and chrome reflections, high-frequency tile texture and grout lines")
-CATEGORY = "glossy/interior"
-RESOLUTION = (128, 128)
 
 ROOM = (3.0, 2.6, 3.0)    # x, y, z; floor at y = 0; back wall (with the mirror) at z = -1.5
 
@@ -76,3 +73,9 @@ def build(width: int, height: int) -> dict:
     for name, transform in walls.items():
         scene[f"wall_{name}"] = {"type": "rectangle", "to_world": transform, "bsdf": wall_tiles}
     return scene
+
+
+SCENE = SceneSpec(
+    description="interior with a mirror and small bright bulbs: mirrored view of the room, glossy "
+                "ceramic and chrome reflections, high-frequency tile texture and grout lines",
+    category="glossy/interior", resolution=(128, 128), build=build)

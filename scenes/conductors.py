@@ -6,12 +6,8 @@ from __future__ import annotations
 import numpy as np
 
 from mcbench.render.geometry import bitmap_texture, gradient_sky, perspective_sensor, quad
+from mcbench.contracts.scene import SceneSpec
 
-DESCRIPTION = ("conductors from mirror-like (alpha 0.01) to rough (alpha 0.5): sharp reflections "
-               "of the sky and the light, near-specular glints that stay noisy, and glossy "
-               "blur whose width a denoiser must keep per material")
-CATEGORY = "glossy"
-RESOLUTION = (128, 128)
 
 # (material, GGX alpha) of the spheres from left to right.
 METALS = (("Au", 0.01), ("Cu", 0.05), ("Al", 0.12), ("Ag", 0.25), ("Cr", 0.5))
@@ -52,3 +48,10 @@ def build(width: int, height: int) -> dict:
             "bsdf": {"type": "roughconductor", "material": material, "distribution": "ggx",
                      "alpha": alpha}}
     return scene
+
+
+SCENE = SceneSpec(
+    description="conductors from mirror-like (alpha 0.01) to rough (alpha 0.5): sharp reflections "
+                "of the sky and the light, near-specular glints that stay noisy, and glossy "
+                "blur whose width a denoiser must keep per material",
+    category="glossy", resolution=(128, 128), build=build)

@@ -2,10 +2,7 @@
 
 from __future__ import annotations
 
-DESCRIPTION = ("diffuse interreflection: indirect light and colour bleeding from the red and "
-               "green walls, soft shadows from a ceiling area light")
-CATEGORY = "diffuse"
-RESOLUTION = (128, 128)
+from mcbench.contracts.scene import SceneSpec
 
 
 def build(width: int, height: int) -> dict:
@@ -19,3 +16,9 @@ def build(width: int, height: int) -> dict:
     film.update(width=int(width), height=int(height))
     scene["sensor"] = dict(scene["sensor"], film=film)
     return scene
+
+
+SCENE = SceneSpec(
+    description="diffuse interreflection: indirect light and colour bleeding from the red and "
+                "green walls, soft shadows from a ceiling area light",
+    category="diffuse", resolution=(128, 128), build=build)

@@ -7,11 +7,8 @@ import numpy as np
 
 from mcbench.render.curves import bspline_polyline, curve_shape, hair_bsdf
 from mcbench.render.geometry import perspective_sensor
+from mcbench.contracts.scene import SceneSpec
 
-DESCRIPTION = ("curly blond hair: thin helical strands with glossy, anisotropic hair highlights "
-               "and long transmissive multiple-scattering paths under env-map and area light")
-CATEGORY = "hair/fur"
-RESOLUTION = (128, 128)
 
 STRANDS = 450           # hair strands
 POINTS = 28             # B-spline control points per strand
@@ -96,3 +93,9 @@ def build(width: int, height: int) -> dict:
                             bsdf=hair_bsdf(eumelanin=0.2, pheomelanin=0.5, longitudinal=0.2,
                                            azimuthal=0.3)),
     }
+
+
+SCENE = SceneSpec(
+    description="curly blond hair: thin helical strands with glossy, anisotropic hair highlights "
+                "and long transmissive multiple-scattering paths under env-map and area light",
+    category="hair/fur", resolution=(128, 128), build=build)

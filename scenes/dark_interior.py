@@ -4,12 +4,8 @@ patches on the floor are thousands of times brighter than the dim corners."""
 from __future__ import annotations
 
 from mcbench.render.geometry import box, diffuse, gradient_sky, perspective_sensor, quad
+from mcbench.contracts.scene import SceneSpec
 
-DESCRIPTION = ("high dynamic range interior: small windows admit a sun and sky that next-event "
-               "estimation mostly misses, so the dim room is lit by rare, very bright paths "
-               "(fireflies) around sharp sunlit patches")
-CATEGORY = "indirect"
-RESOLUTION = (128, 128)
 
 ROOM = (2.0, 2.4, 2.0)                       # half width, height, half depth
 WINDOWS = ((-1.2, -0.6), (0.4, 1.0))          # x ranges of the two windows in the wall z = -2
@@ -55,3 +51,10 @@ def build(width: int, height: int) -> dict:
         scene[f"window_wall{k}"] = quad(((xa + xb) / 2, (ya + yb) / 2, -hz), ((xb - xa) / 2, 0, 0),
                                         (0, (yb - ya) / 2, 0), wall)
     return scene
+
+
+SCENE = SceneSpec(
+    description="high dynamic range interior: small windows admit a sun and sky that next-event "
+                "estimation mostly misses, so the dim room is lit by rare, very bright paths "
+                "(fireflies) around sharp sunlit patches",
+    category="indirect", resolution=(128, 128), build=build)

@@ -6,12 +6,8 @@ from __future__ import annotations
 import numpy as np
 
 from mcbench.render.geometry import bitmap_texture, box, diffuse, gradient_sky, quad, thinlens_sensor
+from mcbench.contracts.scene import SceneSpec
 
-DESCRIPTION = ("strong defocus blur from a wide thin-lens aperture: out-of-focus regions are "
-               "noisy in colour and in every feature (normals and depth average over the lens), "
-               "so feature-guided filters cannot separate blur from noise")
-CATEGORY = "camera"
-RESOLUTION = (128, 128)
 
 CAMERA = (0.3, 1.3, 4.0)
 FOCUS_TARGET = (0.0, 0.45, 0.0)   # the camera focuses on the middle object
@@ -53,3 +49,10 @@ def build(width: int, height: int) -> dict:
         scene[f"far_sphere{k}"] = {"type": "sphere", "center": [x, 0.35, z], "radius": 0.35,
                                    "bsdf": {"type": "conductor", "material": ("Au", "Al")[k % 2]}}
     return scene
+
+
+SCENE = SceneSpec(
+    description="strong defocus blur from a wide thin-lens aperture: out-of-focus regions are "
+                "noisy in colour and in every feature (normals and depth average over the lens), "
+                "so feature-guided filters cannot separate blur from noise",
+    category="camera", resolution=(128, 128), build=build)

@@ -6,11 +6,8 @@ from __future__ import annotations
 import numpy as np
 
 from mcbench.render.geometry import perspective_sensor
+from mcbench.contracts.scene import SceneSpec
 
-DESCRIPTION = ("image-based lighting from a high-dynamic-range sky with a tiny sun: sharp sun "
-               "shadows, sun glints on glossy and glass spheres, and textured floor detail")
-CATEGORY = "environment"
-RESOLUTION = (128, 128)
 
 SUN_ELEVATION_DEG = 38.0   # above the horizon
 SUN_AZIMUTH_U = 0.917      # behind-left of the objects as seen by the camera: shadows point at it
@@ -91,3 +88,9 @@ def build(width: int, height: int) -> dict:
             "bsdf": {"type": "dielectric", "int_ior": 1.5},
         },
     }
+
+
+SCENE = SceneSpec(
+    description="image-based lighting from a high-dynamic-range sky with a tiny sun: sharp sun "
+                "shadows, sun glints on glossy and glass spheres, and textured floor detail",
+    category="environment", resolution=(128, 128), build=build)

@@ -6,12 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from mcbench.render.geometry import bitmap_texture, box, diffuse, perspective_sensor, quad
-
-DESCRIPTION = ("texture detail at and below the pixel scale (checker, stripes, value noise): "
-               "the albedo feature carries it but the noisy colour hides it, so denoisers that "
-               "blur across texture edges lose it and ones that trust the albedo too much alias")
-CATEGORY = "texture"
-RESOLUTION = (128, 128)
+from mcbench.contracts.scene import SceneSpec
 
 
 def stripes(size: int = 256, period: int = 4) -> np.ndarray:
@@ -63,3 +58,10 @@ def build(width: int, height: int) -> dict:
                                         speckle, filter_type="nearest",
                                         to_uv=T().scale([2, 1, 1]))}},
     }
+
+
+SCENE = SceneSpec(
+    description="texture detail at and below the pixel scale (checker, stripes, value noise): "
+                "the albedo feature carries it but the noisy colour hides it, so denoisers that "
+                "blur across texture edges lose it and ones that trust the albedo too much alias",
+    category="texture", resolution=(128, 128), build=build)

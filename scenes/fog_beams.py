@@ -4,11 +4,8 @@ window in the left wall: visible light beams (single and multiple scattering in 
 from __future__ import annotations
 
 from mcbench.render.geometry import perspective_sensor
+from mcbench.contracts.scene import SceneSpec
 
-DESCRIPTION = ("volumetric light beams through a window in a foggy room: participating-medium "
-               "noise everywhere along camera rays, and a mostly indirectly lit interior")
-CATEGORY = "volume"
-RESOLUTION = (128, 128)
 
 ROOM = (4.0, 3.0, 5.0)           # width (x), height (y), depth (z); floor at y = 0, centred in x/z
 WINDOW = (-0.6, 0.6, 1.2, 2.3)   # window opening in the left wall: z0, z1, y0, y1
@@ -82,3 +79,9 @@ def build(width: int, height: int) -> dict:
     }
     scene.update(_wall_with_window(T, -w / 2, white))
     return scene
+
+
+SCENE = SceneSpec(
+    description="volumetric light beams through a window in a foggy room: participating-medium "
+                "noise everywhere along camera rays, and a mostly indirectly lit interior",
+    category="volume", resolution=(128, 128), build=build)

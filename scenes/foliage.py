@@ -7,12 +7,8 @@ import numpy as np
 
 from mcbench.render.geometry import (bitmap_texture, diffuse, gradient_sky, mesh_from_arrays,
                               perspective_sensor)
+from mcbench.contracts.scene import SceneSpec
 
-DESCRIPTION = ("alpha-masked foliage backlit by the sun: leaf edges come from the opacity map, "
-               "not geometry, sun speckles through the crown and dappled shadows are "
-               "high-contrast and noisy, and the translucent leaves glow only indirectly")
-CATEGORY = "foliage"
-RESOLUTION = (128, 128)
 
 LEAF_COUNT = 260
 LEAF_SIZE = 0.14                       # half length of a leaf quad, world units
@@ -83,3 +79,10 @@ def build(width: int, height: int) -> dict:
         scene[f"branch{k}"] = {"type": "cylinder", "p0": [0, 1.3 + 0.15 * k, 0],
                                "p1": [dx, 2.1 + 0.1 * k, dz], "radius": 0.035, "bsdf": bark}
     return scene
+
+
+SCENE = SceneSpec(
+    description="alpha-masked foliage backlit by the sun: leaf edges come from the opacity map, "
+                "not geometry, sun speckles through the crown and dappled shadows are "
+                "high-contrast and noisy, and the translucent leaves glow only indirectly",
+    category="foliage", resolution=(128, 128), build=build)

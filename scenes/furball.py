@@ -7,11 +7,8 @@ import numpy as np
 
 from mcbench.render.curves import curve_shape, hair_bsdf
 from mcbench.render.geometry import perspective_sensor
+from mcbench.contracts.scene import SceneSpec
 
-DESCRIPTION = ("sub-pixel fur fibres: thousands of thin strands with anisotropic hair "
-               "scattering, heavy geometric aliasing and noisy multiple scattering inside the fur")
-CATEGORY = "hair/fur"
-RESOLUTION = (128, 128)
 
 FIBRES = 3000          # strands (render cost grows with the count; ~3000 keeps it cheap)
 SEGMENTS = 4           # control points per strand
@@ -70,3 +67,9 @@ def build(width: int, height: int) -> dict:
                            bsdf=hair_bsdf(eumelanin=0.6, pheomelanin=0.9, longitudinal=0.25,
                                           azimuthal=0.35)),
     }
+
+
+SCENE = SceneSpec(
+    description="sub-pixel fur fibres: thousands of thin strands with anisotropic hair "
+                "scattering, heavy geometric aliasing and noisy multiple scattering inside the fur",
+    category="hair/fur", resolution=(128, 128), build=build)

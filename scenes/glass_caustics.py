@@ -3,12 +3,8 @@
 from __future__ import annotations
 
 from mcbench.render.geometry import perspective_sensor
+from mcbench.contracts.scene import SceneSpec
 
-DESCRIPTION = ("caustics through a glass sphere and specular-diffuse-specular paths from a tiny "
-               "bright light: heavy-tailed noise and fireflies that unidirectional path tracing "
-               "converges to slowly")
-CATEGORY = "glossy/glass"
-RESOLUTION = (128, 128)
 
 LIGHT_POSITION = (1.7, 1.3, 0.7)    # world units; low on the right, so the caustic falls left
 LIGHT_RADIUS = 0.15                 # world units: small enough for sharp caustics, large enough
@@ -58,3 +54,10 @@ def build(width: int, height: int) -> dict:
             "emitter": {"type": "area", "radiance": {"type": "rgb", "value": [LIGHT_RADIANCE] * 3}},
         },
     }
+
+
+SCENE = SceneSpec(
+    description="caustics through a glass sphere and specular-diffuse-specular paths from a tiny "
+                "bright light: heavy-tailed noise and fireflies that unidirectional path tracing "
+                "converges to slowly",
+    category="glossy/glass", resolution=(128, 128), build=build)

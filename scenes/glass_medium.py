@@ -4,11 +4,7 @@ behind dielectric boundaries, on a floor lit by one area light."""
 from __future__ import annotations
 
 from mcbench.render.geometry import perspective_sensor
-
-DESCRIPTION = ("dense scattering media inside glass (milk, juice): subsurface-like transport with "
-               "long volumetric random walks behind refracting boundaries, caustics on the floor")
-CATEGORY = "volume/glass"
-RESOLUTION = (128, 128)
+from mcbench.contracts.scene import SceneSpec
 
 
 def build(width: int, height: int) -> dict:
@@ -43,3 +39,9 @@ def build(width: int, height: int) -> dict:
                   "emitter": {"type": "area", "radiance": {"type": "rgb", "value": [30.0] * 3}}},
         "sky": {"type": "constant", "radiance": {"type": "rgb", "value": [0.08] * 3}},
     }
+
+
+SCENE = SceneSpec(
+    description="dense scattering media inside glass (milk, juice): subsurface-like transport with "
+                "long volumetric random walks behind refracting boundaries, caustics on the floor",
+    category="volume/glass", resolution=(128, 128), build=build)

@@ -6,12 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from mcbench.render.geometry import box, diffuse, lathe, mesh_from_arrays, perspective_sensor, quad
-
-DESCRIPTION = ("transparency: refraction through clear and rough glass, thin-pane reflections "
-               "and caustics on the floor; the first-hit features describe the glass surface, "
-               "not what is seen through it")
-CATEGORY = "glossy/glass"
-RESOLUTION = (128, 128)
+from mcbench.contracts.scene import SceneSpec
 
 
 def vase_mesh():
@@ -62,3 +57,10 @@ def build(width: int, height: int) -> dict:
         "colored_ball": {"type": "sphere", "center": [-0.3, 0.2, -1.2], "radius": 0.2,
                          "bsdf": diffuse([0.8, 0.2, 0.1])},
     }
+
+
+SCENE = SceneSpec(
+    description="transparency: refraction through clear and rough glass, thin-pane reflections "
+                "and caustics on the floor; the first-hit features describe the glass surface, "
+                "not what is seen through it",
+    category="glossy/glass", resolution=(128, 128), build=build)

@@ -6,11 +6,8 @@ from __future__ import annotations
 import numpy as np
 
 from mcbench.render.geometry import perspective_sensor
+from mcbench.contracts.scene import SceneSpec
 
-DESCRIPTION = ("long specular chains: a backdrop seen through up to ten refracting glass "
-               "interfaces, with internal reflections, displaced and doubled texture edges")
-CATEGORY = "glossy/glass"
-RESOLUTION = (128, 128)
 
 PANES = 5
 
@@ -58,3 +55,9 @@ def build(width: int, height: int) -> dict:
             "bsdf": {"type": "dielectric", "int_ior": 1.5 + 0.02 * i},
         }
     return scene
+
+
+SCENE = SceneSpec(
+    description="long specular chains: a backdrop seen through up to ten refracting glass "
+                "interfaces, with internal reflections, displaced and doubled texture edges",
+    category="glossy/glass", resolution=(128, 128), build=build)

@@ -7,11 +7,7 @@ import numpy as np
 
 from mcbench.render.curves import mesh_shape
 from mcbench.render.geometry import perspective_sensor
-
-DESCRIPTION = ("studio product shot: broad glossy highlights and reflections of large area lights "
-               "on plastic, clear-coated and metallic surfaces over a smooth gradient backdrop")
-CATEGORY = "glossy"
-RESOLUTION = (128, 128)
+from mcbench.contracts.scene import SceneSpec
 
 
 def backdrop(n: int = 32, width: float = 8.0, radius: float = 1.2, depth: float = 3.0):
@@ -80,3 +76,9 @@ def build(width: int, height: int) -> dict:
                                      .scale([2.0, 0.08, 1]),
                       "emitter": {"type": "area", "radiance": rgb(25.0, 25.0, 25.0)}},
     }
+
+
+SCENE = SceneSpec(
+    description="studio product shot: broad glossy highlights and reflections of large area lights "
+                "on plastic, clear-coated and metallic surfaces over a smooth gradient backdrop",
+    category="glossy", resolution=(128, 128), build=build)

@@ -7,12 +7,8 @@ import numpy as np
 
 from mcbench.render.geometry import (bitmap_texture, box, diffuse, lathe, mesh_from_arrays,
                               perspective_sensor, quad)
+from mcbench.contracts.scene import SceneSpec
 
-DESCRIPTION = ("a typical interior mixing diffuse walls and furniture with a glossy floor that "
-               "reflects them, two light sources of different colour and size, and many "
-               "contact shadows and occlusion edges")
-CATEGORY = "interior"
-RESOLUTION = (128, 128)
 
 ROOM = (2.5, 2.6, 2.5)      # half width, height, half depth
 
@@ -100,3 +96,10 @@ def build(width: int, height: int) -> dict:
         scene[f"shelf_book{k}"] = box((-2.08, 1.28, 0.75 - 0.12 * k), (0.03, 0.12 + 0.02 * (k % 3), 0.05),
                                       diffuse(rng.uniform(0.1, 0.7, 3)))
     return scene
+
+
+SCENE = SceneSpec(
+    description="a typical interior mixing diffuse walls and furniture with a glossy floor that "
+                "reflects them, two light sources of different colour and size, and many "
+                "contact shadows and occlusion edges",
+    category="interior", resolution=(128, 128), build=build)

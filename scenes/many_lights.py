@@ -5,12 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from mcbench.render.geometry import box, diffuse, perspective_sensor, quad
+from mcbench.contracts.scene import SceneSpec
 
-DESCRIPTION = ("many small emitters of different colours: next-event estimation picks one "
-               "light per vertex, so each pixel sees a random subset, giving coloured noise, "
-               "many overlapping soft shadows and small bright highlights")
-CATEGORY = "many-lights"
-RESOLUTION = (128, 128)
 
 LIGHT_COUNT = 48
 LIGHT_RADIUS = 0.04
@@ -56,3 +52,10 @@ def build(width: int, height: int) -> dict:
             "emitter": {"type": "area", "radiance": {
                 "type": "rgb", "value": [float(c) * LIGHT_POWER for c in colors[k]]}}}
     return scene
+
+
+SCENE = SceneSpec(
+    description="many small emitters of different colours: next-event estimation picks one "
+                "light per vertex, so each pixel sees a random subset, giving coloured noise, "
+                "many overlapping soft shadows and small bright highlights",
+    category="many-lights", resolution=(128, 128), build=build)

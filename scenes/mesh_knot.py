@@ -7,11 +7,8 @@ import numpy as np
 
 from mcbench.render.curves import mesh_shape
 from mcbench.render.geometry import perspective_sensor
+from mcbench.contracts.scene import SceneSpec
 
-DESCRIPTION = ("glossy meshes: faceted geometry with flat vs interpolated shading normals, "
-               "glossy interreflections and highlights on curved tubes under an area light")
-CATEGORY = "glossy"
-RESOLUTION = (128, 128)
 
 SEGMENTS, SIDES = 96, 10      # coarse on purpose: visible facets on the flat-shaded knot
 TUBE_RADIUS = 0.13
@@ -76,3 +73,9 @@ def build(width: int, height: int) -> dict:
                   "emitter": {"type": "area", "radiance": {"type": "rgb", "value": [10.0, 9.5, 9.0]}}},
         "sky": {"type": "constant", "radiance": {"type": "rgb", "value": [0.15, 0.16, 0.2]}},
     }
+
+
+SCENE = SceneSpec(
+    description="glossy meshes: faceted geometry with flat vs interpolated shading normals, "
+                "glossy interreflections and highlights on curved tubes under an area light",
+    category="glossy", resolution=(128, 128), build=build)

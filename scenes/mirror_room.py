@@ -4,12 +4,8 @@ ceiling panel."""
 from __future__ import annotations
 
 from mcbench.render.geometry import box, diffuse, perspective_sensor, quad
+from mcbench.contracts.scene import SceneSpec
 
-DESCRIPTION = ("specular paths: a mirror wall doubles the room, a glossy floor smears "
-               "reflections; reflected objects have the mirror's features (normal, depth) but "
-               "their own shading, so feature-guided denoisers over-blur them")
-CATEGORY = "specular"
-RESOLUTION = (128, 128)
 
 ROOM = (2.0, 2.5, 2.0)     # half width, height, half depth; the mirror is the wall at x = +2
 
@@ -47,3 +43,10 @@ def build(width: int, height: int) -> dict:
         "tall_box": box((-1.2, 0.7, -1.3), (0.3, 0.7, 0.3), diffuse([0.75, 0.75, 0.72]),
                         rotate_y_deg=-20),
     }
+
+
+SCENE = SceneSpec(
+    description="specular paths: a mirror wall doubles the room, a glossy floor smears "
+                "reflections; reflected objects have the mirror's features (normal, depth) but "
+                "their own shading, so feature-guided denoisers over-blur them",
+    category="specular", resolution=(128, 128), build=build)

@@ -6,11 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from mcbench.render.geometry import perspective_sensor
-
-DESCRIPTION = ("night scene: high dynamic range (bright lamp bulbs and windows, pools of lamp "
-               "light) with most of the image dark and lit only by faint indirect light")
-CATEGORY = "high dynamic range"
-RESOLUTION = (128, 128)
+from mcbench.contracts.scene import SceneSpec
 
 
 def build(width: int, height: int) -> dict:
@@ -72,3 +68,9 @@ def build(width: int, height: int) -> dict:
                                                            target=[lamp[0], 0.0, lamp[2]], up=[0, 0, 1]),
                                    "intensity": rgb(60.0, 45.0, 25.0)}
     return scene
+
+
+SCENE = SceneSpec(
+    description="night scene: high dynamic range (bright lamp bulbs and windows, pools of lamp "
+                "light) with most of the image dark and lit only by faint indirect light",
+    category="high dynamic range", resolution=(128, 128), build=build)

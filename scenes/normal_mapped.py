@@ -6,12 +6,8 @@ from __future__ import annotations
 import numpy as np
 
 from mcbench.render.geometry import bitmap_texture, diffuse, perspective_sensor, quad
+from mcbench.contracts.scene import SceneSpec
 
-DESCRIPTION = ("shading detail from bump and normal maps under grazing light: the geometric "
-               "normal feature is flat, so the relief exists only in the noisy colour and "
-               "(partly) the shading-normal feature")
-CATEGORY = "texture"
-RESOLUTION = (128, 128)
 
 LIGHT_DIRECTION = (1.0, -0.22, -0.28)   # from the left, ~12 deg above the floor, grazing the wall
 
@@ -86,3 +82,10 @@ def build(width: int, height: int) -> dict:
                                   "bsdf": {"type": "roughconductor", "material": "Cu",
                                            "distribution": "ggx", "alpha": 0.15}}},
     }
+
+
+SCENE = SceneSpec(
+    description="shading detail from bump and normal maps under grazing light: the geometric "
+                "normal feature is flat, so the relief exists only in the noisy colour and "
+                "(partly) the shading-normal feature",
+    category="texture", resolution=(128, 128), build=build)

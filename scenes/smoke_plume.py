@@ -6,11 +6,8 @@ from __future__ import annotations
 import numpy as np
 
 from mcbench.render.geometry import perspective_sensor
+from mcbench.contracts.scene import SceneSpec
 
-DESCRIPTION = ("heterogeneous smoke from a NumPy density grid: delta-tracking noise, wispy "
-               "detail, self-shadowing and multiple scattering with sharp sun shadows")
-CATEGORY = "volume"
-RESOLUTION = (128, 128)
 
 GRID = (48, 32, 32)        # grid cells (y, z, x) -> NumPy shape (z, y, x) below, see density()
 DENSITY_SCALE = 7.0        # peak extinction per world unit
@@ -77,3 +74,9 @@ def build(width: int, height: int) -> dict:
                 "irradiance": {"type": "rgb", "value": [3.2, 2.9, 2.5]}},
         "sky": {"type": "constant", "radiance": {"type": "rgb", "value": [0.18, 0.22, 0.3]}},
     }
+
+
+SCENE = SceneSpec(
+    description="heterogeneous smoke from a NumPy density grid: delta-tracking noise, wispy "
+                "detail, self-shadowing and multiple scattering with sharp sun shadows",
+    category="volume", resolution=(128, 128), build=build)

@@ -6,12 +6,8 @@ from __future__ import annotations
 import numpy as np
 
 from mcbench.render.geometry import bitmap_texture, box, diffuse, perspective_sensor, quad
+from mcbench.contracts.scene import SceneSpec
 
-DESCRIPTION = ("hard shadows from point-like spot lights next to soft penumbrae from an area "
-               "light, and sharp spot-cone falloff edges: denoisers must keep crisp shadow and "
-               "cone boundaries that no feature buffer shows")
-CATEGORY = "direct"
-RESOLUTION = (128, 128)
 
 SPOTS = (  # position, target, cutoff angle (deg), beam width (deg), colour * intensity
     ((-2.0, 3.0, 2.0), (-0.4, 0.0, 0.0), 30.0, 25.0, (90.0, 40.0, 15.0)),
@@ -55,3 +51,10 @@ def build(width: int, height: int) -> dict:
                                                      up=[0, 1, 0]),
                              "intensity": {"type": "rgb", "value": list(intensity)}}
     return scene
+
+
+SCENE = SceneSpec(
+    description="hard shadows from point-like spot lights next to soft penumbrae from an area "
+                "light, and sharp spot-cone falloff edges: denoisers must keep crisp shadow and "
+                "cone boundaries that no feature buffer shows",
+    category="direct", resolution=(128, 128), build=build)

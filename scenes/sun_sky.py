@@ -6,12 +6,8 @@ from __future__ import annotations
 import numpy as np
 
 from mcbench.render.geometry import box, diffuse, mesh_from_arrays, perspective_sensor
+from mcbench.contracts.scene import SceneSpec
 
-DESCRIPTION = ("physically based sun and sky: a tiny, extremely bright sun disc gives hard "
-               "shadows and bright glints next to soft blue skylight in the shadows, a "
-               "dynamic range that stresses denoisers' handling of outliers")
-CATEGORY = "environment"
-RESOLUTION = (128, 128)
 
 SUN_DIRECTION = (-0.55, 0.45, -0.7)   # towards the sun: low, behind-left of the houses
 EXPOSURE = 2.0                        # sunsky radiance is physical; scales sun and sky together
@@ -66,3 +62,10 @@ def build(width: int, height: int) -> dict:
                                "p1": [-2.6 + 0.7 * k, 1.4, 1.0], "radius": 0.1,
                                "bsdf": diffuse([0.85, 0.83, 0.8])}
     return scene
+
+
+SCENE = SceneSpec(
+    description="physically based sun and sky: a tiny, extremely bright sun disc gives hard "
+                "shadows and bright glints next to soft blue skylight in the shadows, a "
+                "dynamic range that stresses denoisers' handling of outliers",
+    category="environment", resolution=(128, 128), build=build)

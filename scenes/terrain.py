@@ -7,11 +7,8 @@ import numpy as np
 
 from mcbench.render.curves import grid_mesh, mesh_shape
 from mcbench.render.geometry import perspective_sensor
+from mcbench.contracts.scene import SceneSpec
 
-DESCRIPTION = ("fractal terrain under a low sun: fine geometric and texture detail, long sharp "
-               "shadows and soft sky light in shadowed valleys")
-CATEGORY = "geometry/texture"
-RESOLUTION = (128, 128)
 
 GRID = 129            # heightfield vertices per side
 SIZE = 10.0           # world size of the terrain (x and z)
@@ -68,3 +65,9 @@ def build(width: int, height: int) -> dict:
                 "irradiance": {"type": "rgb", "value": [4.0, 3.4, 2.6]}},
         "sky": {"type": "constant", "radiance": {"type": "rgb", "value": [0.25, 0.35, 0.55]}},
     }
+
+
+SCENE = SceneSpec(
+    description="fractal terrain under a low sun: fine geometric and texture detail, long sharp "
+                "shadows and soft sky light in shadowed valleys",
+    category="geometry/texture", resolution=(128, 128), build=build)

@@ -6,12 +6,8 @@ from __future__ import annotations
 import numpy as np
 
 from mcbench.render.geometry import box, diffuse, gradient_sky, perspective_sensor
+from mcbench.contracts.scene import SceneSpec
 
-DESCRIPTION = ("sub-pixel thin geometry against a bright background: wires cover a fraction of "
-               "a pixel, so colour and features are fractional mixtures that denoisers smear "
-               "into halos, and their thin shadows are easily blurred away")
-CATEGORY = "geometry"
-RESOLUTION = (128, 128)
 
 WIRE_RADIUS = 0.008          # world units; at the fence ~0.3 pixels wide at 128^2
 SUN_DIRECTION = (0.35, -0.55, 0.75)   # light travels towards +z: shadows fall towards the camera
@@ -55,3 +51,10 @@ def build(width: int, height: int) -> dict:
     scene["ball"] = {"type": "sphere", "center": [-0.6, 0.3, -1.2], "radius": 0.3,
                      "bsdf": diffuse([0.7, 0.2, 0.1])}
     return scene
+
+
+SCENE = SceneSpec(
+    description="sub-pixel thin geometry against a bright background: wires cover a fraction of "
+                "a pixel, so colour and features are fractional mixtures that denoisers smear "
+                "into halos, and their thin shadows are easily blurred away",
+    category="geometry", resolution=(128, 128), build=build)

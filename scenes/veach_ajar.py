@@ -6,12 +6,8 @@ from __future__ import annotations
 import numpy as np
 
 from mcbench.render.geometry import box, diffuse, lathe, mesh_from_arrays, perspective_sensor, quad, torus
+from mcbench.contracts.scene import SceneSpec
 
-DESCRIPTION = ("light enters only through a narrow door gap: almost all of the room is lit by "
-               "multi-bounce indirect light that next-event estimation cannot reach, giving "
-               "very noisy, slowly converging diffuse and glossy interreflection")
-CATEGORY = "indirect"
-RESOLUTION = (128, 128)
 
 ROOM = (2.0, 2.6, 2.0)        # half width (x), height (y), half depth (z); door wall at z = -2
 DOOR = (0.2, 1.2, 2.0)        # door opening: x from 0.2 to 1.2, y from 0 to 2.0
@@ -95,3 +91,10 @@ def build(width: int, height: int) -> dict:
     for i, part in enumerate(teapot((-0.3, 0.75, -0.2), 0.55, glossy_white)):
         scene[f"teapot_{i}"] = part
     return scene
+
+
+SCENE = SceneSpec(
+    description="light enters only through a narrow door gap: almost all of the room is lit by "
+                "multi-bounce indirect light that next-event estimation cannot reach, giving "
+                "very noisy, slowly converging diffuse and glossy interreflection",
+    category="indirect", resolution=(128, 128), build=build)

@@ -7,11 +7,8 @@ import numpy as np
 
 from mcbench.render.curves import grid_mesh, mesh_shape
 from mcbench.render.geometry import perspective_sensor
+from mcbench.contracts.scene import SceneSpec
 
-DESCRIPTION = ("refractive caustics: sunlight focused by a wavy water surface onto the pool "
-               "floor (specular-diffuse-specular paths) seen through the refracting waves")
-CATEGORY = "glossy/glass"
-RESOLUTION = (128, 128)
 
 POOL = (4.0, 1.0, 4.0)   # x size, depth, z size; water surface at y = 0, floor at y = -depth
 GRID = 80                # water mesh vertices per side
@@ -85,3 +82,9 @@ def build(width: int, height: int) -> dict:
                                                 .scale([sx, sz, 1]),
                                  "bsdf": deck}
     return scene
+
+
+SCENE = SceneSpec(
+    description="refractive caustics: sunlight focused by a wavy water surface onto the pool "
+                "floor (specular-diffuse-specular paths) seen through the refracting waves",
+    category="glossy/glass", resolution=(128, 128), build=build)

@@ -29,12 +29,12 @@ def scenes_with_delta_lobes(scenes: list[str]) -> set[str]:
     import mitsuba as mi
 
     from mcbench.render.variants import pick_variant
-    from scenes import load_scene
+    from scenes import load_scene, scene_spec
 
     pick_variant("auto")
     found = set()
     for name in scenes:
-        scene = mi.load_dict(load_scene(name).build(16, 16))
+        scene = mi.load_dict(scene_spec(load_scene(name)).build(16, 16))
         flags = [shape.bsdf().flags() for shape in scene.shapes() if shape.bsdf() is not None]
         delta = int(mi.BSDFFlags.DeltaReflection) | int(mi.BSDFFlags.DeltaTransmission)
         if any(int(flag) & delta for flag in flags):

@@ -2,18 +2,20 @@
 one-hot selection), the ablation table (Sec. 5.2.1-5.2.5) and a ranking of the comparison
 methods beside the full ensembles they belong to. Pure functions over the tidy metrics table
 (columns scene, spp, candidate, metric, value), the timings table (scene, spp, method, seconds)
-and the method table (name -> {module, kind, inputs, params, label}); core: no plugin import.
+and the method table (name -> {module, kind, inputs, params, label, comparison_role}); core: no
+plugin import, no plugin name: a method's role is the ``comparison_role`` its declaration sets
+(``mcbench.contracts.method.MethodSpec``), copied into the method table by the registry.
 
 How comparisons are found in the method table
 ---------------------------------------------
-* A **full ensemble** is a method of module ``ensemble`` whose params set none of ``weights``,
+* A **full ensemble** is a method of role ``ensemble`` whose params set none of ``weights``,
   ``channels``, ``solver``, ``filter`` to a value other than the default (:data:`ENSEMBLE_DEFAULTS`:
   simplex, rgb, iterative, True). Changing another option of :data:`ENSEMBLE_DEFAULTS` (the
   public code's post-processing, the solver's start) makes an "ensemble variant", in no table and
   not in the pool; ``seed`` and tolerances change nothing here.
-* Its **one-hot variants**: methods of module ``one_hot`` with the same *set* of inputs and
-  ``prefilter`` sbf, nfor or post. Its **naive average**: module ``naive_average``, same set.
-* Its **ablations**: module ``ensemble``, same set of inputs, exactly one of the four params
+* Its **one-hot variants**: methods of role ``one-hot selection`` with the same *set* of inputs
+  and ``prefilter`` sbf, nfor or post. Its **naive average**: role ``naive average``, same set.
+* Its **ablations**: role ``ensemble``, same set of inputs, exactly one of the four params
   changed (:data:`ABLATIONS`: weights=unconstrained, solver=qp, solver=exact, channels=single,
   filter=False), plus its naive average (naive averaging, 5.2.5).
 * Two methods in the same role of a table for the same input set are refused (one is needed).
@@ -93,12 +95,12 @@ def comparison_role(spec: dict) -> str | None:
     """The role of a comparison method ("one-hot sbf", "naive average", "unconstrained weights",
     "ensemble variant", ...) or ``None`` for a method of the main ranking pool (base denoisers,
     full ensembles, deep combiners, anything unknown)."""
-    module = spec.get("module")
-    if module == "one_hot":
+    declared = spec.get("comparison_role")
+    if declared == "one-hot selection":
         return f"one-hot {(spec.get('params') or {}).get('prefilter', 'none')}"
-    if module == "naive_average":
+    if declared == "naive average":
         return "naive average"
-    if module != "ensemble":
+    if declared != "ensemble":
         return None
     changes = ensemble_changes(spec)
     if not changes:
@@ -127,7 +129,7 @@ def find_comparisons(methods: dict[str, dict]) -> dict[str, dict]:
         roles[inputs, kind] = name
     found = {}
     for name, spec in methods.items():
-        if spec.get("module") != "ensemble" or ensemble_changes(spec):
+        if spec.get("comparison_role") != "ensemble" or ensemble_changes(spec):
             continue
         inputs = frozenset(spec.get("inputs", []))
         one_hot = {v: roles[inputs, f"one-hot {v}"] for v in ONE_HOT_VARIANTS if (inputs, f"one-hot {v}") in roles}

@@ -53,11 +53,12 @@ from types import ModuleType
 import numpy as np
 
 from mcbench import BenchError
+from mcbench.contracts.scene import SceneSpec
 from mcbench.io.exr import ExrError, check_finite
 
 __all__ = ["LAYOUTS", "AUTHORS_FILES", "OIDN_FEATURES", "REFERENCE_SUFFIXES", "RenderFolder",
            "scene_module", "case_files", "reference_files", "read_image_any", "read_case",
-           "read_reference", "reference_names", "image_size"]
+           "read_reference", "reference_names", "image_size", "reference_resolution"]
 
 LAYOUTS = ("authors", "oidn")
 #: A case folder's files in the authors' layout -> our render layer (:mod:`mcbench.io.buffers`).
@@ -111,11 +112,11 @@ def _scene_file_values(path: Path) -> dict:
 
 
 def scene_module(path: str | os.PathLike) -> ModuleType:
-    """The scene contract of ``scenes/__init__.py`` for the scene file ``path`` (YAML, keys in the
-    module docstring): ``DESCRIPTION``, ``CATEGORY``, ``RENDER_FOLDER`` (a :class:`RenderFolder`),
-    ``RESOLUTION`` (the size of its first image, read from the header when first asked) and a
-    ``build`` that refuses (these scenes are not rendered). The folder itself is checked case by
-    case (:func:`case_files`), when the DAG is parsed."""
+    """A scene module for the scene file ``path`` (YAML, keys in the module docstring): its
+    ``SCENE`` (:class:`mcbench.contracts.scene.SceneSpec`) has a ``description``, ``category``,
+    ``render_folder`` (a :class:`RenderFolder`), ``resolution`` (the size of its reference image,
+    read from the header when asked) and a ``build`` that refuses (these scenes are not rendered).
+    The folder itself is checked case by case (:func:`case_files`), when the DAG is parsed."""
     path = Path(path)
     values = _scene_file_values(path)
     folder = Path(os.path.expanduser(values["renders"]))
@@ -123,32 +124,28 @@ def scene_module(path: str | os.PathLike) -> ModuleType:
         folder = (path.parent / folder).resolve()
     render_folder = RenderFolder(path=folder, layout=values["layout"], stem=values.get("stem", path.stem),
                                  source=str(path))
-    module = _RenderFolderScene(path.stem)
+    module = ModuleType(path.stem, f"renders of {folder} ({path})")
     module.__file__ = str(path)
-    module.DESCRIPTION = values.get("description", f"renders from {folder}")
-    module.CATEGORY = values.get("category", "renders")
-    module.RENDER_FOLDER = render_folder
 
     def build(width=None, height=None):
         raise BenchError(f"scene '{path.stem}' ({path}) is a folder of renders, not a scene to render "
                          f"(the oracle study and progressive denoising's curve render their scene again: "
                          f"give them a Mitsuba scene)")
 
-    module.build = build
+    module.SCENE = SceneSpec(description=values.get("description", f"renders from {folder}"),
+                             category=values.get("category", "renders"),
+                             resolution=lambda: reference_resolution(render_folder), build=build,
+                             render_folder=render_folder)
     return module
 
 
-class _RenderFolderScene(ModuleType):
-    """A module object whose ``RESOLUTION`` is read from the folder's first image when asked."""
-
-    @property
-    def RESOLUTION(self) -> tuple[int, int]:  # noqa: N802 (the scene contract's name)
-        folder = self.RENDER_FOLDER
-        files = reference_files(folder)
-        if "color" not in files:
-            raise BenchError(f"{folder}: no reference image ({reference_names(folder)})")
-        height, width = image_size(files["color"])
-        return width, height
+def reference_resolution(folder: RenderFolder) -> tuple[int, int]:
+    """``(width, height)`` of the folder's reference image, read from its header."""
+    files = reference_files(folder)
+    if "color" not in files:
+        raise BenchError(f"{folder}: no reference image ({reference_names(folder)})")
+    height, width = image_size(files["color"])
+    return width, height
 
 
 def _case_dir(folder: RenderFolder, spp: int) -> Path:

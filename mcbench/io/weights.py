@@ -3,8 +3,9 @@
 Torch-free at import (parsing the DAG imports this module): :func:`load_weights` imports torch
 only when it is called.
 
-* Folder: ``$MCBENCH_WEIGHTS_DIR`` when set (the workflow sets it from the config key
-  ``weights_dir``), else the committed ``methods/weights`` of this checkout.
+* Folder: the config key ``weights_dir``, passed down to whatever loads weights (the case job
+  hands a learned method its ``<weights_dir>/<name>.pt``); :data:`COMMITTED_WEIGHTS`, the
+  committed ``methods/weights`` of this checkout, when the key is empty.
 * ``<name>.pt`` -- a ``torch.save`` of ``{"arch": network, "state_dict": state_dict()}``
   (:data:`WEIGHTS_KEYS`): plain tensors and containers only, so it loads with
   ``torch.load(..., weights_only=True)``, which never runs code from the file.
@@ -15,22 +16,19 @@ only when it is called.
 * Training checkpoints use the same format with the keys :data:`CHECKPOINT_KEYS` (plus the
   critic's states for adversarial training).
 
-A learned method is a method module whose declaration (:class:`mcbench.io.method_spec.MethodSpec`)
-sets ``network`` (architecture hyperparameters), ``training`` (training settings) and
-``build_network(**network)`` (:attr:`~mcbench.io.method_spec.MethodSpec.learned`).
+A learned method is a method module whose declaration (:class:`mcbench.contracts.method.MethodSpec`)
+sets ``learned`` (:class:`mcbench.contracts.method.LearnedSpec`: its network and training).
 """
 
 from __future__ import annotations
 
-import os
 import re
 from pathlib import Path
 from types import ModuleType
 
 from mcbench import BenchError
-from mcbench.io.method_spec import method_spec
+from mcbench.contracts.method import method_spec
 
-WEIGHTS_DIR_ENV = "MCBENCH_WEIGHTS_DIR"
 COMMITTED_WEIGHTS = Path(__file__).resolve().parents[2] / "methods" / "weights"
 WEIGHTS_SUFFIX = ".pt"
 RECORD_SUFFIX = ".json"
@@ -45,20 +43,20 @@ _UNSAFE_ADVICE = ("weights_only", "weights only", "trusted source", "file an iss
                   "documentation of torch.load", "allowlist")
 
 
-def weights_dir() -> Path:
-    """Folder of learned weights: ``$MCBENCH_WEIGHTS_DIR`` if set, else the committed ``methods/weights``."""
-    folder = os.environ.get(WEIGHTS_DIR_ENV)
-    return Path(folder) if folder else COMMITTED_WEIGHTS
+def weights_folder(configured: str | Path | None) -> Path:
+    """The folder of learned weights the config key ``weights_dir`` names (empty or None: the
+    committed :data:`COMMITTED_WEIGHTS`)."""
+    return Path(configured) if configured else COMMITTED_WEIGHTS
 
 
-def weights_path(name: str) -> Path:
-    """Weights of learned method ``name``: ``<weights_dir>/<name>.pt``."""
-    return weights_dir() / f"{name}{WEIGHTS_SUFFIX}"
+def weights_path(folder: str | Path, name: str) -> Path:
+    """Weights of learned method ``name`` in weights folder ``folder``: ``<folder>/<name>.pt``."""
+    return Path(folder) / f"{name}{WEIGHTS_SUFFIX}"
 
 
-def record_path(name: str) -> Path:
-    """Training record of learned method ``name``: ``<weights_dir>/<name>.json``."""
-    return weights_dir() / f"{name}{RECORD_SUFFIX}"
+def record_path(folder: str | Path, name: str) -> Path:
+    """Training record of learned method ``name`` in weights folder ``folder``: ``<folder>/<name>.json``."""
+    return Path(folder) / f"{name}{RECORD_SUFFIX}"
 
 
 def method_name(module: ModuleType) -> str:
@@ -68,7 +66,7 @@ def method_name(module: ModuleType) -> str:
 
 def is_learned_method(module: ModuleType) -> bool:
     """Whether method module ``module``'s declaration makes it a learned method (imports nothing)."""
-    return method_spec(module).learned
+    return method_spec(module).learned is not None
 
 
 def check_learned_method(module: ModuleType) -> ModuleType:
@@ -76,7 +74,7 @@ def check_learned_method(module: ModuleType) -> ModuleType:
     what its declaration lacks."""
     if not is_learned_method(module):
         raise BenchError(f"methods/{method_name(module)}.py is not a learned method: its METHOD declares no "
-                         f"network, training and build_network")
+                         f"learned=LearnedSpec(...)")
     return module
 
 

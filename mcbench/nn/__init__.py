@@ -9,19 +9,21 @@
   train/validation split, seeded augmented batches;
 * :mod:`mcbench.nn.train` -- the seeded, resumable training loop with checkpoints, the optional
   adversarial critic, validation, and the weights + record it writes;
-* :mod:`mcbench.nn.inference` -- loading committed weights and running a network on one image,
-  deterministically.
+* :mod:`mcbench.nn.inference` -- loading a network's weights and running it, deterministically:
+  the inference every learned plugin shares (``denoise_with_network``, ``combine_with_network``).
 
 The weights' location and file format, the safe loader and :func:`mcbench.io.weights.is_learned_method`
 are in the torch-free :mod:`mcbench.io.weights`.
 
 A learned method is one module in ``methods/`` whose declaration
-(:class:`mcbench.io.method_spec.MethodSpec`) sets ``network`` (architecture hyperparameters),
-``training`` (training settings) and ``build_network(**network)``; the network's
-``forward`` takes a dict of raw buffers (see :data:`mcbench.nn.data.BUFFER_KEYS`) and returns
-linear HDR radiance (N, 3, H, W). Its weights live in ``methods/weights/<name>.pt`` with a record
-``methods/weights/<name>.json``. The functions here take the method's *module* (core never imports
-``methods``; callers resolve names with ``methods.load_method``), and torch is imported only by
+(:class:`mcbench.contracts.method.MethodSpec`) sets ``learned`` (a
+:class:`mcbench.contracts.method.LearnedSpec`: ``network`` hyperparameters, ``training`` settings,
+``build_network(**network)``); the network's ``forward`` takes a dict of raw buffers (see
+:data:`mcbench.nn.data.BUFFER_KEYS`) and returns linear HDR radiance (N, 3, H, W). Its weights
+live in the weights folder (config key ``weights_dir``, default ``methods/weights``) as
+``<name>.pt`` with a record ``<name>.json``. The functions here take the method's module or its
+declaration and the weights file (core never imports ``methods``; callers resolve names with
+``methods.load_method``), and torch is imported only by
 this package's modules other than ``__init__``: a method module imports them inside
 ``build_network`` / ``denoise`` so that importing it (as parsing the DAG does) does not import torch.
 """

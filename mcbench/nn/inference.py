@@ -1,4 +1,4 @@
-"""Running a learned method's committed weights on render buffers.
+"""Running a learned method's network on render buffers: the inference every learned plugin shares.
 
 Weights load through :func:`mcbench.io.weights.load_weights` (``torch.load(..., weights_only=True)``:
 plain tensors and the architecture dict, no pickled code; any failure names the file). Inference
@@ -6,9 +6,11 @@ runs in float32 with ``torch.use_deterministic_algorithms(True)`` under ``torch.
 with the same thread count the same input gives bit-identical output (tested). A network that
 provides ``fuse()`` (WSKPN's RepVGG blocks) is re-parameterised once after loading.
 
-Every function takes the learned method's *module* (its declaration ``METHOD``,
-:func:`mcbench.io.method_spec.method_spec`: ``network``, ``build_network``, ...), never its name:
-core code does not import ``methods``.
+Every function takes the learned method's declaration (``METHOD``, a
+:class:`mcbench.contracts.method.MethodSpec` with ``learned``) and the weights file its runner
+passed (``weights_file``, ``<weights_dir>/<name>.pt``), never its name: core code does not import
+``methods``. A plugin's ``run`` is then one call: ``denoise_with_network(METHOD, buffers, weights_file)``
+(a denoiser, each image on its own) or ``combine_with_network(METHOD, buffers, inputs, weights_file)``.
 """
 
 from __future__ import annotations
@@ -18,38 +20,38 @@ import sys
 from contextlib import contextmanager
 from functools import lru_cache
 from pathlib import Path
-from types import ModuleType
+from typing import Callable
 
 import numpy as np
 import torch
 
 from mcbench import BenchError
 from mcbench.io.buffers import BUFFER_SUFFIXES, Denoised, ImageBuffers, RenderBuffers, denoise_each_buffer
-from mcbench.io.method_spec import method_spec
-from mcbench.io.weights import check_learned_method, load_weights, method_name, weights_path
+from mcbench.contracts.method import MethodSpec
+from mcbench.io.weights import load_weights
 
 
-def load_network(module: ModuleType, path: str | Path | None = None) -> torch.nn.Module:
-    """The network of learned method ``module`` with the weights in ``path`` (default
-    :func:`mcbench.io.weights.weights_path` of its name), in eval mode; cached per process, module
-    and weights file (path and modification time)."""
-    check_learned_method(module)
-    path = Path(path) if path is not None else weights_path(method_name(module))
+def load_network(spec: MethodSpec, weights_file: str | Path) -> torch.nn.Module:
+    """The network of learned method ``spec`` with the weights in ``weights_file``
+    (``<weights_dir>/<name>.pt``), in eval mode; cached per process, declaration and weights file
+    (path and modification time)."""
+    path = Path(weights_file)
+    if spec.learned is None:
+        raise BenchError(f"{path}: '{spec.label}' is not a learned method (its METHOD declares no learned=)")
     if not path.exists():
-        name = method_name(module)
-        raise BenchError(f"{path}: weights of '{name}' are missing; train them with "
-                         f"`snakemake --cores 2 train_{name}`")
-    return _cached_network(module, str(path), path.stat().st_mtime_ns)
+        raise BenchError(f"{path}: weights of '{path.stem}' are missing; train them with "
+                         f"`snakemake --cores 2 train_{path.stem}` or fix weights_dir")
+    return _cached_network(spec, str(path), path.stat().st_mtime_ns)
 
 
 @lru_cache(maxsize=None)
-def _cached_network(module: ModuleType, path: str, mtime_ns: int) -> torch.nn.Module:
+def _cached_network(spec: MethodSpec, path: str, mtime_ns: int) -> torch.nn.Module:
     blob = load_weights(path)
     try:
-        network = method_spec(module).build_network(**blob["arch"])
+        network = spec.learned.build_network(**blob["arch"])
         network.load_state_dict(blob["state_dict"])
     except (RuntimeError, KeyError, TypeError, ValueError) as exc:
-        raise BenchError(f"{path}: cannot load weights of '{method_name(module)}' ({exc})") from exc
+        raise BenchError(f"{path}: cannot load weights of '{Path(path).stem}' ({exc})") from exc
     network.eval()
     if hasattr(network, "fuse"):
         network.fuse()
@@ -95,10 +97,17 @@ def run_network(network: torch.nn.Module, image: ImageBuffers) -> np.ndarray:
     return run_network_on(network, image_tensors(image))
 
 
-def denoise_with_network(module: ModuleType, buffers: RenderBuffers) -> Denoised:
-    """Run the committed network of learned method ``module`` on the full buffer and on each half buffer."""
-    network = load_network(module)
-    return denoise_each_buffer(buffers, lambda image: run_network(network, image))
+def image_function(spec: MethodSpec, weights_file: str | Path) -> Callable[[ImageBuffers], np.ndarray]:
+    """Learned denoiser ``spec`` with the weights ``weights_file`` as a function of one image ->
+    (H, W, 3) float32 radiance (:func:`run_network`)."""
+    network = load_network(spec, weights_file)
+    return lambda image: run_network(network, image)
+
+
+def denoise_with_network(spec: MethodSpec, buffers: RenderBuffers, weights_file: str | Path) -> Denoised:
+    """Run the network of learned denoiser ``spec`` (weights ``weights_file``) on the full buffer
+    and on each half buffer."""
+    return denoise_each_buffer(buffers, image_function(spec, weights_file))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -175,21 +184,21 @@ def run_network_on(network: torch.nn.Module, tensors: dict[str, torch.Tensor]) -
         return tensor_image(network(tensors))
 
 
-def combine_with_network(module: ModuleType, buffers: RenderBuffers, inputs: list[Denoised], *,
+def combine_with_network(spec: MethodSpec, buffers: RenderBuffers, inputs: list[Denoised],
+                         weights_file: str | Path | None = None, *,
                          network: torch.nn.Module | None = None) -> Denoised:
-    """Run the combiner network of learned method ``module`` (its ``inputs``, ``training_keys``) on
+    """Run the combiner network of learned method ``spec`` (its ``inputs``, ``training_keys``) on
     the full image and on each half buffer, each from its own samples and ``inputs``' results on
-    that image (:func:`combiner_image_tensors`). ``network`` defaults to the committed weights
-    (:func:`load_network`, loaded only after every input is checked). The result is float32 and
-    finite (a non-finite output is a :class:`BenchError` naming the method)."""
-    name = method_name(module)
-    spec = method_spec(module)
+    that image (:func:`combiner_image_tensors`). ``network`` defaults to the weights
+    ``weights_file`` (:func:`load_network`, loaded only after every input is checked). The result
+    is float32 and finite (a non-finite output is a :class:`BenchError` naming the method)."""
+    name = Path(weights_file).stem if weights_file is not None else spec.label
     expected = spec.inputs or 1
     if len(inputs) != expected:
         raise BenchError(f"{name} combines exactly {expected} input(s), got {len(inputs)}")
-    tensors = {which: combiner_image_tensors(buffers, inputs, which, spec.training_keys)
+    tensors = {which: combiner_image_tensors(buffers, inputs, which, spec.learned.training_keys)
                for which in BUFFER_SUFFIXES}
-    network = load_network(module) if network is None else network
+    network = load_network(spec, weights_file) if network is None else network
     results = {which: run_network_on(network, tensors[which]) for which in BUFFER_SUFFIXES}
     for which, result in results.items():
         if not np.isfinite(result).all():

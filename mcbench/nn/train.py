@@ -9,7 +9,7 @@ core code never imports ``methods``) on training crops (:mod:`mcbench.nn.data`) 
 * ``record_path`` -- JSON: data, settings, loss, validation loss (overall and per validation
   scene), loss history, wall time, machine, torch version.
 
-Settings (the ``training`` dict of a method's declaration, :class:`mcbench.io.method_spec.MethodSpec`,
+Settings (the ``training`` of a method's :class:`mcbench.contracts.method.LearnedSpec`,
 overridable from ``config.yaml``):
 
 ``steps``, ``batch_size``, ``patch`` (square training patches, pixels), ``learning_rate``
@@ -63,13 +63,13 @@ import numpy as np
 import torch
 
 from mcbench import BenchError
-from mcbench.io.method_spec import method_spec
+from mcbench.contracts.method import method_spec
 from mcbench.io.tables import read_json, write_json
 from mcbench.nn.data import CropSet, crop_paths, load_crops, sample_batch, validation_batches
 from mcbench.nn.losses import LOSSES
 from mcbench.progress import eta_seconds, progress_line
 from mcbench.io.weights import (CHECKPOINT_KEYS, WEIGHTS_DIGEST_KEY, check_learned_method, file_sha256, load_weights,
-                                method_name, record_path, weights_path)
+                                method_name, record_path, weights_folder, weights_path)
 
 DEFAULT_SETTINGS = {
     "steps": 4000,
@@ -105,7 +105,8 @@ def training_settings(module, overrides: dict | None = None) -> dict:
     """DEFAULT_SETTINGS < the ``training`` of the method's declaration < ``overrides`` (unknown keys
     are refused)."""
     settings = dict(DEFAULT_SETTINGS)
-    for source, values in (("METHOD.training", method_spec(module).training), ("config", overrides or {})):
+    declared = method_spec(module).learned.training
+    for source, values in (("METHOD.learned.training", declared), ("config", overrides or {})):
         unknown = sorted(set(values) - set(DEFAULT_SETTINGS))
         if unknown:
             raise BenchError(f"{source} of '{module.__name__}': unknown training setting(s) {unknown}; "
@@ -210,7 +211,7 @@ def train_network(module: ModuleType, data: list[str | Path] | CropSet, weights_
     :func:`mcbench.nn.data.load_combiner_crops`); returns the record (``provenance``, e.g. the
     CPU, is added to it as given)."""
     name = method_name(check_learned_method(module))
-    spec = method_spec(module)
+    spec = method_spec(module).learned
     settings = training_settings(module, overrides)
     torch.set_num_threads(int(settings["threads"]))
     checkpoint = Path(checkpoint)
@@ -230,7 +231,7 @@ def train_network(module: ModuleType, data: list[str | Path] | CropSet, weights_
     critic = critic_optimizer = None
     if adversarial:
         if spec.build_critic is None:
-            raise BenchError(f"methods/{name}.py sets adversarial_weight but its METHOD declares no build_critic")
+            raise BenchError(f"methods/{name}.py sets adversarial_weight but its LearnedSpec declares no build_critic")
         critic = spec.build_critic(**spec.critic)
         critic_optimizer = torch.optim.Adam(critic.parameters(), lr=settings["critic_learning_rate"],
                                             betas=(0.5, 0.9))
@@ -347,7 +348,7 @@ def train_network(module: ModuleType, data: list[str | Path] | CropSet, weights_
     final = evaluate(network, validation_set, settings["loss"])
     record = {
         "network": name,
-        "label": spec.label,
+        "label": method_spec(module).label,
         "arch": spec.network,
         "parameters": count_parameters(network),
         "settings": settings,
@@ -383,13 +384,14 @@ def train_network(module: ModuleType, data: list[str | Path] | CropSet, weights_
     return record
 
 
-def evaluate_committed(module: ModuleType, crops: CropSet) -> dict:
-    """Validation loss of the committed weights of learned method ``module`` on ``crops`` (its
-    validation scenes, or all of them when none is a validation scene)."""
+def evaluate_committed(module: ModuleType, crops: CropSet, weights_dir: str | Path) -> dict:
+    """Validation loss of the weights in ``weights_dir`` of learned method ``module`` on ``crops``
+    (its validation scenes, or all of them when none is a validation scene)."""
     from mcbench.nn.inference import load_network
 
-    record = read_json(record_path(method_name(module)))
-    network = load_network(module)
+    name = method_name(module)
+    record = read_json(record_path(weights_dir, name))
+    network = load_network(method_spec(module), weights_path(weights_dir, name))
     _, validation_set = crops.split()
     return evaluate(network, validation_set if len(validation_set) else crops, record["loss"])
 
@@ -416,7 +418,10 @@ def main(argv: list[str] | None = None, *, load_method: Callable[[str], ModuleTy
     parser.add_argument("--data", default="results/training", help="folder of training crops")
     parser.add_argument("--steps", type=int, default=None, help="override the steps of its training settings")
     parser.add_argument("--checkpoint", default=None)
+    parser.add_argument("--weights-dir", default=None,
+                        help="folder of the weights (default: the committed methods/weights)")
     args = parser.parse_args(argv)
+    folder = weights_folder(args.weights_dir)
     try:
         module = check_learned_method(load_method(args.name))
         files = crop_paths(args.data)
@@ -424,16 +429,16 @@ def main(argv: list[str] | None = None, *, load_method: Callable[[str], ModuleTy
         if method_spec(module).kind == "combiner":
             if load_data is None:
                 raise BenchError(f"{args.name} is a combiner: no loader for its base results")
-            files, correlated = correlated_paths(args.data, method_spec(module).correlated_bases, files)
+            files, correlated = correlated_paths(args.data, method_spec(module).learned.correlated_bases, files)
             data = load_data(args.name, files, correlated)
         if args.command == "train":
             overrides = {"steps": args.steps} if args.steps else {}
             checkpoint = args.checkpoint or f"results/training/checkpoints/{args.name}.ckpt"
-            train_network(module, data, weights_path(args.name), record_path(args.name), checkpoint,
+            train_network(module, data, weights_path(folder, args.name), record_path(folder, args.name), checkpoint,
                           overrides, log=lambda m: print(m, file=sys.stderr, flush=True), provenance=provenance)
         else:
-            result = evaluate_committed(module, data if isinstance(data, CropSet) else load_crops(data))
-            recorded = read_json(record_path(args.name))["validation"]["loss"]
+            result = evaluate_committed(module, data if isinstance(data, CropSet) else load_crops(data), folder)
+            recorded = read_json(record_path(folder, args.name))["validation"]["loss"]
             print(f"{args.name}: validation loss {result['loss']:.6f} (recorded {recorded:.6f}, "
                   f"ratio {result['loss'] / recorded:.4f}), relMSE {result['relmse']:.6f}")
     except BenchError as exc:

@@ -95,13 +95,15 @@ def run_case(case: dict, *, threads: int = 1) -> dict:
 
     ``case`` (built by ``workflow/rules/common.smk``, JSON-able):
     ``scene``, ``spp``, ``render``, ``reference`` (paths), ``metrics`` (metric names),
-    ``methods``: ``[{name, module, params, inputs, weights, exr, timing}]`` in dependency order
-    (``inputs``: method names; ``weights``: the weights file of a learned method, else None),
+    ``methods``: ``[{name, module, params, inputs, weights, weights_read, exr, timing}]`` in
+    dependency order (``inputs``: method names; ``weights``: the weights file a learned method is
+    handed, else None; ``weights_read``: the weights files it reads, which its key's digest covers),
     ``entries``: ``[{entry, image, values, viewer, weight_inputs}]`` (the noisy input first),
     ``outputs``: ``{metrics, viewer, record}`` (the case's metrics CSV, viewer folder, record).
     """
     from mcbench.io.weights import file_sha256
-    from mcbench.pipeline.methods import run_methods
+    from mcbench.pipeline.method_runs import run_methods
+    from mcbench.pipeline.study_plan import weights_digest
 
     scene, spp = case["scene"], int(case["spp"])
     render = content_checksum(case["render"])
@@ -111,7 +113,8 @@ def run_case(case: dict, *, threads: int = 1) -> dict:
         if unknown:
             raise BenchError(f"method '{method['name']}' of case ({scene}, {spp}) reads {unknown}, which the case "
                              "does not make before it (the plan's dependency order is broken)")
-        weights = file_sha256(method["weights"]) if method.get("weights") else ""
+        read = method.get("weights_read", [method["weights"]] if method.get("weights") else [])
+        weights = weights_digest(read, {path: file_sha256(path) for path in read})
         keys[method["name"]] = method_key(module=method["module"], params=method["params"],
                                           input_keys=[keys[name] for name in method["inputs"]],
                                           weights_sha256=weights, render=render)
@@ -120,7 +123,8 @@ def run_case(case: dict, *, threads: int = 1) -> dict:
     by_name = {method["name"]: method for method in case["methods"]}
     if stale:
         run_methods([{"name": m["name"], "module": m["module"], "params": m["params"], "key": keys[m["name"]],
-                      "input_paths": [by_name[i]["exr"] for i in m["inputs"]], "exr": m["exr"], "timing": m["timing"]}
+                      "weights": m.get("weights"), "input_paths": [by_name[i]["exr"] for i in m["inputs"]],
+                      "exr": m["exr"], "timing": m["timing"]}
                      for m in stale], case["render"], scene=scene, spp=spp, threads=threads)
     evaluated = _evaluate_case(case)
     _assemble_case(case, evaluated)

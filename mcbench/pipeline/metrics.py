@@ -49,7 +49,7 @@ def gather_tables(paths: list[str], output_path: str, *, candidates: list[str], 
     return frame
 
 
-#: The fields of a method's timing record (written by mcbench.pipeline.methods.run_methods) and their types.
+#: The fields of a method's timing record (written by mcbench.pipeline.method_runs.run_methods) and their types.
 TIMING_FIELDS = {"scene": str, "spp": int, "method": str, "module": str, "kind": str, "seconds": float,
                  "width": int, "height": int, "threads": int, "machine": str}
 

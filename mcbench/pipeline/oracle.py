@@ -26,6 +26,7 @@ import numpy as np
 import pandas as pd
 
 from mcbench import NOISY, BenchError
+from mcbench.contracts.scene import scene_spec
 from mcbench.io.buffers import Denoised, RenderBuffers
 from mcbench.io.exr import check_finite, read_layers
 from mcbench.io.tables import write_csv, write_text
@@ -59,7 +60,7 @@ def usable_downscale(resolution, scene_resolution, downscale: int) -> int:
 
 def oracle_size(resolution, scene_resolution, downscale: int) -> tuple[int, int]:
     """``(width, height)`` of the oracle renders: the harness's resolution (config ``resolution``
-    or the scene's ``RESOLUTION``) divided by ``downscale``; BenchError naming the key otherwise."""
+    or the scene's declared ``resolution``) divided by ``downscale``; BenchError naming the key otherwise."""
     width, height = (int(v) for v in (resolution if resolution is not None else scene_resolution))
     factor = int(downscale)
     if factor < 1 or width % factor or height % factor:
@@ -83,7 +84,7 @@ def _combiner_weights(result: Denoised, count: int) -> np.ndarray:
 def run_oracle_study(scene: str, reference_path: str, *, table_csv: str, table_md: str, weights_png: str,
                      denoisers: list[str], repetitions: int, spp: int, downscale: int, resolution=None,
                      variant: str = "auto", seed: int = 0, threads: int | None = None,
-                     features: str = "first_hit") -> pd.DataFrame:
+                     features: str = "first_hit", weights_dir: str | None = None) -> pd.DataFrame:
     """Run the oracle study of one scene and write its table (CSV and Markdown) and weight maps (PNG).
 
     ``denoisers``: base denoiser modules of ``methods/`` (default parameters); ``repetitions``
@@ -92,8 +93,10 @@ def run_oracle_study(scene: str, reference_path: str, *, table_csv: str, table_m
     ``reference_path`` must have the harness's resolution). Returns the table: one row per panel
     a-i (``panel``, ``statistics``, ``weights``, ``relmse``, ``dssim``) then the held-out noisy
     render and each base denoiser (panel ``-``), errors against the block-averaged reference.
-    ``features``: the renders' feature convention (config key ``features``).
+    ``features``: the renders' feature convention (config key ``features``); ``weights_dir``: the
+    learned bases' weights folder (config key ``weights_dir``; default the committed one).
     """
+    from mcbench.pipeline.method_runs import method_function
     from mcbench.pipeline.registry import load_method
     from mcbench.render.renderer import render_dict_buffers
     from mcbench.render.variants import pick_variant, set_threads
@@ -101,14 +104,15 @@ def run_oracle_study(scene: str, reference_path: str, *, table_csv: str, table_m
 
     started = time.perf_counter()
     module = load_scene(scene, config_key="oracle.scene")
-    width, height = oracle_size(resolution, module.RESOLUTION, downscale)
+    scene_declaration = scene_spec(module)
+    width, height = oracle_size(resolution, scene_declaration.size, downscale)
     repetitions, spp = int(repetitions), int(spp)
     if repetitions < 2:
         raise BenchError(f"config key 'oracle.repetitions': need at least 2, got {repetitions}")
     if len(denoisers) < 2:
         raise BenchError(f"config key 'oracle.denoisers': need at least 2 base denoisers, got {denoisers}")
-    bases = [load_method(name, kind="denoiser", config_key=f"oracle.denoisers[{i}]")
-             for i, name in enumerate(denoisers)]
+    bases = [method_function(load_method(name, kind="denoiser", config_key=f"oracle.denoisers[{i}]"),
+                             weights_dir=weights_dir) for i, name in enumerate(denoisers)]
     reference = read_layers(reference_path, ["color"])
     check_finite(reference_path, reference)
     reference = np.asarray(reference["color"], np.float64)
@@ -119,7 +123,7 @@ def run_oracle_study(scene: str, reference_path: str, *, table_csv: str, table_m
 
     variant = pick_variant(variant)
     set_threads(threads)
-    desc = module.build(width, height)
+    desc = scene_declaration.build(width, height)
     accumulators = {"full": MseMatrixAccumulator(mu, count=len(bases)),
                     "half": MseMatrixAccumulator(mu, count=len(bases))}
     label = f"oracle {scene} ({width}x{height}, {spp} spp, {variant})"
@@ -128,7 +132,7 @@ def run_oracle_study(scene: str, reference_path: str, *, table_csv: str, table_m
             desc, spp, lambda half, j, p, r=r: oracle_render_seed(r, half, bin=j, pass_index=p, base_seed=seed),
             key=f"oracle:{scene}", variant=variant, features=features)
         buffers = RenderBuffers(layers=layers, spp=spp, source=f"oracle render {r} of '{scene}'")
-        outputs = [base.denoise(buffers) for base in bases]
+        outputs = [denoise(buffers) for denoise in bases]
         if r < repetitions:
             accumulators["full"].add(_stack(outputs, "full"))
             accumulators["half"].add(_stack(outputs, "a"))
@@ -149,7 +153,8 @@ def run_oracle_study(scene: str, reference_path: str, *, table_csv: str, table_m
             images[name] = blend(maps[name], full)
             rows[name] = {"panel": next(panel), "statistics": GROUND_TRUTH[statistics], "weights": weights_label}
     for name, combiner, params, weights_label in DUAL_BUFFER:
-        result = load_method(combiner, kind="combiner").combine(held_out, held_outputs, **params)
+        result = method_function(load_method(combiner, kind="combiner"), weights_dir=weights_dir)(
+            held_out, held_outputs, **params)
         maps[name] = _combiner_weights(result, len(bases))
         images[name] = np.asarray(result.full, np.float64)
         rows[name] = {"panel": next(panel), "statistics": "<M> (dual buffer, held-out render)",

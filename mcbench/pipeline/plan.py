@@ -33,7 +33,7 @@ Checks here beyond the method table's (:func:`methods.method_table`):
 * a scene of renders made elsewhere (``scenes/<name>.yaml``, :mod:`mcbench.io.render_folders`)
   has a case for every ``spp`` and a reference, at the config's ``resolution`` if one is set,
   a reference variance if a metric that reads it is computed (``relmse_corrected``), and every layer each configured
-  method reads (:func:`mcbench.pipeline.methods.needed_layers`): a method that needs what the
+  method reads (:func:`mcbench.pipeline.method_runs.needed_layers`): a method that needs what the
   folder lacks (half buffers, variance, depth) is refused for that scene, naming the files
   that would supply it; the oracle study and the progressive curve render their scene again,
   so they take the first scene that Mitsuba renders.
@@ -46,12 +46,15 @@ import re
 from mcbench import NOISY, NOISY_LABEL, BenchError
 from mcbench.analysis.comparisons import comparison_role, find_comparisons
 from mcbench.analysis.pool import POOL
-from mcbench.io.method_spec import method_spec
+from mcbench.contracts.method import method_spec
+from mcbench.contracts.scene import scene_spec
+from mcbench.io.weights import COMMITTED_WEIGHTS
 from mcbench.pipeline.config import ConfigError, key_path, schema_defaults
 from mcbench.pipeline.oracle import oracle_size, usable_downscale
-from mcbench.pipeline.registry import available_scenes, config_method_table, load_method, load_metrics, load_scene
-from mcbench.pipeline.study_plan import (CasePlan, MethodPlan, RankingPlan, SideStudyPlan, StudyPlan, TrainingPlan,
-                                         frozen_mapping)
+from mcbench.pipeline.registry import (available_scenes, config_method_table, load_method, load_metrics,
+                                       load_scene, single_image_methods)
+from mcbench.pipeline.study_plan import (CasePlan, MethodPlan, RankingPlan, SideStudyPlan, StudyPaths, StudyPlan,
+                                         TrainingPlan, frozen_mapping)
 from mcbench.render.seeds import FIBRE_SEED_BASE, spp_code, training_seeds
 
 __all__ = ["plan_study", "default_note", "defaulted_key"]
@@ -160,12 +163,13 @@ def _plan(config: dict, is_learned) -> StudyPlan:
         methods=frozen_mapping({name: MethodPlan(name=name, kind=spec["kind"], module=spec["module"],
                                           params=frozen_mapping(spec["params"]), inputs=tuple(spec["inputs"]),
                                           label=spec["label"], learned=spec["learned"],
-                                          config_key=spec.get("config_key", ""))
+                                          config_key=spec.get("config_key", ""),
+                                          comparison_role=spec.get("comparison_role"), weights=_weights_read(spec))
                          for name, spec in methods.items()}),
         cases=CasePlan(scenes=tuple(scenes), spps=tuple(spps), reference_spp=frozen_mapping(reference_spp),
                        reference_chunks=reference_chunks, render_folders=frozen_mapping(render_folders),
                        resolutions=frozen_mapping({scene: tuple(int(n) for n in (config["resolution"] or
-                                                                                 load_scene(scene).RESOLUTION))
+                                                                                 scene_spec(load_scene(scene)).size))
                                                    for scene in scenes})),
         ranking=RankingPlan(candidates=tuple(candidates), ranked=tuple(ranked), extras=tuple(extras),
                             pool_study=bool(pool_study), pool_note=pool_note, labels=frozen_mapping(labels),
@@ -175,7 +179,8 @@ def _plan(config: dict, is_learned) -> StudyPlan:
                               combiner_settings=frozen_mapping(combiner_training), combiner_seeds=tuple(combiner_seeds)),
         side=SideStudyPlan(oracle_scene=oracle_scene, oracle_downscale=oracle_downscale,
                            progressive=frozen_mapping(progressive), progressive_scene=progressive_scene,
-                           progressive_downscale=progressive_downscale))
+                           progressive_downscale=progressive_downscale),
+        paths=StudyPaths(weights_dir=config.get("weights_dir") or str(COMMITTED_WEIGHTS)))
 
 
 def _check_metrics(names: list[str]) -> None:
@@ -211,13 +216,13 @@ def _check_render_folders(config: dict, methods: dict, scenes: list[str], spps: 
     """The scenes of renders made elsewhere -> their :class:`mcbench.io.render_folders.RenderFolder`,
     after checking (headers only, no pixels) that each has every case and its reference, the
     config's resolution, the reference variance the corrected relMSE needs, and every layer of
-    every configured method (:func:`mcbench.pipeline.methods.needed_layers`)."""
+    every configured method (:func:`mcbench.pipeline.method_runs.needed_layers`)."""
     from mcbench.io.render_folders import AUTHORS_FILES, case_files, image_size, reference_files, reference_names
-    from mcbench.pipeline.methods import needed_layers
+    from mcbench.pipeline.method_runs import needed_layers
 
     folders = {}
     for index, scene in enumerate(scenes):
-        folder = getattr(load_scene(scene, config_key=f"scenes[{index}]"), "RENDER_FOLDER", None)
+        folder = scene_spec(load_scene(scene, config_key=f"scenes[{index}]")).render_folder
         if folder is None:
             continue
         folders[scene] = folder
@@ -357,8 +362,8 @@ def _oracle(config: dict, scenes: list[str], rendered: list[str],
         raise BenchError(f"oracle.scene: '{scene}' is not one of the config's scenes "
                          f"({', '.join(scenes)}); its reference is rendered only for those")
     module = load_scene(scene, config_key="oracle.scene")
-    downscale = usable_downscale(config["resolution"], module.RESOLUTION, oracle["downscale"])
-    oracle_size(config["resolution"], module.RESOLUTION, downscale)
+    downscale = usable_downscale(config["resolution"], scene_spec(module).size, oracle["downscale"])
+    oracle_size(config["resolution"], scene_spec(module).size, downscale)
     for index, name in enumerate(oracle["denoisers"]):
         load_method(name, kind="denoiser", config_key=f"oracle.denoisers[{index}]")
     worth = reference_spp[scene] * downscale ** 2
@@ -367,6 +372,17 @@ def _oracle(config: dict, scenes: list[str], rendered: list[str],
                          f"('{scene}': {reference_spp[scene]} spp averaged over {downscale}x{downscale} blocks); "
                          f"lower oracle.spp or raise {_reference_key(config, scene)}")
     return scene, downscale
+
+
+def _weights_read(spec: dict) -> tuple[str, ...]:
+    """The weights files (names in the weights folder) a method of the method table reads: a
+    learned method's own, or what its declaration's ``weights_read`` says for its params."""
+    if not spec["learned"]:
+        return ()
+    declared = method_spec(load_method(spec["module"])).learned
+    if declared is None or declared.weights_read is None:
+        return (spec["module"],)
+    return tuple(declared.weights_read(dict(spec["params"])))
 
 
 def _progressive_curve(config: dict, scenes: list[str], rendered: list[str], reference_spp: dict[str, int],
@@ -385,8 +401,11 @@ def _progressive_curve(config: dict, scenes: list[str], rendered: list[str], ref
         raise BenchError(f"progressive_curve.scene: '{scene}' is not one of the config's scenes "
                          f"({', '.join(scenes)}); its reference is rendered only for those")
     module = load_scene(scene, config_key="progressive_curve.scene")
-    downscale = usable_downscale(config["resolution"], module.RESOLUTION, curve["downscale"])
+    downscale = usable_downscale(config["resolution"], scene_spec(module).size, curve["downscale"])
     load_method(curve["base"], kind="denoiser", config_key="progressive_curve.base")
+    if progressive and curve["divergence"] not in ("none", *single_image_methods()):
+        raise BenchError(f"progressive_curve.divergence: '{curve['divergence']}' has no single-image function; "
+                         f"name one of none, {', '.join(single_image_methods())}")
     if progressive:
         worth = reference_spp[scene] * downscale ** 2
         top = max(curve["spp"])

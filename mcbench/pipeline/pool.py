@@ -90,7 +90,7 @@ def run_step(step: str, *args, log_path: str | None, workers: int, threads: int 
 
     ``workers``: the pool's size (the cores Snakemake may use at once; every job using the pool
     has ``threads`` 1, so no more than ``workers`` steps run at a time). ``environment``: variables
-    set in each worker (e.g. ``MCBENCH_WEIGHTS_DIR``); ``paths``: folders put first on its
+    set in each worker; ``paths``: folders put first on its
     ``sys.path``. Arguments must pickle. Raises :class:`mcbench.BenchError` when the step fails
     (naming it and ``log_path``) or its worker dies.
     """

@@ -9,7 +9,7 @@ render's as spp grows and is never much worse, whatever the base's bias. Like
 Choices:
 
 * **Resolution.** The curve renders at the harness's resolution (config ``resolution`` or the
-  scene's ``RESOLUTION``) divided by ``downscale`` (config ``progressive_curve.downscale``, 2 by
+  scene's declared ``resolution``) divided by ``downscale`` (config ``progressive_curve.downscale``, 2 by
   default), as the oracle study does: four times fewer pixels make the 8192-spp render affordable.
   The ground truth is the harness's reference averaged over ``downscale`` x ``downscale`` blocks
   (:func:`mcbench.combine.oracle.block_average`: with the box pixel filter the block mean is the reference
@@ -53,9 +53,10 @@ import numpy as np
 import pandas as pd
 
 from mcbench import NOISY, BenchError
+from mcbench.contracts.scene import scene_spec
 from mcbench.io.buffers import RenderBuffers
 from mcbench.io.exr import ExrError, check_finite, read_layers
-from mcbench.io.method_spec import method_spec
+from mcbench.contracts.method import method_spec
 from mcbench.analysis.figures import pyplot_agg, save_figure
 from mcbench.io.tables import read_table, write_csv, write_text
 from mcbench.analysis.metrics import relmse, relmse_corrected, smape
@@ -238,7 +239,8 @@ def curve_figure(table: pd.DataFrame, path: str, *, entries: list[str], labels: 
 def run_consistency_curve(scene: str, reference_path: str, *, table_csv: str, table_md: str, figure_png: str,
                           spp_levels: list[int], base: str = "oidn", divergence: str = "oidn",
                           downscale: int = 2, resolution=None, variant: str = "auto", seed: int = 0,
-                          threads: int | None = None, features: str = "first_hit") -> pd.DataFrame:
+                          threads: int | None = None, features: str = "first_hit",
+                          weights_dir: str | None = None) -> pd.DataFrame:
     """Render ``scene`` at every level of ``spp_levels`` and write the consistency curve's table
     (CSV and Markdown) and figure (PNG).
 
@@ -249,10 +251,12 @@ def run_consistency_curve(scene: str, reference_path: str, *, table_csv: str, ta
     resolution. Returns the table: one row per (spp, entry) with columns ``spp``, ``entry``,
     ``label``, ``relmse``, ``relmse_corrected`` (only when the reference has a variance layer),
     ``smape``, ``seconds``; entries :func:`entry_names` (module docstring). ``features``: the
-    renders' feature convention (config key ``features``).
+    renders' feature convention (config key ``features``); ``weights_dir``: the learned
+    networks' folder (config key ``weights_dir``; default the committed one).
     """
     from mcbench import NOISY_LABEL
-    from mcbench.pipeline.registry import load_method, single_image_function
+    from mcbench.pipeline.method_runs import method_function
+    from mcbench.pipeline.registry import load_method, single_image_methods
     from mcbench.render.renderer import load_scene_dict, passes_for, render_dict_buffers
     from mcbench.render.variants import pick_variant, set_threads
     from mcbench.pipeline.registry import load_scene
@@ -260,17 +264,17 @@ def run_consistency_curve(scene: str, reference_path: str, *, table_csv: str, ta
     started = time.perf_counter()
     levels = check_spp_levels(spp_levels)
     module = load_scene(scene, config_key="progressive_curve.scene")
-    width, height = curve_size(resolution, module.RESOLUTION, downscale)
+    scene_declaration = scene_spec(module)
+    width, height = curve_size(resolution, scene_declaration.size, downscale)
     downscale = int(downscale)
     base_module = load_method(base, kind="denoiser", config_key="progressive_curve.base")
     combiner = load_method("progressive", kind="combiner", config_key="progressive_curve")
-    denoise, combine = method_spec(base_module).run, method_spec(combiner).run
-    divergences = combiner.DivergenceBase.__args__    # the names the plugin's ``divergence`` param takes
+    denoise = method_function(base_module, weights_dir=weights_dir)
+    combine = method_function(combiner, weights_dir=weights_dir)
+    divergences = ("none", *single_image_methods())     # the denoisers that declare a single-image function
     if divergence not in divergences:
         raise BenchError(f"config key 'progressive_curve.divergence': '{divergence}' is not one of "
-                         f"{', '.join(divergences)}")
-    if divergence != "none":
-        single_image_function(divergence, choices=divergences)     # its error names the method
+                         f"{', '.join(divergences)} (none, or a denoiser with a single-image function)")
     mu, reference_variance = block_reference(reference_path, width, height, downscale)
     floor = reference_floor(mu, reference_variance)
 
@@ -281,7 +285,7 @@ def run_consistency_curve(scene: str, reference_path: str, *, table_csv: str, ta
     if passes > MAX_PROGRESSIVE_CURVE_PASSES:
         raise BenchError(f"config key 'progressive_curve.spp': {top} spp at {width}x{height} needs {passes} "
                          f"passes per bin, more than the seed layout's {MAX_PROGRESSIVE_CURVE_PASSES}")
-    desc = module.build(width, height)
+    desc = scene_declaration.build(width, height)
     key = f"progressive_curve:{scene}"
     load_scene_dict(desc, key=key, variant=variant)        # the scene's load is no level's time
 

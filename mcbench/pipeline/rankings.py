@@ -11,6 +11,7 @@ from pathlib import Path
 
 
 from mcbench import BenchError
+from mcbench.contracts.scene import scene_spec
 from mcbench.io.exr import check_finite, check_resolution, read_layers, read_metadata
 from mcbench.io.tables import read_table, write_csv, write_text
 from mcbench.pipeline.registry import load_metric
@@ -155,8 +156,8 @@ def write_scene_table(metrics_csv: str, reference_paths: dict[str, str], referen
         check_finite(path, layers)
         check_resolution(path, layers["color"].shape)
         floors[scene] = None if imported_without_variance else reference_relmse_floor(layers["color"], layers["variance"])
-        module = load_scene(scene)
-        info[scene] = {"category": module.CATEGORY, "description": module.DESCRIPTION,
+        spec = scene_spec(load_scene(scene))
+        info[scene] = {"category": spec.category, "description": spec.description,
                        "resolution": meta.get("resolution", ""), "reference_spp": reference_spp[scene]}
         costs[scene] = {
             "render_cpu_hours": _benchmark_cpu_hours(_records_of(scene, noisy_records)),

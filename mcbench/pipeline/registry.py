@@ -16,8 +16,9 @@ from typing import TYPE_CHECKING, Callable
 if TYPE_CHECKING:
     from mcbench.contracts.metric import MetricSpec
 
-__all__ = ["available_methods", "load_method", "method_parameters", "config_method_table", "single_image_function",
-           "available_scenes", "load_scene", "available_metrics", "load_metric", "load_metrics", "metric_source"]
+__all__ = ["available_methods", "load_method", "method_parameters", "config_method_table", "single_image_methods",
+           "single_image_function", "available_scenes", "load_scene", "available_metrics", "load_metric", "load_metrics",
+           "metric_source"]
 
 
 def available_methods() -> list[str]:
@@ -49,11 +50,19 @@ def config_method_table(config: dict, *, is_learned: Callable[[ModuleType], bool
     return methods.config_method_table(config, is_learned=is_learned)
 
 
-def single_image_function(name: str, *, choices=None) -> Callable:
-    """Base denoiser ``name`` as a function of one image (:func:`methods.single_image_function`)."""
+def single_image_methods() -> tuple[str, ...]:
+    """The denoisers whose declarations make them single-image (:func:`methods.single_image_methods`)."""
     import methods
 
-    return methods.single_image_function(name, choices=choices)
+    return methods.single_image_methods()
+
+
+def single_image_function(name: str, *, weights_dir) -> Callable:
+    """Base denoiser ``name`` as a function of one image, a learned one with its weights in
+    ``weights_dir`` (:func:`methods.single_image_function`)."""
+    import methods
+
+    return methods.single_image_function(name, weights_dir=weights_dir)
 
 
 def available_scenes() -> list[str]:

@@ -5,6 +5,7 @@ the same rules import its cases and its reference from the folder instead.
 
 from __future__ import annotations
 
+from mcbench.contracts.scene import scene_spec
 from mcbench.io.exr import check_finite, check_resolution, read_layers, read_metadata, write_layers
 from mcbench.io.render_folders import RenderFolder, case_files, read_case, read_reference, reference_files
 
@@ -44,8 +45,9 @@ def render_noisy(scene: str, spp: int, output_path: str, *, resolution=None, var
     from mcbench.pipeline.registry import load_scene
 
     module = load_scene(scene)
-    if getattr(module, "RENDER_FOLDER", None) is not None:
-        _import_case(scene, module.RENDER_FOLDER, spp, output_path, resolution)
+    folder = scene_spec(module).render_folder
+    if folder is not None:
+        _import_case(scene, folder, spp, output_path, resolution)
         return
     from mcbench.render.renderer import render_buffers
 
@@ -78,7 +80,7 @@ def merge_reference(chunk_paths: list[str], output_path: str, *, scene: str | No
     if scene is not None:
         from mcbench.pipeline.registry import load_scene
 
-        folder = getattr(load_scene(scene), "RENDER_FOLDER", None)
+        folder = scene_spec(load_scene(scene)).render_folder
         if folder is not None:
             layers = read_reference(folder)
             height, width = layers["color"].shape[:2]

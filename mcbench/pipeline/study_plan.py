@@ -18,8 +18,10 @@ from types import MappingProxyType
 from typing import Mapping
 
 from mcbench import NOISY
+from mcbench.io.weights import COMMITTED_WEIGHTS, WEIGHTS_SUFFIX
 
-__all__ = ["frozen_mapping", "MethodPlan", "CasePlan", "RankingPlan", "TrainingPlan", "SideStudyPlan", "StudyPaths", "StudyPlan"]
+__all__ = ["frozen_mapping", "MethodPlan", "CasePlan", "RankingPlan", "TrainingPlan", "SideStudyPlan", "StudyPaths", "StudyPlan",
+           "weights_digest"]
 
 
 def frozen_mapping(mapping: Mapping) -> Mapping:
@@ -31,7 +33,10 @@ def frozen_mapping(mapping: Mapping) -> Mapping:
 class MethodPlan:
     """One method of the config: ``kind`` ("denoiser" or "combiner"), its ``module`` (plugin
     file name), ``params``, ``inputs`` (method names, earlier in the plan), table ``label``,
-    whether it is ``learned`` (reads weights) and the ``config_key`` it comes from."""
+    whether it is ``learned`` (reads weights), the ``config_key`` it comes from and its role in
+    the Sec. 5.2 comparisons (``comparison_role``, declared by its module) and the weights files
+    it reads (``weights``: names in the weights folder; a learned method's own, or what its
+    declaration's ``weights_read`` says for its params)."""
 
     name: str
     kind: str
@@ -41,11 +46,13 @@ class MethodPlan:
     label: str
     learned: bool
     config_key: str = ""
+    comparison_role: str | None = None
+    weights: tuple[str, ...] = ()
 
     def as_dict(self) -> dict:
         """The method as plain data (for a script's params or a table)."""
         return {"kind": self.kind, "module": self.module, "params": dict(self.params), "inputs": list(self.inputs),
-                "label": self.label, "learned": self.learned}
+                "label": self.label, "learned": self.learned, "comparison_role": self.comparison_role}
 
 
 @dataclass(frozen=True)
@@ -126,9 +133,15 @@ class SideStudyPlan:
 class StudyPaths:
     """Where a study's files go, relative to the working directory: a case's render and
     reference, each method's output and timing record, each entry's kept metric values and viewer
-    images, and the case job's outputs."""
+    images, the case job's outputs, and the learned methods' weights (``weights_dir``: the
+    config key of that name, or the committed ``methods/weights`` when it is empty)."""
 
     results: str = "results"
+    weights_dir: str = str(COMMITTED_WEIGHTS)
+
+    def weights(self, module: str) -> str:
+        """The weights file of learned method module ``module``."""
+        return f"{self.weights_dir}/{module}{WEIGHTS_SUFFIX}"
 
     def render(self, scene: str, spp: int) -> str:
         return f"{self.results}/renders/{scene}/spp{spp}.exr"
@@ -167,21 +180,22 @@ class StudyPlan:
     def case_plan(self, weights_sha256: Mapping) -> dict:
         """What a case's job depends on besides its files (the same for every case; rule
         run_case's params): the methods in dependency order with their settings and, for a
-        learned method, its weights' SHA-256 (``weights_sha256``: module -> digest), the
-        entries, the metrics."""
+        learned method, the SHA-256 of the weights it reads (``weights_sha256``: weights name ->
+        digest, :meth:`weights_names`), the entries, the metrics."""
         return {"methods": [{"name": m.name, "module": m.module, "params": dict(m.params), "inputs": list(m.inputs),
-                             **({"weights_sha256": weights_sha256[m.module]} if m.learned else {})}
+                             **({"weights_sha256": weights_digest(m.weights, weights_sha256)} if m.learned else {})}
                             for m in self.methods.values()],
                 "entries": self.ranking.entries, "metrics": list(self.ranking.metrics)}
 
-    def case_job(self, scene: str, spp: int, *, weights_dir: str, outputs: Mapping) -> dict:
+    def case_job(self, scene: str, spp: int, *, outputs: Mapping) -> dict:
         """The description of one case's job (:func:`mcbench.pipeline.cases.run_case`): its
         render and reference, its methods in dependency order with their files and weights
-        (``<weights_dir>/<module>.pt`` for a learned method), its entries' evaluations and the
-        job's ``outputs`` (``metrics``, ``viewer``, ``record``)."""
+        (:meth:`StudyPaths.weights` for a learned method: the file its key covers and its run
+        reads), its entries' evaluations and the job's ``outputs`` (``metrics``, ``viewer``, ``record``)."""
         paths, spp = self.paths, int(spp)
         methods = [{"name": m.name, "module": m.module, "params": dict(m.params), "inputs": list(m.inputs),
-                    "weights": f"{weights_dir}/{m.module}.pt" if m.learned else None,
+                    "weights": paths.weights(m.module) if m.learned else None,
+                    "weights_read": [paths.weights(name) for name in m.weights],
                     "exr": paths.method_output(scene, spp, m.name), "timing": paths.method_timing(scene, spp, m.name)}
                    for m in self.methods.values()]
         entries = [{"entry": entry, "image": paths.entry_image(scene, spp, entry),
@@ -192,6 +206,12 @@ class StudyPlan:
                 "metrics": list(self.ranking.metrics), "methods": methods, "entries": entries,
                 "outputs": {key: str(outputs[key]) for key in ("metrics", "viewer", "record")}}
 
-    def learned_modules(self) -> list[str]:
-        """The modules of the learned methods, each once, in plan order."""
-        return list(dict.fromkeys(m.module for m in self.methods.values() if m.learned))
+    def weights_names(self) -> list[str]:
+        """The weights files the methods read (names in the weights folder), each once, in plan order."""
+        return list(dict.fromkeys(name for m in self.methods.values() for name in m.weights))
+
+
+def weights_digest(names, digests: Mapping) -> str:
+    """The digest of the weights ``names`` a method reads: the SHA-256 of the one file (of its own
+    weights, as a method reading only those has it), else the files' digests joined by ``+``."""
+    return digests[names[0]] if len(names) == 1 else "+".join(digests[name] for name in names)

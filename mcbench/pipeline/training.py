@@ -9,9 +9,11 @@ import time
 import numpy as np
 
 from mcbench import BenchError
+from mcbench.contracts.method import method_spec
 from mcbench.io.buffers import RenderBuffers
 from mcbench.io.exr import check_finite, read_layers, read_metadata, write_layers
-from mcbench.io.method_spec import method_spec
+from mcbench.io.weights import record_path, weights_folder, weights_path
+from mcbench.pipeline.method_runs import method_function
 from mcbench.pipeline.render import resolution_pair
 
 
@@ -35,8 +37,9 @@ SURE_SUFFIX = "+sure"   # a training base "<name>+sure" also writes SURE's diver
 
 
 def write_correlated_training_inputs(base: str, crop_paths: list[str], output_paths: list[str], *,
-                                     threads: int | None = None) -> None:
-    """Run base denoiser ``base`` (``methods/<base>.py``; a learned one with its committed weights)
+                                     weights_dir: str | None = None, threads: int | None = None) -> None:
+    """Run base denoiser ``base`` (``methods/<base>.py``; a learned one with its weights in
+    ``weights_dir``, default the committed ones)
     on every noisy level of each training crop and write its results, the correlated inputs of
     the deep combiner's training (Back et al. 2020 Sec. 5): per level ``N`` the layers
     ``correlated_spp<N>``, ``correlated_a_spp<N>``, ``correlated_b_spp<N>`` and, for a base that
@@ -54,18 +57,15 @@ def write_correlated_training_inputs(base: str, crop_paths: list[str], output_pa
 
     if threads:
         set_threads(threads)
-        try:
-            import torch
-            torch.set_num_threads(int(threads))
-        except ImportError:
-            pass
+        _torch_threads(int(threads))
     name, with_sure = (base[:-len(SURE_SUFFIX)], True) if base.endswith(SURE_SUFFIX) else (base, False)
-    denoise = method_spec(load_method(name, kind="denoiser", config_key=f"base '{base}'")).run
+    folder = weights_folder(weights_dir)
+    denoise = method_function(load_method(name, kind="denoiser", config_key=f"base '{base}'"), weights_dir=folder)
     if with_sure:
         from mcbench.filters.sure import divergence_map
         from mcbench.io.buffers import IMAGE_INDEX
         from mcbench.pipeline.registry import single_image_function
-        denoise_image = single_image_function(name)
+        denoise_image = single_image_function(name, weights_dir=folder)
     if len(crop_paths) != len(output_paths):
         raise BenchError(f"{len(crop_paths)} crops for {len(output_paths)} outputs of base '{base}'")
     for crop_path, output_path in zip(crop_paths, output_paths):
@@ -96,11 +96,19 @@ def write_correlated_training_inputs(base: str, crop_paths: list[str], output_pa
                                                  "seconds": f"{time.perf_counter() - start:.3f}"})
 
 
+def _torch_threads(threads: int) -> None:
+    """torch's thread count, where torch is installed."""
+    try:
+        import torch
+    except ImportError:
+        return
+    torch.set_num_threads(threads)
+
+
 def learned_method(name: str):
-    """``methods/<name>.py`` checked to be a learned method (its declaration sets ``network``,
-    ``training``, ``build_network``): a denoiser, or a combiner trained on base results (its
-    ``correlated_bases``, ``training_keys``; :class:`mcbench.io.method_spec.MethodSpec` refuses a
-    learned combiner without them)."""
+    """``methods/<name>.py`` checked to be a learned method (its declaration sets ``learned``): a
+    denoiser, or a combiner trained on base results (its ``correlated_bases``, ``training_keys``;
+    :class:`mcbench.contracts.method.MethodSpec` refuses a learned combiner without them)."""
     from mcbench.io.weights import check_learned_method
     from mcbench.pipeline.registry import load_method
 
@@ -114,6 +122,7 @@ def training_data(name: str, crop_files: list[str], correlated_files: dict[str, 
     spec = method_spec(learned_method(name))
     if spec.kind != "combiner":
         return list(crop_files)
+    spec = spec.learned
     from mcbench.nn.data import load_combiner_crops
 
     correlated_files = correlated_files or {}
@@ -142,15 +151,14 @@ def training_provenance() -> dict:
 
 
 def train_progressive_variant(variant: str, data: str = "results/training", steps: int | None = None,
-                              threads: int | None = None) -> dict:
+                              threads: int | None = None, weights_dir: str | None = None) -> dict:
     """Train progressive denoising's h_NN (``methods/progressive.py``): ``full`` (the committed
     ``progressive.pt``) or an ablation of its ``VARIANTS`` (``no_sure``, ``no_fact``; Firmino et al.
     2022 Table 4), on the crops with results of its declared ``correlated_bases`` under
-    ``<data>/correlated/``; weights and record in ``methods/weights/``, checkpoint
+    ``<data>/correlated/``; weights and record in ``weights_dir`` (default ``methods/weights/``), checkpoint
     ``results/training/checkpoints/<name>.ckpt`` (a run resumes from it)."""
     import sys
 
-    from mcbench.io.weights import record_path, weights_path
     from mcbench.nn.data import crop_paths
     from mcbench.nn.train import correlated_paths, train_network
     from mcbench.pipeline.registry import load_method
@@ -159,11 +167,12 @@ def train_progressive_variant(variant: str, data: str = "results/training", step
     if variant != "full" and variant not in progressive.VARIANTS:
         raise BenchError(f"unknown progressive variant '{variant}'; known: full, {', '.join(progressive.VARIANTS)}")
     module = progressive if variant == "full" else progressive.variant_module(variant)
-    files, correlated = correlated_paths(data, method_spec(progressive).correlated_bases, crop_paths(data))
+    files, correlated = correlated_paths(data, method_spec(progressive).learned.correlated_bases, crop_paths(data))
     crops = training_data("progressive", [str(f) for f in files],
                           {b: [str(f) for f in fs] for b, fs in correlated.items()})
     name = "progressive" if variant == "full" else f"progressive_{variant}"
-    return train_network(module, crops, weights_path(name), record_path(name),
+    folder = weights_folder(weights_dir)
+    return train_network(module, crops, weights_path(folder, name), record_path(folder, name),
                          f"results/training/checkpoints/{name}.ckpt",
                          {**({"steps": steps} if steps else {}), **({"threads": threads} if threads else {})},
                          log=lambda message: print(message, file=sys.stderr, flush=True),
@@ -186,8 +195,10 @@ def main(argv: list[str] | None = None) -> int:
         parser.add_argument("--data", default="results/training")
         parser.add_argument("--steps", type=int, default=None, help="training steps (default TRAINING['steps'])")
         parser.add_argument("--threads", type=int, default=None, help="torch threads (default 2)")
+        parser.add_argument("--weights-dir", default=None, help="folder of the weights (default: methods/weights)")
         arguments = parser.parse_args(argv[1:])
-        train_progressive_variant(arguments.variant, arguments.data, arguments.steps, arguments.threads)
+        train_progressive_variant(arguments.variant, arguments.data, arguments.steps, arguments.threads,
+                                  arguments.weights_dir)
         return 0
     from mcbench.nn.train import main as train_main
 

@@ -40,9 +40,9 @@ What is rendered
 ----------------
 The renderer never looks up a scene by name (core does not import ``scenes/``): callers pass
 
-* a scene *module* (``DESCRIPTION``, ``CATEGORY``, ``RESOLUTION``, ``build(width, height)``, see
-  ``scenes/__init__.py``) to :func:`render_buffers` and :func:`render_reference_chunk`, which
-  use the test render seeds of :func:`mcbench.render.seeds.render_seed`; or
+* a scene *module* (its declaration ``SCENE``, a :class:`mcbench.contracts.scene.SceneSpec`:
+  ``resolution``, ``build(width, height)``; see ``scenes/__init__.py``) to :func:`render_buffers`
+  and :func:`render_reference_chunk`, which use the test render seeds of :func:`mcbench.render.seeds.render_seed`; or
 * a Mitsuba scene *dict* (integrator and sensor included) with a caller-chosen ``key`` and
   seeds to :func:`render_dict_buffers` (noisy full/A/B buffers) or :func:`render_scene_sums`
   (float64 moment sums of one run of passes); the training data uses these.
@@ -63,6 +63,7 @@ from typing import Callable
 import numpy as np
 
 from mcbench import BenchError
+from mcbench.contracts.scene import scene_spec
 from mcbench.io.buffers import ALL_LAYERS, BINS
 from mcbench.progress import eta_seconds, progress_line
 from mcbench.render.seeds import SCALAR_BLOCK_SIZE, mitsuba_seed, render_seed
@@ -459,12 +460,13 @@ def _scene_name(module: ModuleType) -> str:
 
 
 def _size(module: ModuleType, resolution) -> tuple[int, int]:
-    width, height = (resolution if resolution is not None else module.RESOLUTION)
+    width, height = (resolution if resolution is not None else scene_spec(module).size)
     return int(width), int(height)
 
 
 def _loaded_module(module: ModuleType, width: int, height: int, variant: str):
-    return _loaded(module.__name__, lambda: module.build(width, height), _scene_name(module),
+    build = scene_spec(module).build
+    return _loaded(module.__name__, lambda: build(width, height), _scene_name(module),
                    width, height, variant)
 
 
@@ -474,7 +476,7 @@ def render_buffers(scene_module: ModuleType, spp: int, *, resolution: tuple[int,
     """Render the two independent half buffers A and B (spp/2 samples each) of a test scene.
 
     ``scene_module``: the scene module (``scenes.load_scene(name)``; its name is the module's last
-    component); ``resolution``: ``(width, height)``, default the module's ``RESOLUTION``;
+    component); ``resolution``: ``(width, height)``, default its declaration's ``resolution``;
     ``seed``: the config's global seed (:func:`mcbench.render.seeds.render_seed`).
 
     For spp a multiple of 4 each half is rendered as two sample bins of spp/4 (layers

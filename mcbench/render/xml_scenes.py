@@ -3,13 +3,14 @@
 A scene of the harness is normally a Python module whose ``build(width, height)`` returns a
 Mitsuba scene dict (``scenes/__init__.py``). A Mitsuba 3 XML file ``scenes/<name>.xml`` (its
 assets beside it, paths relative to it) is a scene too: :func:`scene_module` gives it the same
-contract -- ``DESCRIPTION`` (the file's first comment line, or its name), ``CATEGORY`` ("xml"),
-``RESOLUTION`` (its film's size) and ``build(width, height)``, which returns an :class:`XmlScene`
-instead of a dict. The renderer (:mod:`mcbench.render.renderer`) wraps an XML scene as it wraps
-a dict (:func:`wrapped_xml`): the scene's own ``<integrator>`` goes inside ``moment(aov(...))``
-(sample moments and the albedo, normal and depth features), the film gets the requested size and
-a box filter (crop windows removed), the sensor an ``independent`` sampler; then Mitsuba loads
-the text with the file's folder on its search path. The file must hold one ``<sensor>`` with a
+declaration, a :class:`mcbench.contracts.scene.SceneSpec` -- ``description`` (the file's first
+comment line, or its name), ``category`` ("xml"), ``resolution`` (its film's size) and
+``build(width, height)``, which returns an :class:`XmlScene` instead of a dict. The renderer
+(:mod:`mcbench.render.renderer`) wraps an XML scene as it wraps a dict (:func:`wrapped_xml`): the
+scene's own ``<integrator>`` goes inside ``moment(aov(...))`` (sample moments and the albedo,
+normal and depth features), the film gets the requested size and a box filter (crop windows
+removed), the sensor an ``independent`` sampler; then Mitsuba loads the text with the file's
+folder on its search path. The file must hold one ``<sensor>`` with a
 ``<film>`` and its own top-level ``<integrator>``; ``$name`` parameters keep their ``<default>``s.
 """
 
@@ -21,6 +22,7 @@ from pathlib import Path
 from types import ModuleType
 
 from mcbench import BenchError
+from mcbench.contracts.scene import SceneSpec
 
 __all__ = ["XmlScene", "scene_module", "film_resolution", "wrapped_xml", "load_xml_scene"]
 
@@ -85,14 +87,12 @@ def _description(path: Path) -> str:
 
 
 def scene_module(path: str | Path) -> ModuleType:
-    """A scene module for the XML file ``path`` (the module docstring's contract)."""
+    """A scene module for the XML file ``path``: its ``SCENE`` (:class:`SceneSpec`) describes it
+    (the first comment), sizes it (its film) and builds an :class:`XmlScene` of it."""
     path = Path(path).resolve()
     module = ModuleType(f"scenes.{path.stem}", f"Mitsuba XML scene {path}")
-    module.DESCRIPTION = _description(path)
-    module.CATEGORY = "xml"
-    module.RESOLUTION = film_resolution(path)
-    module.SOURCE = path
-    module.build = lambda width, height: XmlScene(path, int(width), int(height))
+    module.SCENE = SceneSpec(description=_description(path), category="xml", resolution=film_resolution(path),
+                             build=lambda width, height: XmlScene(path, int(width), int(height)))
     return module
 
 

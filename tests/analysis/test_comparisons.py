@@ -22,9 +22,12 @@ SCENES, SPPS = ("s1", "s2"), (4, 8)
 CASES = [(s, n) for s in SCENES for n in SPPS]
 
 
+ROLES = {"ensemble": "ensemble", "one_hot": "one-hot selection", "naive_average": "naive average"}
+
+
 def spec(module, inputs=(), **params):
     return {"module": module, "kind": "combiner" if inputs else "denoiser", "inputs": list(inputs),
-            "params": params, "label": f"L-{module}-{'+'.join(inputs)}-{params}"}
+            "params": params, "label": f"L-{module}-{'+'.join(inputs)}-{params}", "comparison_role": ROLES.get(module)}
 
 
 METHODS = {

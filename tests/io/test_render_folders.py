@@ -8,6 +8,7 @@ import OpenEXR
 import pytest
 
 from mcbench import BenchError
+from mcbench.contracts.scene import scene_spec
 from mcbench.io.case_folders import write_image
 from mcbench.io.exr import ExrError, NonFiniteError
 from mcbench.io.render_folders import (RenderFolder, case_files, read_case, read_image_any, read_reference,
@@ -143,10 +144,11 @@ def test_scene_file_gives_the_scene_contract_and_names_bad_keys(tmp_path):
     oidn_folder(tmp_path / "renders")
     (tmp_path / "kitchen.yaml").write_text("renders: renders\nlayout: oidn\ndescription: a kitchen\n")
     module = scene_module(tmp_path / "kitchen.yaml")
-    assert module.RENDER_FOLDER.path == (tmp_path / "renders").resolve() and module.RENDER_FOLDER.stem == "kitchen"
-    assert module.RESOLUTION == (W, H) and module.DESCRIPTION == "a kitchen" and module.CATEGORY == "renders"
+    spec = scene_spec(module)
+    assert spec.render_folder.path == (tmp_path / "renders").resolve() and spec.render_folder.stem == "kitchen"
+    assert spec.size == (W, H) and spec.description == "a kitchen" and spec.category == "renders"
     with pytest.raises(BenchError, match="not a scene to render"):
-        module.build(W, H)
+        spec.build(W, H)
     for text, message in (("renders: r\nlayout: pbrt\n", "layout"), ("layout: oidn\n", "'renders'"),
                           ("renders: r\nlayout: oidn\nstems: x\n", r"unknown key\(s\) \['stems'\]"),
                           ("- a\n", "mapping")):

@@ -15,7 +15,7 @@ import pytest
 
 from mcbench import BenchError
 from mcbench.io import weights
-from mcbench.io.method_spec import MethodSpec
+from mcbench.contracts.method import LearnedSpec, MethodSpec
 ROOT = Path(__file__).resolve().parents[2]
 
 
@@ -29,26 +29,30 @@ def test_importing_learned_methods_does_not_import_torch():
     assert result.stdout.strip() == "[]"
 
 
-def test_location_follows_the_environment(monkeypatch, tmp_path):
-    monkeypatch.delenv(weights.WEIGHTS_DIR_ENV, raising=False)
-    assert weights.weights_dir() == ROOT / "methods" / "weights" == weights.COMMITTED_WEIGHTS
-    monkeypatch.setenv(weights.WEIGHTS_DIR_ENV, str(tmp_path))
-    assert weights.weights_path("kpcn") == tmp_path / "kpcn.pt"
-    assert weights.record_path("kpcn") == tmp_path / "kpcn.json"
+def test_location_is_the_folder_passed(tmp_path):
+    assert weights.weights_folder(None) == weights.weights_folder("") == ROOT / "methods" / "weights" \
+        == weights.COMMITTED_WEIGHTS
+    assert weights.weights_folder(str(tmp_path)) == tmp_path
+    assert weights.weights_path(tmp_path, "kpcn") == tmp_path / "kpcn.pt"
+    assert weights.record_path(tmp_path, "kpcn") == tmp_path / "kpcn.json"
 
 
 def test_learned_method_is_read_from_the_declaration():
     def run(buffers):
         return None
 
+    def learned_run(buffers, *, weights_file):
+        return None
+
     learned = SimpleNamespace(__name__="methods.toy", METHOD=MethodSpec(
-        kind="denoiser", label="Toy", run=run, network={}, training={}, build_network=lambda: None))
+        kind="denoiser", label="Toy", run=learned_run,
+        learned=LearnedSpec(network={}, training={}, build_network=lambda: None)))
     plain = SimpleNamespace(__name__="methods.toy", METHOD=MethodSpec(kind="denoiser", label="Toy", run=run))
     assert weights.is_learned_method(learned) and not weights.is_learned_method(plain)
     assert weights.check_learned_method(learned) is learned
-    with pytest.raises(BenchError, match=r"methods/toy\.py is not a learned method: its METHOD declares no network"):
+    with pytest.raises(BenchError, match=r"methods/toy\.py is not a learned method: its METHOD declares no learned="):
         weights.check_learned_method(plain)
-    with pytest.raises(BenchError, match=r"methods/toy\.py: METHOD must be a mcbench\.io\.method_spec\.MethodSpec"):
+    with pytest.raises(BenchError, match=r"methods/toy\.py: METHOD must be a mcbench\.contracts\.method\.MethodSpec"):
         weights.is_learned_method(SimpleNamespace(__name__="methods.toy", NETWORK={}, TRAINING={}))
     assert weights.method_name(plain) == "toy"
 
@@ -127,10 +131,10 @@ def test_inference_refuses_bad_weights_naming_the_file(tmp_path):
 
     path = _bad_files(tmp_path)["hostile"]
     with pytest.raises(BenchError) as caught:
-        load_network(kpcn, path)
+        load_network(kpcn.METHOD, path)
     assert str(path) in str(caught.value) and "weights_only" not in _full_text(caught.value)
-    with pytest.raises(BenchError, match=r"nothing\.pt: weights of 'kpcn' are missing; train them"):
-        load_network(kpcn, tmp_path / "nothing.pt")
+    with pytest.raises(BenchError, match=r"kpcn\.pt: weights of 'kpcn' are missing; train them"):
+        load_network(kpcn.METHOD, tmp_path / "kpcn.pt")
 
 
 def test_reasons_drop_torch_advice_but_keep_the_cause():

@@ -1,12 +1,13 @@
 """The contract every module in ``methods/`` must keep, so a new method is tested the moment its
 file exists: it loads through the registry with a well-formed declaration
-(:class:`mcbench.io.method_spec.MethodSpec`), returns a :class:`mcbench.io.buffers.Denoised` whose
+(:class:`mcbench.contracts.method.MethodSpec`), returns a :class:`mcbench.io.buffers.Denoised` whose
 full, A and B images are finite float (H, W, 3) arrays, and the same input gives the same output.
 Hard cases: fireflies, black regions, a 1x1 image, and for combiners identical inputs and an
 input equal to the noisy image.
 
-The declaration itself: every field of :class:`MethodSpec` is documented (its docstring and
-``docs/methods.md``) and type-checked, and the registry refuses scratch plugins that break each
+The declaration itself: every field of :class:`MethodSpec` and :class:`LearnedSpec` is documented
+(its docstring and ``docs/methods.md``) and type-checked, a learned method's fields are accepted
+only in its ``learned=LearnedSpec(...)``, and the registry refuses scratch plugins that break each
 rule (no declaration, a misspelt field, a wrong type, fields that go together, a top-level hook the
 declaration does not carry), naming the plugin's file.
 
@@ -27,7 +28,9 @@ import pytest
 
 import methods
 from mcbench.io.buffers import SUB_OUTPUTS, Denoised, RenderBuffers
-from mcbench.io.method_spec import MethodSpec, MethodSpecError, check_fields, field_names
+from mcbench.contracts.fields import SpecError, field_names
+from mcbench.contracts.method import LearnedSpec, MethodSpec
+from mcbench.io.weights import COMMITTED_WEIGHTS
 from methods import UnknownMethodError, available_methods, load_method, method_spec
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -158,9 +161,11 @@ def run(module, buffers, inputs) -> Denoised:
     """A denoiser on ``buffers``; a combiner on ``buffers`` and ``inputs`` (its first ``inputs``
     when it declares how many it takes, e.g. the deep combiner's one)."""
     spec = method_spec(module)
+    name = module.__name__.split(".")[-1]
+    weights = {"weights_file": COMMITTED_WEIGHTS / f"{name}.pt"} if spec.learned else {}
     if spec.kind == "combiner":
-        return spec.run(buffers, inputs[:spec.inputs or len(inputs)])
-    return spec.run(buffers, **REQUIRED_PARAMS.get(module.__name__.split(".")[-1], {}))
+        return spec.run(buffers, inputs[:spec.inputs or len(inputs)], **weights)
+    return spec.run(buffers, **REQUIRED_PARAMS.get(name, {}), **weights)
 
 
 def assert_valid_output(result, shape):
@@ -176,7 +181,6 @@ def assert_valid_output(result, shape):
 def test_loads_and_keeps_the_contract(name, make_render_buffers):
     module = load_method(name)
     spec = method_spec(module)
-    check_fields(spec)
     assert spec.label and spec.run is getattr(module, methods.KINDS[spec.kind])   # denoise/combine by name
     if name in READERS:
         return
@@ -196,7 +200,7 @@ def test_loads_and_keeps_the_contract(name, make_render_buffers):
 @pytest.mark.parametrize("name", [n for n in computing_methods() if method_spec(load_method(n)).render_layers])
 def test_declared_render_layers_are_all_the_method_reads(name, make_render_buffers):
     """A method declaring render_layers gets only those (and colour) from a job
-    (mcbench.pipeline.methods.render_layers): on such a render it must give exactly its full-render result."""
+    (mcbench.pipeline.method_runs.render_layers): on such a render it must give exactly its full-render result."""
     module = load_method(name)
     buffers = make_render_buffers(height=HEIGHT, width=WIDTH, seed=1, bins=True)
     inputs = synthetic_inputs(buffers)
@@ -250,46 +254,81 @@ def test_default_config_variants_give_finite_output(name, options, case, make_re
 
 
 def test_every_field_is_documented():
-    """The contract is read from the type: each field of MethodSpec is described in its docstring
-    and in docs/methods.md (a new field without documentation fails here)."""
+    """The contract is read from the types: each field of MethodSpec and LearnedSpec is described
+    in its docstring and in docs/methods.md (a new field without documentation fails here)."""
     docs = (ROOT / "docs" / "methods.md").read_text()
-    for name in field_names():
-        assert f"``{name}``" in MethodSpec.__doc__, f"MethodSpec's docstring does not describe {name}"
-        assert f"\n| `{name}` |" in docs, f"docs/methods.md: no row of the contract's table for field {name}"
+    for spec_class in (MethodSpec, LearnedSpec):
+        for name in field_names(spec_class):
+            assert f"``{name}``" in spec_class.__doc__, f"{spec_class.__name__}'s docstring does not describe {name}"
+            assert f"\n| `{name}` |" in docs, f"docs/methods.md: no row of the contract's table for field {name}"
 
 
 def _valid_fields() -> dict:
     return {"kind": "denoiser", "label": "Scratch", "run": lambda buffers: None}
 
 
-@pytest.mark.parametrize("field", field_names())
+def _learned_fields() -> dict:
+    return {"network": {}, "training": {}, "build_network": lambda **arch: None}
+
+
+def _learned_run(buffers, *, weights_file):
+    return None
+
+
+@pytest.mark.parametrize("field", [f for f in field_names(MethodSpec) if f != "learned"])
 def test_each_field_refuses_a_value_of_another_type(field):
     """Every field's annotation is checked: an object of no declared type is refused, naming the field."""
-    with pytest.raises(MethodSpecError, match=rf"field '{field}' must be"):
+    with pytest.raises(SpecError, match=rf"MethodSpec field '{field}' must be"):
         MethodSpec(**{**_valid_fields(), field: object()})
+
+
+@pytest.mark.parametrize("field", field_names(LearnedSpec))
+def test_each_learned_field_refuses_a_value_of_another_type(field):
+    with pytest.raises(SpecError, match=rf"LearnedSpec field '{field}' must be"):
+        LearnedSpec(**{**_learned_fields(), field: object()})
+
+
+def test_a_learned_methods_fields_are_accepted_only_in_its_learned_spec():
+    """network, training, build_network, ... given to MethodSpec itself are refused, naming
+    ``learned=LearnedSpec(...)``; a learned method's run takes ``weights_file``, no other method's does."""
+    for field, value in _learned_fields().items():
+        with pytest.raises(SpecError, match=rf"MethodSpec has no field '{field}': it goes in learned=LearnedSpec"):
+            MethodSpec(**_valid_fields(), **{field: value})
+    spec = MethodSpec(**{**_valid_fields(), "run": _learned_run}, learned=LearnedSpec(**_learned_fields()))
+    assert spec.learned.network == {} and spec.single_image
+    with pytest.raises(SpecError, match="MethodSpec field 'learned' must be Optional\\[LearnedSpec\\]"):
+        MethodSpec(**{**_valid_fields(), "run": _learned_run}, learned=_learned_fields())
+    with pytest.raises(SpecError, match="a learned method's run takes the keyword 'weights_file'.*does not"):
+        MethodSpec(**_valid_fields(), learned=LearnedSpec(**_learned_fields()))
+    with pytest.raises(SpecError, match="any other method's not; _learned_run\\(\\) does"):
+        MethodSpec(**{**_valid_fields(), "run": _learned_run})
+    with pytest.raises(SpecError, match="LearnedSpec has no field 'netwrok' \\(did you mean 'network'\\?\\)"):
+        LearnedSpec(netwrok={}, training={}, build_network=lambda **arch: None)
 
 
 def test_fields_that_go_together_and_misplaced_fields_are_refused():
     MethodSpec(**_valid_fields())                         # the minimal declaration is valid
-    learned = dict(network={}, training={}, build_network=lambda **arch: None)
-    MethodSpec(**_valid_fields(), **learned)
-    with pytest.raises(MethodSpecError, match="network, training, build_network go together: network, "
-                                              "build_network set, training not"):
-        MethodSpec(**_valid_fields(), network={}, build_network=lambda **arch: None)
-    with pytest.raises(MethodSpecError, match="correlated_bases, training_keys go together"):
-        MethodSpec(**{**_valid_fields(), "kind": "combiner"}, **learned)
-    with pytest.raises(MethodSpecError, match="critic, build_critic go together"):
-        MethodSpec(**_valid_fields(), **learned, critic={})
-    with pytest.raises(MethodSpecError, match="'inputs' is for a combiner"):
+    learned_run = {**_valid_fields(), "run": _learned_run}
+    with pytest.raises(SpecError, match="LearnedSpec of a combiner sets correlated_bases and training_keys"):
+        MethodSpec(**{**learned_run, "kind": "combiner"}, learned=LearnedSpec(**_learned_fields()))
+    with pytest.raises(SpecError, match="correlated_bases, training_keys are for a learned combiner"):
+        MethodSpec(**learned_run, learned=LearnedSpec(**_learned_fields(), correlated_bases=("oidn",)))
+    with pytest.raises(SpecError, match="critic, build_critic go together"):
+        LearnedSpec(**_learned_fields(), critic={})
+    with pytest.raises(SpecError, match="inputs, comparison_role are for a combiner"):
         MethodSpec(**_valid_fields(), inputs=1)
-    with pytest.raises(MethodSpecError, match="'label' must not be empty"):
+    with pytest.raises(SpecError, match=r"MethodSpec needs the field\(s\) run"):
+        MethodSpec(kind="denoiser", label="Scratch")
+    with pytest.raises(SpecError, match=r"LearnedSpec needs the field\(s\) training"):
+        LearnedSpec(network={}, build_network=lambda **arch: None)
+    with pytest.raises(SpecError, match="'label' must not be empty"):
         MethodSpec(**{**_valid_fields(), "label": ""})
-    with pytest.raises(MethodSpecError, match="field 'warm_up' must be bool"):
+    with pytest.raises(SpecError, match="field 'warm_up' must be bool"):
         MethodSpec(**_valid_fields(), warm_up=0)
-    with pytest.raises(MethodSpecError, match="field 'inputs' must be Optional\\[int\\], got True"):
+    with pytest.raises(SpecError, match="field 'inputs' must be Optional\\[int\\], got True"):
         MethodSpec(**{**_valid_fields(), "kind": "combiner"}, inputs=True)
-    with pytest.raises(MethodSpecError, match="field 'training_keys' must be .*got \\{'color': 3.0\\}"):
-        MethodSpec(**_valid_fields(), training_keys={"color": 3.0})
+    with pytest.raises(SpecError, match="field 'training_keys' must be .*got \\{'color': 3.0\\}"):
+        LearnedSpec(**_learned_fields(), training_keys={"color": 3.0})
     spec = MethodSpec(**_valid_fields())
     with pytest.raises(dataclasses.FrozenInstanceError):
         spec.label = "other"
@@ -305,7 +344,7 @@ def scratch_plugin(tmp_path, monkeypatch):
     written = []
 
     def load(name: str, body: str, kind: str | None = None):
-        (folder / f"{name}.py").write_text("from mcbench.io.method_spec import MethodSpec\n\n\n"
+        (folder / f"{name}.py").write_text("from mcbench.contracts.method import LearnedSpec, MethodSpec\n\n\n"
                                            "def denoise(buffers, *, radius: int = 1):\n    return buffers\n\n"
                                            + textwrap.dedent(body))
         written.append(f"methods.{name}")
@@ -326,7 +365,7 @@ def test_a_valid_scratch_plugin_loads(scratch_plugin):
 
 
 @pytest.mark.parametrize(("name", "body", "message"), [
-    ("scratch_none", "", r"methods/scratch_none\.py: METHOD must be a mcbench\.io\.method_spec\.MethodSpec.*found none"),
+    ("scratch_none", "", r"methods/scratch_none\.py: METHOD must be a mcbench\.contracts\.method\.MethodSpec.*found none"),
     ("scratch_dict", "METHOD = {'kind': 'denoiser', 'label': 'Scratch', 'run': denoise}\n",
      r"methods/scratch_dict\.py: METHOD must be .*found a dict"),
     ("scratch_misspelt", "METHOD = MethodSpec(kind='denoiser', label='Scratch', run=denoise, rendr_layers=('color',))\n",
@@ -347,6 +386,11 @@ def test_a_valid_scratch_plugin_loads(scratch_plugin):
                        "METHOD = MethodSpec(kind='denoiser', label='Scratch', run=denoise, render_layers=('albedo',))\n",
      r"methods/scratch_legacy\.py defines .*: KIND \(set kind= in METHOD\), RENDER_LAYERS \(set render_layers= "
      r"in METHOD\), TIMES_ITSELF \(set program_seconds= in METHOD\)"),
+    ("scratch_network", "def build_network(**arch):\n    pass\n\n"
+                        "METHOD = MethodSpec(kind='denoiser', label='Scratch', run=denoise)\n",
+     r"methods/scratch_network\.py defines .*: build_network \(set learned=LearnedSpec\(build_network=\.\.\.\) in METHOD\)"),
+    ("scratch_learned", "METHOD = MethodSpec(kind='denoiser', label='Scratch', run=denoise, network={'width': 8})\n",
+     r"methods/scratch_learned\.py: MethodSpec has no field 'network': it goes in learned=LearnedSpec"),
     ("scratch_run", "METHOD = MethodSpec(kind='denoiser', label='Scratch', run=lambda buffers: buffers)\n",
      r"methods/scratch_run\.py defines .*: denoise \(set run= in METHOD\)"),
 ])
@@ -368,8 +412,9 @@ def legacy_reads(text: str) -> list[str]:
     import re
     import typing
 
-    names = [n.upper() for n in field_names()] + ["TIMES_ITSELF"]
-    functions = [name for name, hint in typing.get_type_hints(MethodSpec).items() if "Callable" in str(hint)]
+    names = [n.upper() for spec in (MethodSpec, LearnedSpec) for n in field_names(spec)] + ["TIMES_ITSELF"]
+    functions = [name for spec in (MethodSpec, LearnedSpec) for name, hint in typing.get_type_hints(spec).items()
+                 if "Callable" in str(hint)]
     attribute = re.compile(rf"\.({'|'.join(names)})\b")
     by_name = re.compile(rf"\b(?:getattr|hasattr)\([^,()]+,\s*[\"']({'|'.join(names + functions)})[\"']")
     return [m.group(0) for pattern in (attribute, by_name) for m in pattern.finditer(text)]

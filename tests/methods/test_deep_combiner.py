@@ -18,6 +18,7 @@ from mcbench import BenchError
 from mcbench.io.buffers import Denoised, RenderBuffers
 from mcbench.nn.combination import (IMAGE_INPUT_CHANNELS, combination_weights, combine_multi, combine_single,
                                     image_inputs, window_neighbourhoods)
+from mcbench.io.weights import COMMITTED_WEIGHTS
 from mcbench.nn.inference import combine_with_network, combiner_image_tensors
 
 MODULES = (single_module, multi_module)
@@ -243,7 +244,7 @@ def base_result(buffers: RenderBuffers, *, sub_outputs: bool = True) -> Denoised
 
 def random_network(module, seed=0):
     torch.manual_seed(seed)
-    return module.build_network(**module.METHOD.network).eval()
+    return module.build_network(**module.METHOD.learned.network).eval()
 
 
 def hard_case(kind, make_render_buffers, rng):
@@ -274,8 +275,8 @@ def test_random_networks_are_finite_and_deterministic_on_hard_images(module, kin
     buffers = hard_case(kind, make_render_buffers, rng)
     base = base_result(buffers)
     network = random_network(module)
-    first = combine_with_network(module, buffers, [base], network=network)
-    second = combine_with_network(module, buffers, [base], network=random_network(module))
+    first = combine_with_network(module.METHOD, buffers, [base], network=network)
+    second = combine_with_network(module.METHOD, buffers, [base], network=random_network(module))
     for which in ("full", "a", "b"):
         image = first.image(which)
         assert image.dtype == np.float32 and image.shape == buffers.shape + (3,)
@@ -291,7 +292,7 @@ def test_half_buffer_results_use_only_their_own_samples(module, make_render_buff
     buffers = with_bins_and_feature_variances(make_render_buffers(height=10, width=12, seed=2), rng)
     base = base_result(buffers)
     network = random_network(module, seed=3)
-    before = combine_with_network(module, buffers, [base], network=network)
+    before = combine_with_network(module.METHOD, buffers, [base], network=network)
     # change everything that belongs to B: its colour, bins, variances, features, the base's B results
     layers = {name: (value * 1.7 + 0.3).astype(np.float32)
               if name.endswith("_b") or name.endswith(("_bin2", "_bin3")) else value
@@ -300,7 +301,7 @@ def test_half_buffer_results_use_only_their_own_samples(module, make_render_buff
     extras = {name: (value * 1.7 + 0.3).astype(np.float32) if name.startswith("color_b_") else value
               for name, value in base.extras.items()}
     changed_base = Denoised(full=base.full, a=base.a, b=base.b * 1.7 + 0.3, extras=extras, source=base.source)
-    after = combine_with_network(module, changed, [changed_base], network=network)
+    after = combine_with_network(module.METHOD, changed, [changed_base], network=network)
     np.testing.assert_array_equal(after.a, before.a)
     assert not np.array_equal(after.b, before.b)
 
@@ -309,8 +310,8 @@ def test_combiner_tensors_follow_the_training_keys(make_render_buffers):
     rng = np.random.default_rng(11)
     buffers = with_bins_and_feature_variances(make_render_buffers(height=5, width=6, seed=4), rng)
     base = base_result(buffers)
-    tensors = combiner_image_tensors(buffers, [base], "a", multi_module.METHOD.training_keys)
-    for key, channels in multi_module.METHOD.training_keys.items():
+    tensors = combiner_image_tensors(buffers, [base], "a", multi_module.METHOD.learned.training_keys)
+    for key, channels in multi_module.METHOD.learned.training_keys.items():
         assert tensors[key].shape == (1, channels, 5, 6) and tensors[key].dtype == torch.float32
     np.testing.assert_array_equal(tensors["color_sub"][0, 3:].permute(1, 2, 0).numpy(), buffers.color_bin1)
     np.testing.assert_array_equal(tensors["correlated_sub"][0, :3].permute(1, 2, 0).numpy(),
@@ -320,7 +321,7 @@ def test_combiner_tensors_follow_the_training_keys(make_render_buffers):
     without = RenderBuffers(layers={k: v for k, v in buffers.layers.items() if k != "normal_variance_b"},
                             spp=buffers.spp, source="render.exr")
     with pytest.raises(BenchError, match=r"render.exr: no layer 'normal_variance_b'"):
-        combine_with_network(single_module, without, [base], network=random_network(single_module))
+        combine_with_network(single_module.METHOD, without, [base], network=random_network(single_module))
 
 
 @pytest.mark.parametrize("module", MODULES, ids=lambda m: m.__name__)
@@ -330,7 +331,7 @@ def test_combine_refuses_other_input_counts(module, make_render_buffers):
     name = module.__name__.split(".")[-1]
     for inputs in ([base, base], []):
         with pytest.raises(BenchError, match=rf"{name} combines exactly 1 .*got {len(inputs)}"):
-            module.combine(buffers, inputs)
+            module.combine(buffers, inputs, weights_file=COMMITTED_WEIGHTS / f"{name}.pt")
 
 
 def test_multi_buffer_combiner_refuses_renders_without_bins_and_bases_without_sub_outputs(make_render_buffers):
@@ -338,34 +339,34 @@ def test_multi_buffer_combiner_refuses_renders_without_bins_and_bases_without_su
     no_bins = RenderBuffers(layers={k: v for k, v in buffers.layers.items() if "_bin" not in k}, spp=6,
                             source="renders/box/spp6.exr")
     with pytest.raises(BenchError, match=r"renders/box/spp6.exr: no sample bins"):
-        multi_module.combine(no_bins, [base_result(buffers)])
+        multi_module.combine(no_bins, [base_result(buffers)], weights_file=COMMITTED_WEIGHTS / "deep_combiner_mb.pt")
     with pytest.raises(BenchError, match=r"base.exr: no sub-buffer results"):
-        multi_module.combine(buffers, [base_result(buffers, sub_outputs=False)])
+        multi_module.combine(buffers, [base_result(buffers, sub_outputs=False)],
+                             weights_file=COMMITTED_WEIGHTS / "deep_combiner_mb.pt")
     # the single-buffer combiner needs neither
-    result = combine_with_network(single_module, no_bins, [base_result(buffers, sub_outputs=False)],
+    result = combine_with_network(single_module.METHOD, no_bins, [base_result(buffers, sub_outputs=False)],
                                   network=random_network(single_module))
     assert np.isfinite(result.full).all()
 
 
 @pytest.mark.parametrize("module", MODULES, ids=lambda m: m.__name__)
-def test_missing_weights_are_a_clear_error(module, make_render_buffers, tmp_path, monkeypatch):
-    monkeypatch.setenv("MCBENCH_WEIGHTS_DIR", str(tmp_path))
+def test_missing_weights_are_a_clear_error(module, make_render_buffers, tmp_path):
     buffers = with_bins_and_feature_variances(make_render_buffers(height=6, width=6), np.random.default_rng(14))
     name = module.__name__.split(".")[-1]
     with pytest.raises(BenchError, match=rf"{name}.pt: weights of '{name}' are missing; train them"):
-        module.combine(buffers, [base_result(buffers)])
+        module.combine(buffers, [base_result(buffers)], weights_file=tmp_path / f"{name}.pt")
 
 
 def test_module_declarations_and_parameter_counts():
     assert single_module.METHOD.kind == multi_module.METHOD.kind == "combiner"
     assert single_module.METHOD.inputs == multi_module.METHOD.inputs == 1
-    assert set(single_module.METHOD.training_keys) < set(multi_module.METHOD.training_keys)
+    assert set(single_module.METHOD.learned.training_keys) < set(multi_module.METHOD.learned.training_keys)
     from mcbench.nn.train import DEFAULT_SETTINGS, count_parameters
     for module in MODULES:
-        assert set(module.METHOD.training) <= set(DEFAULT_SETTINGS) and module.METHOD.training["loss"] == "relmse"
-        network = module.build_network(**module.METHOD.network)
+        assert set(module.METHOD.learned.training) <= set(DEFAULT_SETTINGS) and module.METHOD.learned.training["loss"] == "relmse"
+        network = module.build_network(**module.METHOD.learned.network)
         assert 100_000 <= count_parameters(network) <= 250_000
-        assert network.body[-1].out_channels % (module.METHOD.network["window"] ** 2) == 0
+        assert network.body[-1].out_channels % (module.METHOD.learned.network["window"] ** 2) == 0
 
 
 def test_importing_the_modules_does_not_import_torch():

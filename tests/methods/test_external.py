@@ -15,7 +15,7 @@ import pytest
 from mcbench import BenchError
 from mcbench.io.exr import read_layers, write_layers
 from mcbench.io.external_program import ExternalProgramError, check_command
-from mcbench.pipeline.methods import run_methods
+from mcbench.pipeline.method_runs import run_methods
 from methods import check_params, load_method
 
 REPO = Path(__file__).resolve().parents[2]

@@ -62,7 +62,7 @@ def _randomise_batch_norms(network):
 def test_repvgg_reparameterisation_is_exact(noisy_buffers):
     module = importlib.import_module("methods.wskpn")
     torch.manual_seed(0)
-    network = module.build_network(**module.METHOD.network).eval()
+    network = module.build_network(**module.METHOD.learned.network).eval()
     _randomise_batch_norms(network)
     buffers = image_tensors(noisy_buffers().image("full"))
     with torch.no_grad():
@@ -87,7 +87,7 @@ def test_untrained_networks_start_unsaturated(name, noisy_buffers):
     stalled a first WSKPN without batch norms)."""
     module = importlib.import_module(f"methods.{name}")
     torch.manual_seed(0)
-    network = module.build_network(**module.METHOD.network).train()
+    network = module.build_network(**module.METHOD.learned.network).train()
     buffers = image_tensors(noisy_buffers(32, 32, seed=4).image("full"))
     network(buffers).mean().backward()
     gradients = [p.grad for p in network.parameters() if p.grad is not None]
@@ -105,7 +105,7 @@ def test_untrained_networks_start_unsaturated(name, noisy_buffers):
 def test_untrained_networks_handle_any_size(name, noisy_buffers):
     module = importlib.import_module(f"methods.{name}")
     torch.manual_seed(0)
-    network = module.build_network(**module.METHOD.network).eval()
+    network = module.build_network(**module.METHOD.learned.network).eval()
     for height, width in ((13, 17), (4, 4), (33, 20)):
         image = noisy_buffers(height, width).image("a")
         output = run_network(network, image)
@@ -115,14 +115,14 @@ def test_untrained_networks_handle_any_size(name, noisy_buffers):
 
 @pytest.mark.parametrize("name", LEARNED)
 def test_committed_weights_load_safely_and_match_their_record(name):
-    path = weights_path(name)
+    path = weights_path(COMMITTED_WEIGHTS, name)
     assert path.parent == COMMITTED_WEIGHTS and path.exists(), f"{path} missing"
     assert path.stat().st_size < 5 * 2 ** 20
     blob = load_weights(path)
     module = load_method(name)
-    assert blob["arch"] == module.METHOD.network
-    record = read_json(record_path(name))
-    assert record["network"] == name and record["arch"] == module.METHOD.network
+    assert blob["arch"] == module.METHOD.learned.network
+    record = read_json(record_path(COMMITTED_WEIGHTS, name))
+    assert record["network"] == name and record["arch"] == module.METHOD.learned.network
     network = module.build_network(**blob["arch"])
     network.load_state_dict(blob["state_dict"])
     assert record["parameters"] == sum(p.numel() for p in network.parameters())
@@ -136,8 +136,8 @@ def test_committed_weights_load_safely_and_match_their_record(name):
 def test_inference_is_deterministic_and_finite_on_hard_cases(name, noisy_buffers):
     module = load_method(name)
     buffers = noisy_buffers(24, 20, seed=3)
-    first = module.denoise(buffers)
-    second = module.denoise(buffers)
+    first = module.denoise(buffers, weights_file=weights_path(COMMITTED_WEIGHTS, name))
+    second = module.denoise(buffers, weights_file=weights_path(COMMITTED_WEIGHTS, name))
     for a, b in ((first.full, second.full), (first.a, second.a), (first.b, second.b)):
         np.testing.assert_array_equal(a, b)
     layers = dict(buffers.layers)
@@ -148,7 +148,7 @@ def test_inference_is_deterministic_and_finite_on_hard_cases(name, noisy_buffers
     layers["color_a"][5, 5] = 1e6                                         # a firefly
     layers["variance_a"] = layers["variance_a"].copy()
     layers["variance_a"][5, 5] = 1e10
-    result = module.denoise(RenderBuffers(layers=layers, spp=8))
+    result = module.denoise(RenderBuffers(layers=layers, spp=8), weights_file=weights_path(COMMITTED_WEIGHTS, name))
     for image in (result.full, result.a, result.b):
         assert np.all(np.isfinite(image)) and image.min() >= 0
     assert np.abs(result.full).max() < BLACK_TOLERANCE[name]  # a black input stays (near) black
@@ -160,9 +160,9 @@ def validation_scene():
     from mcbench.render.variants import pick_variant
     from mcbench.training_data import training_example
 
-    data = read_json(record_path("kpcn"))["data"]
+    data = read_json(record_path(COMMITTED_WEIGHTS, "kpcn"))["data"]
     for name in LEARNED:
-        other = read_json(record_path(name))["data"]
+        other = read_json(record_path(COMMITTED_WEIGHTS, name))["data"]
         assert {k: other[k] for k in ("spp_levels", "resolution", "target_spp")} == \
                {k: data[k] for k in ("spp_levels", "resolution", "target_spp")}
     if pick_variant("auto") == "scalar_rgb":
@@ -178,8 +178,8 @@ def validation_scene():
 @pytest.mark.parametrize("name", LEARNED)
 def test_committed_weights_reproduce_their_validation_loss(name, validation_scene):
     seed, crops = validation_scene
-    record = read_json(record_path(name))
-    result = evaluate(load_network(load_method(name)), crops, record["loss"])
+    record = read_json(record_path(COMMITTED_WEIGHTS, name))
+    result = evaluate(load_network(load_method(name).METHOD, weights_path(COMMITTED_WEIGHTS, name)), crops, record["loss"])
     recorded = record["validation"]["per_scene"][str(seed)]
     assert result["loss"] == pytest.approx(recorded, rel=0.03)
 
@@ -187,15 +187,15 @@ def test_committed_weights_reproduce_their_validation_loss(name, validation_scen
 def test_no_test_scene_is_a_training_scene():
     from mcbench.render.variants import pick_variant
     from mcbench.training_data import scene_fingerprint, training_scene_fingerprint
-    from scenes import available_scenes, load_scene
+    from scenes import available_scenes, load_scene, scene_spec
 
     seeds = set()
     for name in LEARNED_METHODS:      # the learned combiners too
-        data = read_json(record_path(name))["data"]
+        data = read_json(record_path(COMMITTED_WEIGHTS, name))["data"]
         used = data["training_scenes"] + data["validation_scenes"]
         assert len(used) == len(set(used)) and not any(is_validation_seed(s) for s in data["training_scenes"])
         assert data["source"] == "procedural training scenes of mcbench.training_data (no test scene)"
         seeds.update(used)
     pick_variant("auto")
-    tests = {scene_fingerprint(load_scene(scene).build(16, 12)) for scene in available_scenes()}
+    tests = {scene_fingerprint(scene_spec(load_scene(scene)).build(16, 12)) for scene in available_scenes()}
     assert not tests & {training_scene_fingerprint(seed) for seed in seeds}

@@ -11,7 +11,7 @@ import pytest
 from mcbench import BenchError
 from mcbench.io.case_folders import result_files, write_image
 from mcbench.io.exr import read_layers, write_layers
-from mcbench.pipeline.methods import run_methods
+from mcbench.pipeline.method_runs import run_methods
 from mcbench.pipeline.plan import _check_case_files
 from methods import check_params, load_method
 

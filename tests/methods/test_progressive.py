@@ -5,6 +5,7 @@ Eq. 12-18, the swap augmentation, and the combiner on hard images (finite, deter
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -237,7 +238,7 @@ def random_network(**arch):
     import methods.progressive as progressive
 
     torch.manual_seed(0)
-    net = progressive.build_network(**{**progressive.METHOD.network, **arch})
+    net = progressive.build_network(**{**progressive.METHOD.learned.network, **arch})
     with torch.no_grad():                       # a network whose α varies over [0, 1]
         net.conv_out.weight.mul_(30.0)
     return net.eval()
@@ -309,7 +310,7 @@ def test_torch_f_act_matches_numpy_and_alpha_is_clipped():
 def test_initial_network_starts_near_alpha_one_half():
     import methods.progressive as progressive
 
-    net = progressive.build_network(**progressive.METHOD.network).eval()
+    net = progressive.build_network(**progressive.METHOD.learned.network).eval()
     import torch
     with torch.no_grad():
         alpha = net.alpha(random_batch(np.random.default_rng(4)))
@@ -382,15 +383,22 @@ def test_t_test_only_mode_converges_to_the_noisy_image_when_the_base_is_biased(m
 
 def test_divergence_bases_and_their_refusals():
     import methods.progressive as progressive
-    from methods import single_image_function
+    from methods import check_params, single_image_function, single_image_methods
     from mcbench import BenchError
+    from mcbench.io.weights import COMMITTED_WEIGHTS
 
-    assert callable(single_image_function("oidn"))
-    assert callable(single_image_function("jbf"))
-    with pytest.raises(BenchError, match="no single-image function"):
-        single_image_function("nfor")
+    assert single_image_methods() == ("jbf", "kpcn", "mcgan", "oidn", "optix_ae", "wskpn")
+    assert callable(single_image_function("oidn", weights_dir=COMMITTED_WEIGHTS))
+    assert callable(single_image_function("jbf", weights_dir=COMMITTED_WEIGHTS))
+    assert callable(single_image_function("kpcn", weights_dir=COMMITTED_WEIGHTS))
+    with pytest.raises(BenchError, match="no single-image function.*one of jbf, kpcn"):
+        single_image_function("nfor", weights_dir=COMMITTED_WEIGHTS)
     with pytest.raises(BenchError):
-        progressive.combine(None, [], iterations=0)
+        progressive.combine(None, [], iterations=0, weights_file=COMMITTED_WEIGHTS / "progressive.pt")
+    check_params(progressive, {"divergence": "kpcn"}, config_key="combiners[0].params")
+    with pytest.raises(BenchError, match=r"combiners\[0\]\.params\.divergence: 'nfor' is not allowed for "
+                                         r"progressive; expected one of 'none' or a single-image denoiser \(jbf, kpcn"):
+        check_params(progressive, {"divergence": "nfor"}, config_key="combiners[0].params")
 
 
 def test_importing_the_method_does_not_import_torch():
@@ -407,14 +415,15 @@ def test_ablation_variants_are_other_networks_with_their_own_weights():
     from mcbench import BenchError
 
     module = progressive.variant_module("no_sure")
-    assert module.__name__ == "methods.progressive_no_sure" and module.METHOD.network["sure_input"] is False
-    assert module.METHOD.build_network(**module.METHOD.network).sure_input is False
+    assert module.__name__ == "methods.progressive_no_sure" and module.METHOD.learned.network["sure_input"] is False
+    assert module.METHOD.learned.build_network(**module.METHOD.learned.network).sure_input is False
     no_fact = progressive.variant_module("no_fact").METHOD
-    assert no_fact.build_network(**no_fact.network).conv_out.out_channels == 3
+    assert no_fact.learned.build_network(**no_fact.learned.network).conv_out.out_channels == 3
     assert no_fact.label == f"{progressive.METHOD.label}, ablation no_fact" and no_fact.run is progressive.combine
-    assert progressive.ablation_weights_path(sure_input=True, f_act=True).name == "progressive.pt"
-    assert progressive.ablation_weights_path(sure_input=False, f_act=True).name == "progressive_no_sure.pt"
-    assert progressive.ablation_weights_path(sure_input=True, f_act=False).name == "progressive_no_fact.pt"
+    full = Path("w/progressive.pt")
+    assert progressive.ablation_weights_path(full, sure_input=True, f_act=True) == full
+    assert progressive.ablation_weights_path(full, sure_input=False, f_act=True) == Path("w/progressive_no_sure.pt")
+    assert progressive.ablation_weights_path(full, sure_input=True, f_act=False) == Path("w/progressive_no_fact.pt")
     with pytest.raises(BenchError):
         progressive.variant_module("no_t_test")
 

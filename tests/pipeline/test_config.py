@@ -165,16 +165,23 @@ def test_every_method_param_annotation_is_checkable():
     type is caught at parse time for every method, not only for the ones tested above."""
     import typing
 
-    simple = (bool, int, float, str)
+    from mcbench.contracts.method import SingleImageDenoiser
+
+    simple = (bool, int, float, str, SingleImageDenoiser)
+
+    def checkable(hint) -> bool:
+        if typing.get_origin(hint) is typing.Union:
+            return all(checkable(arg) for arg in typing.get_args(hint))
+        return (hint in simple or typing.get_origin(hint) is typing.Literal
+                or (typing.get_origin(hint) is list and typing.get_args(hint)[0] in simple))
+
     for name in methods.available_methods():
         module = methods.load_method(name)
         hints = typing.get_type_hints(methods.method_spec(module).run)
         for parameter in methods.method_parameters(module):
             hint = hints.get(parameter)
             assert hint is not None, f"methods/{name}.py: parameter '{parameter}' has no annotation"
-            checkable = (hint in simple or typing.get_origin(hint) is typing.Literal
-                         or (typing.get_origin(hint) is list and typing.get_args(hint)[0] in simple))
-            assert checkable, (name, parameter, hint)
+            assert checkable(hint), (name, parameter, hint)
 
 
 def test_schema_training_overrides_are_the_training_settings():

@@ -207,7 +207,8 @@ def valid_configs(draw, *, max_scenes: int = 4, max_spp: int = 4, max_denoisers:
             params = draw(params_strategy(module))
             if module == "ensemble" and not params and frozenset(inputs) in pool_sets:
                 continue
-            role = comparison_role({"module": module, "inputs": inputs, "params": params})
+            role = comparison_role({"module": module, "inputs": inputs, "params": params,
+                                    "comparison_role": methods.method_spec(methods.load_method(module)).comparison_role})
             if role is not None:
                 if (frozenset(inputs), role) in roles:
                     continue
@@ -247,7 +248,7 @@ def valid_configs(draw, *, max_scenes: int = 4, max_spp: int = 4, max_denoisers:
         "scene": st.one_of(st.none(), st.sampled_from(scenes)),
         "spp": st.lists(st.integers(1, 4096).map(lambda k: 2 * k), min_size=2, max_size=6, unique=True),
         "base": st.sampled_from(DENOISERS),
-        "divergence": st.sampled_from(SCHEMA["properties"]["progressive_curve"]["properties"]["divergence"]["enum"]),
+        "divergence": st.sampled_from(("none", *methods.single_image_methods())),
         "downscale": st.integers(1, 4)}))
     if curve or draw(st.booleans()):
         config["progressive_curve"] = curve

@@ -69,7 +69,7 @@ def _benchmark_record(path: Path, cpu_time: float) -> None:
 
 def build_case(tree: Path) -> None:
     """The finished case every damage starts from (see the module docstring)."""
-    from mcbench.pipeline.methods import run_methods
+    from mcbench.pipeline.method_runs import run_methods
     from mcbench.pipeline.metrics import gather_tables
 
     render = build_render_buffers(height=HEIGHT, width=WIDTH, spp=SPP, bins=True, seed=3)
@@ -98,7 +98,7 @@ def build_case(tree: Path) -> None:
 # --- the jobs that read the case's files: name -> (files it reads, run(tree, out)) -----------------
 
 def _run_combiner(tree: Path, out: Path) -> None:
-    from mcbench.pipeline.methods import run_methods
+    from mcbench.pipeline.method_runs import run_methods
 
     entry = _entry(tree, "naive", "naive_average", BASES)
     entry.update(exr=str(out / "naive.exr"), timing=str(out / "naive.json"))
@@ -106,7 +106,7 @@ def _run_combiner(tree: Path, out: Path) -> None:
 
 
 def _run_ensemble(tree: Path, out: Path) -> None:   # reads its render and inputs by rows
-    from mcbench.pipeline.methods import run_methods
+    from mcbench.pipeline.method_runs import run_methods
 
     entry = _entry(tree, "ens", "ensemble", BASES)
     entry.update(exr=str(out / "ens.exr"), timing=str(out / "ens.json"))
@@ -114,7 +114,7 @@ def _run_ensemble(tree: Path, out: Path) -> None:   # reads its render and input
 
 
 def _run_base(tree: Path, out: Path) -> None:
-    from mcbench.pipeline.methods import run_methods
+    from mcbench.pipeline.method_runs import run_methods
 
     entry = _entry(tree, "jbf", "jbf")
     entry.update(exr=str(out / "jbf.exr"), timing=str(out / "jbf.json"))

@@ -273,17 +273,21 @@ def test_curve_seed_refuses_out_of_range_fields(kwargs, error, match):
         progressive_curve_seed(**kwargs)
 
 
-def test_the_schema_offers_exactly_the_plugins_divergence_bases():
-    """The schema's enum of ``progressive_curve.divergence`` (checked at parse time) is the
-    plugin's ``DivergenceBase``: the one list the plugin owns, repeated in the schema for the
-    early error, must not drift."""
-    import typing
-
+def test_the_divergence_bases_are_the_declared_single_image_denoisers():
+    """No list of divergence bases is written anywhere: the schema takes a name, and the plan
+    checks it against the denoisers whose declarations make them single-image, naming them."""
     import yaml
 
-    import methods.progressive as progressive
-    from mcbench.pipeline.config import SCHEMA_PATH
+    from mcbench.pipeline.config import SCHEMA_PATH, resolve_config
+    from mcbench.pipeline.plan import plan_study
+    from mcbench.pipeline.registry import single_image_methods
 
     schema = yaml.safe_load(SCHEMA_PATH.read_text())
-    enum = schema["properties"]["progressive_curve"]["properties"]["divergence"]["enum"]
-    assert list(enum) == list(typing.get_args(progressive.DivergenceBase))
+    assert "enum" not in schema["properties"]["progressive_curve"]["properties"]["divergence"]
+    assert {"oidn", "jbf", "kpcn"} <= set(single_image_methods()) and "nfor" not in single_image_methods()
+    config = {"scenes": ["cornell_box"], "spp": [4], "resolution": [32, 32], "study": {"pool": False},
+              "denoisers": ["oidn"], "combiners": [{"name": "pd", "method": "progressive", "inputs": ["oidn"]}],
+              "progressive_curve": {"divergence": "nfor", "spp": [4, 8]}}
+    with pytest.raises(BenchError, match=r"progressive_curve\.divergence: 'nfor' has no single-image function; "
+                                         r"name one of none, jbf, kpcn"):
+        plan_study(resolve_config(config), written=config, source="test.yaml")

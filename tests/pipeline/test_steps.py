@@ -11,7 +11,7 @@ import pytest
 
 from mcbench import NOISY, BenchError
 
-from mcbench.pipeline import methods, metrics, rankings, render
+from mcbench.pipeline import method_runs, metrics, rankings, render
 from mcbench.pipeline.cases import run_case
 from mcbench.pipeline.registry import load_metric
 from mcbench.io.buffers import Denoised, RenderBuffers
@@ -38,7 +38,7 @@ def case_files(tmp_path, make_render_buffers):
 
 def run(method, render, tmp_path, **kw):
     output, timing = tmp_path / f"{method}.exr", tmp_path / f"{method}.json"
-    methods.run_method(method, str(render), str(output), str(timing), scene=SCENE, spp=SPP,
+    method_runs.run_method(method, str(render), str(output), str(timing), scene=SCENE, spp=SPP,
                      threads=1, **kw)
     return output, timing
 
@@ -85,10 +85,10 @@ def test_run_methods_in_one_job_equals_one_job_per_method(case_files, tmp_path):
     single, batch = tmp_path / "single", tmp_path / "batch"
     single.mkdir(), batch.mkdir()
     for name, module, params, inputs in specs:
-        methods.run_method(name, str(render), str(single / f"{name}.exr"), str(single / f"{name}.json"),
+        method_runs.run_method(name, str(render), str(single / f"{name}.exr"), str(single / f"{name}.json"),
                          module_name=module, params=params,
                          input_paths=[str(single / f"{i}.exr") for i in inputs], scene=SCENE, spp=SPP)
-    methods.run_methods([{"name": name, "module": module, "params": params,
+    method_runs.run_methods([{"name": name, "module": module, "params": params,
                         "input_paths": [str(batch / f"{i}.exr") for i in inputs],
                         "exr": str(batch / f"{name}.exr"), "timing": str(batch / f"{name}.json")}
                        for name, module, params, inputs in specs], str(render), scene=SCENE, spp=SPP)
@@ -103,7 +103,7 @@ def test_run_methods_in_one_job_equals_one_job_per_method(case_files, tmp_path):
 def test_run_methods_names_a_missing_input(case_files, tmp_path):
     render, _ = case_files
     with pytest.raises(Exception, match="missing.exr"):
-        methods.run_methods([{"name": "ens", "module": "ensemble", "params": {},
+        method_runs.run_methods([{"name": "ens", "module": "ensemble", "params": {},
                             "input_paths": [str(tmp_path / "missing.exr")],
                             "exr": str(tmp_path / "ens.exr"), "timing": str(tmp_path / "ens.json")}],
                           str(render))
@@ -242,8 +242,8 @@ def test_a_job_of_row_reading_methods_never_reads_an_input_whole(case_files, tmp
     by rows (no read_layers of those files) and writes what the whole-file path writes."""
     render, _ = case_files
     inputs = [run(name, render, tmp_path, module_name=name)[0] for name in ("jbf", "oidn")]
-    assert methods.reads_rows([load_method("ensemble")])
-    assert not methods.reads_rows([load_method("ensemble"), load_method("naive_average")])
+    assert method_runs.reads_rows([load_method("ensemble")])
+    assert not method_runs.reads_rows([load_method("ensemble"), load_method("naive_average")])
     expected = load_method("ensemble").combine(RenderBuffers.load(render), [Denoised.load(p) for p in inputs])
     import mcbench.io.buffers
     import mcbench.io.exr
@@ -253,7 +253,7 @@ def test_a_job_of_row_reading_methods_never_reads_an_input_whole(case_files, tmp
     monkeypatch.setattr(mcbench.io.buffers, "read_layers", refuse)
     monkeypatch.setattr(mcbench.io.exr, "read_layers", refuse)
     output = tmp_path / "ens_rows.exr"
-    methods.run_methods([{"name": "ens", "module": "ensemble", "params": {}, "input_paths": [str(p) for p in inputs],
+    method_runs.run_methods([{"name": "ens", "module": "ensemble", "params": {}, "input_paths": [str(p) for p in inputs],
                         "exr": str(output), "timing": str(tmp_path / "ens_rows.json")}], str(render))
     monkeypatch.undo()
     layers = read_layers(output)
@@ -312,3 +312,37 @@ def test_an_added_metric_is_the_only_one_computed_and_a_changed_file_recomputes_
     frame = metrics.evaluate_entry(SCENE, SPP, "jbf", str(output), str(reference), ["relmse"],
                                    metrics_path=str(tmp_path / "six.csv"), values_path=str(values))
     assert frame.value.iloc[0] == changed.value.iloc[0]
+
+
+def test_a_learned_method_runs_with_the_weights_file_its_job_names(case_files, tmp_path):
+    """The weights folder is passed, never read from the environment: two folders holding
+    different weights give two outputs, each what the plugin gives with that file, and the case's
+    key follows the file's digest (mcbench.pipeline.cases.method_key)."""
+    import shutil
+
+    import torch
+
+    from mcbench.io.weights import COMMITTED_WEIGHTS, file_sha256, load_weights
+    from mcbench.pipeline.cases import method_key
+    from mcbench.pipeline.method_runs import method_function
+
+    render, _ = case_files
+    committed, other = tmp_path / "committed", tmp_path / "other"
+    committed.mkdir(), other.mkdir()
+    shutil.copy(COMMITTED_WEIGHTS / "optix_ae.pt", committed / "optix_ae.pt")
+    blob = load_weights(COMMITTED_WEIGHTS / "optix_ae.pt")
+    torch.save({"arch": blob["arch"], "state_dict": {k: v * 0.5 for k, v in blob["state_dict"].items()}},
+               other / "optix_ae.pt")
+    images = {}
+    for folder in (committed, other):
+        output, _ = run(f"ae_{folder.name}", render, tmp_path, module_name="optix_ae",
+                        weights=str(folder / "optix_ae.pt"))
+        images[folder.name] = Denoised.load(str(output)).full
+        expected = method_function(load_method("optix_ae"), weights_dir=folder)(RenderBuffers.load(render))
+        np.testing.assert_array_equal(images[folder.name], expected.full)
+    assert not np.array_equal(images["committed"], images["other"])
+    keys = {method_key(module="optix_ae", params={}, input_keys=[], weights_sha256=file_sha256(folder / "optix_ae.pt"),
+                       render="r") for folder in (committed, other)}
+    assert len(keys) == 2
+    with pytest.raises(BenchError, match="'ae_none' is a learned method, but its job names no weights file"):
+        run("ae_none", render, tmp_path, module_name="optix_ae")

@@ -14,6 +14,7 @@ from mcbench.pipeline.plan import plan_study
 
 CONFIG = {"scenes": ["cornell_box", "glass_caustics"], "spp": [16, 4], "resolution": [16, 16],
           "denoisers": ["jbf", "oidn", "kpcn"], "study": {"pool": False}, "metrics": ["relmse", "smape"],
+          "weights_dir": "w",
           "combiners": [{"name": "ens", "method": "ensemble", "inputs": ["jbf", "oidn"]},
                         {"name": "avg", "method": "naive_average", "inputs": ["ens", "kpcn"]}]}
 
@@ -28,7 +29,7 @@ def test_the_plan_holds_the_configs_cases_and_methods_in_dependency_order(plan):
     assert list(plan.methods) == ["jbf", "oidn", "kpcn", "ens", "avg"]
     assert plan.methods["avg"].inputs == ("ens", "kpcn") and plan.methods["avg"].kind == "combiner"
     assert plan.ranking.entries == [NOISY, "jbf", "oidn", "kpcn", "ens", "avg"]
-    assert plan.learned_modules() == ["kpcn"]
+    assert plan.weights_names() == ["kpcn"]
 
 
 def test_the_plan_is_read_only(plan):
@@ -41,7 +42,7 @@ def test_the_plan_is_read_only(plan):
 
 
 def test_a_case_job_names_every_file_of_the_case(plan):
-    job = plan.case_job("glass_caustics", 4, weights_dir="w", outputs={"metrics": "m.csv", "viewer": "v", "record": "r.json"})
+    job = plan.case_job("glass_caustics", 4, outputs={"metrics": "m.csv", "viewer": "v", "record": "r.json"})
     assert job["render"] == "results/renders/glass_caustics/spp4.exr"
     assert job["reference"] == "results/references/glass_caustics.exr"
     by_name = {m["name"]: m for m in job["methods"]}
@@ -55,6 +56,38 @@ def test_a_case_job_names_every_file_of_the_case(plan):
     assert entries["avg"]["values"] == "results/metrics/glass_caustics/spp4/values/avg.json"
     assert entries["avg"]["viewer"] == "results/viewer_entries/glass_caustics/spp4/avg"
     assert job["outputs"] == {"metrics": "m.csv", "viewer": "v", "record": "r.json"}
+
+
+def test_the_weights_folder_comes_from_the_config_and_defaults_to_the_committed_one(plan):
+    from mcbench.io.weights import COMMITTED_WEIGHTS
+
+    assert plan.paths.weights_dir == "w" and plan.paths.weights("kpcn") == "w/kpcn.pt"
+    config = {key: value for key, value in CONFIG.items() if key != "weights_dir"}
+    default = plan_study(resolve_config(dict(config)), written=dict(config), source="test.yaml")
+    assert default.paths.weights("kpcn") == f"{COMMITTED_WEIGHTS}/kpcn.pt"
+
+
+def test_the_key_of_a_method_covers_every_weights_file_it_reads():
+    """Progressive denoising reads its variant's network and a learned divergence base's: the
+    case job names those files and the case plan carries their digests; a learned method
+    reading only its own weights keeps the one file's digest."""
+    config = {**CONFIG, "denoisers": ["oidn", "kpcn"],
+              "combiners": [{"name": "pd_kpcn", "method": "progressive", "inputs": ["kpcn"], "params": {"divergence": "kpcn"}},
+                            {"name": "pd_no_sure", "method": "progressive", "inputs": ["oidn"], "params": {"sure_input": False}},
+                            {"name": "pd_bound", "method": "progressive", "inputs": ["oidn"], "params": {"network": False}}]}
+    plan = plan_study(resolve_config(dict(config)), written=dict(config), source="test.yaml")
+    assert {n: m.weights for n, m in plan.methods.items()} == {
+        "oidn": (), "kpcn": ("kpcn",), "pd_kpcn": ("progressive", "kpcn"), "pd_no_sure": ("progressive_no_sure",),
+        "pd_bound": ()}
+    assert plan.weights_names() == ["kpcn", "progressive", "progressive_no_sure"]
+    job = plan.case_job("glass_caustics", 4, outputs={"metrics": "m.csv", "viewer": "v", "record": "r.json"})
+    by_name = {m["name"]: m for m in job["methods"]}
+    assert by_name["pd_kpcn"]["weights"] == "w/progressive.pt"
+    assert by_name["pd_kpcn"]["weights_read"] == ["w/progressive.pt", "w/kpcn.pt"]
+    assert by_name["kpcn"]["weights_read"] == ["w/kpcn.pt"] and by_name["oidn"]["weights_read"] == []
+    digests = {"kpcn": "k", "progressive": "p", "progressive_no_sure": "s"}
+    plan_of = {m["name"]: m.get("weights_sha256") for m in plan.case_plan(digests)["methods"]}
+    assert plan_of == {"oidn": None, "kpcn": "k", "pd_kpcn": "p+k", "pd_no_sure": "s", "pd_bound": ""}
 
 
 def test_a_case_plan_carries_the_learned_methods_weights_digest(plan):

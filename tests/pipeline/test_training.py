@@ -10,6 +10,8 @@ from mcbench import BenchError
 from mcbench.io.buffers import ALL_LAYERS, BIN_LAYERS, SUB_OUTPUTS, Denoised, RenderBuffers
 from mcbench.io.exr import read_layers, write_layers
 from mcbench.nn.data import BUFFER_KEYS, crop_render_layers, load_combiner_crops
+from mcbench.io.weights import COMMITTED_WEIGHTS
+from mcbench.pipeline.method_runs import method_function
 from mcbench.pipeline.training import write_correlated_training_inputs
 from methods import available_methods, load_method, method_spec
 
@@ -38,21 +40,21 @@ def test_kpcn_applies_each_image_kernel_to_its_sub_buffers(make_render_buffers):
     """KPCN's kernel is linear in the colour it filters and color = (sub0 + sub1) / 2, so its
     results on the two sub-buffers average to its result on the image (A from bins 0-1 with A's
     kernel, never B's samples); renders without bins get no sub-buffer results."""
-    kpcn = load_method("kpcn")
+    kpcn = method_function(load_method("kpcn"), weights_dir=COMMITTED_WEIGHTS)
     buffers = make_render_buffers(height=16, width=12, seed=5, bins=True, half_std=0.01)
     assert all(buffers.layers[n].min() >= 0 for n in BIN_LAYERS)   # radiance: KPCN clamps at 0
-    result = kpcn.denoise(buffers)
+    result = kpcn(buffers)
     for which in ("full", "a", "b"):
         sub0, sub1 = result.sub_outputs(which)
         np.testing.assert_allclose((sub0.astype(np.float64) + sub1) / 2, result.image(which), rtol=2e-4, atol=1e-5)
         assert not np.allclose(sub0, sub1)
     plain = make_render_buffers(height=16, width=12, seed=5)
-    plain_result = kpcn.denoise(plain)
+    plain_result = kpcn(plain)
     assert not plain_result.extras
     with pytest.raises(BenchError, match="sub-buffer"):
         plain_result.sub_outputs("a")
     # the same network and input: the image results do not depend on the sub-buffers
-    again = kpcn.denoise(RenderBuffers(layers={k: v for k, v in buffers.layers.items() if k not in BIN_LAYERS},
+    again = kpcn(RenderBuffers(layers={k: v for k, v in buffers.layers.items() if k not in BIN_LAYERS},
                                        spp=buffers.spp))
     np.testing.assert_array_equal(again.full, result.full)
 
@@ -116,7 +118,7 @@ def test_denoised_load_reads_extras_only_when_asked(tmp_path):
 #: the learned combiners trained on other methods' plain results (found through their declarations;
 #: progressive denoising's base "oidn+sure" also carries a divergence term: tests/methods/test_progressive.py)
 COMBINERS = [n for n in available_methods() if (spec := method_spec(load_method(n))).learned
-             and spec.kind == "combiner" and set(spec.correlated_bases) <= set(available_methods())]
+             and spec.kind == "combiner" and set(spec.learned.correlated_bases) <= set(available_methods())]
 
 
 @pytest.mark.parametrize("name", COMBINERS)
@@ -124,16 +126,16 @@ def test_committed_combiner_weights_load_safely_and_match_their_record(name):
     from mcbench.io.tables import read_json
     from mcbench.io.weights import COMMITTED_WEIGHTS, load_weights, record_path, weights_path
 
-    path = weights_path(name)
+    path = weights_path(COMMITTED_WEIGHTS, name)
     assert path.parent == COMMITTED_WEIGHTS and path.exists(), f"{path} missing"
     blob = load_weights(path)                       # torch.load(weights_only=True) underneath
     module = load_method(name)
-    record = read_json(record_path(name))
-    assert blob["arch"] == module.METHOD.network == record["arch"] and record["network"] == name
+    record = read_json(record_path(COMMITTED_WEIGHTS, name))
+    assert blob["arch"] == module.METHOD.learned.network == record["arch"] and record["network"] == name
     network = module.build_network(**blob["arch"])
     network.load_state_dict(blob["state_dict"])
     assert record["parameters"] == sum(p.numel() for p in network.parameters())
-    assert record["data"]["bases"] == list(module.METHOD.correlated_bases)
+    assert record["data"]["bases"] == list(module.METHOD.learned.correlated_bases)
     assert record["settings"]["steps"] == record["history"][-1]["step"]
     per_spp = record["validation"]["per_spp"]
     assert all(np.isfinite(v["loss"]) and v["loss"] < v["noisy_loss"] for v in per_spp.values())
@@ -146,12 +148,12 @@ def combiner_validation_scene(tmp_path_factory):
     from mcbench.io.tables import read_json
     from mcbench.training_data import training_example
     from mcbench.render.variants import pick_variant
-    from mcbench.io.weights import record_path
+    from mcbench.io.weights import COMMITTED_WEIGHTS, record_path, weights_path
 
     if pick_variant("auto") == "scalar_rgb":
         pytest.skip("training renders need an LLVM or CUDA variant (libLLVM 19 missing)")
-    data = read_json(record_path("deep_combiner"))["data"]
-    rendered = read_json(record_path("kpcn"))["data"]["crops_per_scene"]   # crops rendered per scene
+    data = read_json(record_path(COMMITTED_WEIGHTS, "deep_combiner"))["data"]
+    rendered = read_json(record_path(COMMITTED_WEIGHTS, "kpcn"))["data"]["crops_per_scene"]   # crops rendered per scene
     seed = data["validation_scenes"][0]
     width, height = (int(v) for v in data["resolution"].split("x"))
     crops = training_example(seed, data["spp_levels"], int(data["target_spp"]), (width, height),
@@ -161,7 +163,7 @@ def combiner_validation_scene(tmp_path_factory):
     for layers, meta in crops:
         paths.append(str(folder / f"example_{seed}_{meta['crop']}.exr"))
         write_layers(paths[-1], layers, metadata=meta)
-    bases = sorted({b for name in COMBINERS for b in load_method(name).METHOD.correlated_bases})
+    bases = sorted({b for name in COMBINERS for b in load_method(name).METHOD.learned.correlated_bases})
     correlated = {}
     for base in bases:
         correlated[base] = [str(folder / "correlated" / base / f"example_{seed}_{k}.exr") for k in range(len(paths))]
@@ -183,10 +185,10 @@ def test_committed_combiner_weights_reproduce_their_validation_loss(name, combin
     from mcbench.nn.inference import load_network
     from mcbench.nn.train import evaluate
     from mcbench.pipeline.training import training_data
-    from mcbench.io.weights import record_path
+    from mcbench.io.weights import COMMITTED_WEIGHTS, record_path, weights_path
 
     seed, paths, correlated = combiner_validation_scene
-    record = read_json(record_path(name))
+    record = read_json(record_path(COMMITTED_WEIGHTS, name))
     crops = training_data(name, paths, correlated)
-    result = evaluate(load_network(load_method(name)), crops, record["loss"])
+    result = evaluate(load_network(load_method(name).METHOD, weights_path(COMMITTED_WEIGHTS, name)), crops, record["loss"])
     assert result["loss"] == pytest.approx(record["validation"]["per_scene"][str(seed)], rel=0.05)

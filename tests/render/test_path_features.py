@@ -33,6 +33,7 @@ import numpy as np
 import pytest
 
 from mcbench import BenchError
+from mcbench.contracts.scene import SceneSpec
 from mcbench.render.renderer import (FEATURE_CONVENTIONS, merge_reference_chunks, render_dict_buffers,
                                      render_reference_chunk, weighted_mean_variance)
 from mcbench.render.variants import pick_variant
@@ -234,8 +235,8 @@ def test_a_rough_surface_records_at_once(variant, bsdf):
 
 def test_reference_chunks_record_the_same_features(variant):
     module = types.ModuleType("tests_mirror_wall")
-    module.RESOLUTION = (SIZE, SIZE)
-    module.build = lambda width, height: _mirror_wall()
+    module.SCENE = SceneSpec(description="a mirror before a red wall", category="test", resolution=(SIZE, SIZE),
+                             build=lambda width, height: _mirror_wall())
     layers, metadata = render_reference_chunk(module, 16, 0, variant=variant, features="tungsten")
     assert metadata["features"] == "tungsten"
     np.testing.assert_allclose(layers["albedo"], np.broadcast_to(RED, (SIZE, SIZE, 3)), atol=1e-6)

@@ -16,7 +16,8 @@ from mcbench.render.seeds import (FIBRE_SEED_BASE, MAX_BASE_SEED, MAX_TRAINING_S
                            decode_seed, decode_training_seed, mitsuba_seed, render_seed,
                            scalar_seed_stride, training_render_seed)
 from mcbench.render.variants import pick_variant
-from scenes import UnknownSceneError, available_scenes, load_scene
+from mcbench.contracts.scene import SceneSpec
+from scenes import UnknownSceneError, available_scenes, load_scene, scene_spec
 
 TINY = (16, 16)
 SCENES = ("cornell_box", "glass_caustics", "envmap_objects")
@@ -33,8 +34,8 @@ def variant():
 def test_registry_lists_the_scenes():
     assert set(SCENES) <= set(available_scenes())
     for name in SCENES:
-        module = load_scene(name)
-        assert module.DESCRIPTION and module.CATEGORY and len(module.RESOLUTION) == 2
+        spec = scene_spec(load_scene(name))
+        assert spec.description and spec.category and len(spec.size) == 2
 
 
 def test_unknown_scene_names_the_config_key():
@@ -221,8 +222,8 @@ def test_load_scene_dict_caches_by_key_leaves_the_dict_alone_and_forgets(variant
 
 def test_a_film_of_the_wrong_size_names_the_scene(variant):
     wrong = types.ModuleType("scenes.wrong_size")
-    wrong.RESOLUTION = (8, 8)
-    wrong.build = lambda width, height: CORNELL.build(width + 1, height)
+    wrong.SCENE = SceneSpec(description="a film one pixel too wide", category="test", resolution=(8, 8),
+                            build=lambda width, height: scene_spec(CORNELL).build(width + 1, height))
     with pytest.raises(BenchError, match=r"wrong_size.*build\(8, 8\) made a 9x8 film"):
         render_buffers(wrong, 2)
 

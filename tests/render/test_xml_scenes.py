@@ -11,6 +11,7 @@ import pytest
 from mcbench import BenchError
 from mcbench.render.renderer import AOVS, render_buffers
 from mcbench.render.variants import pick_variant
+from mcbench.contracts.scene import SceneSpec, scene_spec
 from mcbench.render.xml_scenes import XmlScene, film_resolution, scene_module, wrapped_xml
 
 SPHERE_XML = """<?xml version="1.0"?>
@@ -55,9 +56,10 @@ def sphere_file(tmp_path):
 
 def test_an_xml_file_gets_the_scene_contract(sphere_file):
     module = scene_module(sphere_file)
-    assert module.DESCRIPTION == "a sphere under a constant sky" and module.CATEGORY == "xml"
-    assert module.RESOLUTION == (20, 14) == film_resolution(sphere_file)     # $w from its <default>
-    assert module.build(8, 6) == XmlScene(sphere_file.resolve(), 8, 6)
+    spec = scene_spec(module)
+    assert spec.description == "a sphere under a constant sky" and spec.category == "xml"
+    assert spec.resolution == (20, 14) == film_resolution(sphere_file)     # $w from its <default>
+    assert spec.build(8, 6) == XmlScene(sphere_file.resolve(), 8, 6)
 
 
 def test_the_wrapping_matches_the_dict_path(sphere_file):
@@ -83,8 +85,9 @@ def test_an_xml_scene_renders_the_same_pixels_as_the_same_dict_scene(sphere_file
     """The same scene, once as XML and once as a dict, through render_buffers with the same seeds:
     the same buffers (independent truth: Mitsuba's dict loader)."""
     pick_variant("auto")
-    dict_module = type("M", (), {"__name__": "scenes.sphere_dict", "RESOLUTION": (20, 14),
-                                 "build": staticmethod(sphere_dict)})
+    dict_module = type("M", (), {"__name__": "scenes.sphere_dict",
+                                 "SCENE": SceneSpec(description="a sphere", category="test", resolution=(20, 14),
+                                                    build=sphere_dict)})
     from_xml, meta_xml = render_buffers(scene_module(sphere_file), 8, resolution=(12, 10))
     from_dict, meta_dict = render_buffers(dict_module, 8, resolution=(12, 10))
     assert from_xml.keys() == from_dict.keys()

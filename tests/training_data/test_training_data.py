@@ -15,7 +15,7 @@ from mcbench.render.seeds import (FIBRE_SEED_BASE, TRAINING_BASE_SEED, decode_se
 from mcbench.training_data import (crop_boxes, random_scene, render_target, scene_fingerprint,
                                    training_example, training_scene_fingerprint)
 from mcbench.render.variants import pick_variant
-from scenes import available_scenes, load_scene
+from scenes import available_scenes, load_scene, scene_spec
 
 REPO = Path(__file__).resolve().parents[2]
 LEVELS = (4, 16)
@@ -127,7 +127,7 @@ def test_training_fingerprints_distinct_and_not_test_scenes():
     seeds = list(range(100)) + list(range(FIBRE_SEED_BASE, FIBRE_SEED_BASE + 8))
     training = [training_scene_fingerprint(seed) for seed in seeds]
     assert len(set(training)) == len(seeds)
-    tests = {scene_fingerprint(load_scene(name).build(16, 12)) for name in available_scenes()}
+    tests = {scene_fingerprint(scene_spec(load_scene(name)).build(16, 12)) for name in available_scenes()}
     assert len(tests) == len(available_scenes())
     assert not tests & set(training)
 

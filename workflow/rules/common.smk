@@ -18,8 +18,8 @@ from mcbench.pipeline.plan import plan_study  # noqa: E402
 from mcbench.pipeline.render import folder_case_files, folder_reference_files  # noqa: E402
 from mcbench.analysis.study.figures import STUDY_FIGURES as STUDY_FIGURE_KEYS, curve_candidates, paper_recommended  # noqa: E402
 from mcbench.pipeline.resources import StudyRequests, load_job_costs  # noqa: E402
-from mcbench.io.method_spec import method_spec  # noqa: E402
-from mcbench.io.weights import COMMITTED_WEIGHTS, check_trained_features, file_sha256, is_learned_method  # noqa: E402
+from mcbench.contracts.method import method_spec  # noqa: E402
+from mcbench.io.weights import check_trained_features, file_sha256, is_learned_method  # noqa: E402
 from mcbench.pipeline.registry import available_metrics, load_method, load_metric, load_scene  # noqa: E402
 
 
@@ -33,14 +33,14 @@ config.update(_RESOLVED)
 logger.info(f"mcbench: configuration {_CONFIG_SOURCE} with the schema's defaults, digest {config_digest(config)}")
 
 RESULTS = "results"
-# Learned methods' weights: the committed methods/weights of this checkout unless the config
-# names another folder (relative to the working directory).
-WEIGHTS_DIR = config["weights_dir"] or str(COMMITTED_WEIGHTS)
-
 # Everything the rules plan that depends on the config alone, checked before any job
 # (mcbench.pipeline.plan.plan_study; the tests call the same function). Errors name the file and
 # the key, and say so when the key holds a schema default the config never wrote.
 PLAN = plan_study(config, written=_WRITTEN, source=_CONFIG_SOURCE, is_learned=is_learned_method)
+# Learned methods' weights: the committed methods/weights of this checkout unless the config
+# names another folder (relative to the working directory); every rule that loads weights is
+# handed this folder or a file in it.
+WEIGHTS_DIR = PLAN.paths.weights_dir
 # The names the rules read, as plain lists and dicts (what Snakemake records in params).
 METHODS = PLAN.methods   # name -> mcbench.pipeline.study_plan.MethodPlan, in dependency order
 SCENES = list(PLAN.cases.scenes)
@@ -83,12 +83,11 @@ wildcard_constraints:
 
 def run_in_pool(step, *args, log, **kwargs):
     """Run ``step`` ("module:function") of a ``run:`` rule in a warm worker (mcbench.pipeline.pool),
-    with as many workers as the cores Snakemake was given, the job's weights folder and this
-    checkout on the workers' paths."""
+    with as many workers as the cores Snakemake was given and this checkout on the workers' paths
+    (a learned method's weights file travels in the job's description, case_job)."""
     from mcbench.pipeline.pool import run_step
 
     run_step(step, *args, log_path=log, workers=max(1, int(workflow.cores or 1)),
-             environment={"MCBENCH_WEIGHTS_DIR": str(Path(WEIGHTS_DIR).resolve())},
              paths=[str(Path(workflow.basedir))], **kwargs)
 
 
@@ -117,12 +116,12 @@ def _case_plan():
     for name, spec in METHODS.items():
         if spec.learned:
             check_weights(name)
-    return PLAN.case_plan({module: weights_digest_of(module) for module in PLAN.learned_modules()})
+    return PLAN.case_plan({name: weights_digest_of(name) for name in PLAN.weights_names()})
 
 
 def case_job(wildcards, output):
     """What run_case's job makes in one case (mcbench.pipeline.study_plan.StudyPlan.case_job)."""
-    return PLAN.case_job(wildcards.scene, int(wildcards.spp), weights_dir=WEIGHTS_DIR,
+    return PLAN.case_job(wildcards.scene, int(wildcards.spp),
                          outputs={"metrics": output.metrics, "viewer": output.viewer, "record": output.record})
 
 
@@ -189,7 +188,7 @@ def train_network_inputs(wildcards):
 
 def combiner_bases(network):
     """The base denoisers a learned combiner is trained on (its declared ``correlated_bases``); () for a denoiser."""
-    return (method_spec(load_method(network)).correlated_bases or ()) if network in NETWORKS else ()
+    return (method_spec(load_method(network)).learned.correlated_bases or ()) if network in NETWORKS else ()
 
 
 def combiner_crop_files():

@@ -2,7 +2,8 @@
 # against one-hot selection), the ablation table and the comparison methods' own ranking.
 # Which method compares with which is read from the method table (module docstring).
 
-COMPARISON_METHODS = {name: {key: spec.as_dict()[key] for key in ("module", "kind", "inputs", "params", "label")}
+COMPARISON_METHODS = {name: {key: spec.as_dict()[key] for key in ("module", "kind", "inputs", "params", "label",
+                                                                       "comparison_role")}
                       for name, spec in METHODS.items()}
 
 

@@ -35,6 +35,7 @@ rule training_correlated:
         [f"{RESULTS}/training/correlated/{{base}}/example_{{seed}}_{k}.exr" for k in range(COMBINER_TRAINING["crops"])],
     params:
         weights=lambda wildcards: weights_digest_of(wildcards.base),
+        weights_dir=WEIGHTS_DIR,
     threads: 1
     resources:
         **job_resources("training_correlated"),

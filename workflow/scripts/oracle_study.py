@@ -2,10 +2,6 @@ from mcbench.pipeline.threads import limit_threads
 
 limit_threads(snakemake.threads)  # before any heavy import (numba, torch, OpenBLAS, OIDN read it)  # noqa: F821
 
-import os  # noqa: E402
-
-os.environ["MCBENCH_WEIGHTS_DIR"] = os.path.abspath(snakemake.params.weights_dir)
-
 from mcbench.pipeline.logs import run_logged  # noqa: E402
 from mcbench.pipeline.oracle import run_oracle_study  # noqa: E402
 
@@ -15,4 +11,4 @@ run_logged(snakemake.log[0], run_oracle_study, snakemake.wildcards.scene, snakem
            weights_png=snakemake.output.weights, denoisers=list(params.denoisers),
            repetitions=int(params.repetitions), spp=int(params.spp), downscale=int(params.downscale),
            resolution=params.resolution, variant=params.variant, features=params.get("features", "first_hit"), seed=int(params.seed),
-           threads=snakemake.threads)
+           weights_dir=params.weights_dir, threads=snakemake.threads)

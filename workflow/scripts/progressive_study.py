@@ -4,21 +4,19 @@ limit_threads(snakemake.threads)  # before any heavy import (numba, torch, OpenB
 
 import os  # noqa: E402
 
-# the two rules of workflow/rules/progressive_study.smk
-if snakemake.rule == "progressive_curve":
-    os.environ["MCBENCH_WEIGHTS_DIR"] = os.path.abspath(snakemake.params.weights_dir)
-
 from mcbench.pipeline.logs import run_logged  # noqa: E402
 from mcbench.pipeline.progressive_study import write_progressive_tables  # noqa: E402
 from mcbench.pipeline.progressive_study import run_consistency_curve  # noqa: E402
 
 params = snakemake.params
+# the two rules of workflow/rules/progressive_study.smk
 if snakemake.rule == "progressive_curve":
     run_logged(snakemake.log[0], run_consistency_curve, snakemake.wildcards.scene, snakemake.input.reference,
                table_csv=snakemake.output.table, table_md=snakemake.output.markdown,
                figure_png=snakemake.output.figure, spp_levels=[int(s) for s in params.spp], base=params.base,
                divergence=params.divergence, downscale=int(params.downscale), resolution=params.resolution,
-               variant=params.variant, features=params.get("features", "first_hit"), seed=int(params.seed), threads=snakemake.threads)
+               variant=params.variant, features=params.get("features", "first_hit"), seed=int(params.seed),
+               weights_dir=params.weights_dir, threads=snakemake.threads)
 else:
     run_logged(snakemake.log[0], write_progressive_tables, snakemake.input.metrics, snakemake.input.timings,
                os.path.dirname(snakemake.output.consistency), pairs=dict(params.pairs),

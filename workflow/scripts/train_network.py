@@ -2,10 +2,6 @@ from mcbench.pipeline.threads import limit_threads
 
 limit_threads(snakemake.threads)  # before any heavy import (numba, torch, OpenBLAS, OIDN read it)  # noqa: F821
 
-import os  # noqa: E402
-
-os.environ["MCBENCH_WEIGHTS_DIR"] = os.path.abspath(snakemake.params.weights_dir)
-
 from mcbench.pipeline.logs import run_logged  # noqa: E402
 from mcbench.pipeline.training import train_learned_method  # noqa: E402
 

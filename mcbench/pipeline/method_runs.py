@@ -1,13 +1,16 @@
-"""The work behind ``workflow/rules/methods.smk``: running base denoisers and combiners on one
-test case (one method per job, in a warm worker of mcbench.pipeline.pool; or several in one
-call), with their outputs, timing records and output checks.
+"""Running base denoisers and combiners on one test case for the case job
+(:mod:`mcbench.pipeline.cases`, rule ``run_case`` of ``workflow/rules/methods.smk``): several
+methods in one call, with their outputs, timing records and output checks, and what a job of
+them reads of a render.
 """
 
 from __future__ import annotations
 
+import functools
 import json
 import platform
 import time
+from typing import Callable
 
 import numpy as np
 
@@ -15,8 +18,9 @@ from mcbench import BenchError
 from mcbench.io.buffers import Denoised, RenderBuffers
 from mcbench.io.exr import check_finite, read_metadata, write_layers
 from mcbench.io.file_cache import cached_read
-from mcbench.io.method_spec import method_spec
+from mcbench.contracts.method import WEIGHTS_ARGUMENT, method_spec
 from mcbench.io.tables import write_json
+from mcbench.io.weights import weights_folder, weights_path
 
 
 def _machine() -> str:
@@ -25,13 +29,14 @@ def _machine() -> str:
 
 def run_method(method: str, render_path: str, output_path: str, timing_path: str, *,
                module_name: str, params: dict | None = None, input_paths: list[str] = (),
-               scene: str = "", spp: int = 0, threads: int = 1) -> None:
-    """Run one base denoiser or combiner on a render and write its output EXR and timing JSON.
+               weights: str | None = None, scene: str = "", spp: int = 0, threads: int = 1) -> None:
+    """Run one base denoiser or combiner on a render and write its output EXR and timing JSON
+    (``weights``: a learned method's weights file).
 
     The timing counts the method's compute only (EXR reading and writing excluded), measured
     with ``time.perf_counter``; base denoisers include their three runs (full, A, B).
     """
-    run_methods([{"name": method, "module": module_name, "params": params or {},
+    run_methods([{"name": method, "module": module_name, "params": params or {}, "weights": weights,
                   "input_paths": list(input_paths), "exr": output_path, "timing": timing_path}],
                 render_path, scene=scene, spp=spp, threads=threads)
 
@@ -41,7 +46,8 @@ def run_methods(entries: list[dict], render_path: str, *, scene: str = "", spp: 
     """Run several methods of one test case in one process, in the given order.
 
     ``entries``: dicts with ``name``, ``module``, ``params``, ``input_paths`` (the output EXRs
-    of the method's inputs), ``exr``, ``timing`` (where its output and timing record go) and
+    of the method's inputs), ``exr``, ``timing`` (where its output and timing record go),
+    ``weights`` (a learned method's weights file, handed to its ``run`` as ``weights_file``) and
     optionally ``key`` (:func:`mcbench.pipeline.cases.method_key`, recorded in both),
     in dependency order: an entry may take an earlier entry's output as an input. The render and
     every input EXR are read once; an input made earlier in the same call is read back from the
@@ -92,8 +98,10 @@ def run_methods(entries: list[dict], render_path: str, *, scene: str = "", spp: 
         for key, value in (("name", method), ("scene", scene), ("spp", spp)):
             if key in method_parameters(module) and key not in params:
                 params[key] = value          # a method that names its files gets its name and case
-        key = (module_name, json.dumps(params, sort_keys=True, default=str))
         spec = method_spec(module)
+        if spec.learned is not None:
+            params[WEIGHTS_ARGUMENT] = _weights_file(entry, method)
+        key = (module_name, json.dumps(params, sort_keys=True, default=str))
         if key not in warmed and spec.warm_up:
             _apply(module, *_corner_crop(buffers, inputs), params)
             warmed.add(key)
@@ -114,6 +122,25 @@ def run_methods(entries: list[dict], render_path: str, *, scene: str = "", spp: 
                                      "height": height, "threads": threads, "machine": _machine(), **key})
 
 
+def method_function(module, *, weights_dir) -> Callable:
+    """Method module ``module``'s declared ``run``, a learned method's with its weights
+    ``<weights_dir>/<name>.pt`` bound (``weights_file``), for steps that run a method outside a
+    case job (the oracle study, the progressive curve, training inputs)."""
+    spec = method_spec(module)
+    if spec.learned is None:
+        return spec.run
+    name = module.__name__.rsplit(".", 1)[-1]
+    return functools.partial(spec.run, **{WEIGHTS_ARGUMENT: str(weights_path(weights_folder(weights_dir), name))})
+
+
+def _weights_file(entry: dict, method: str) -> str:
+    """The weights file of learned method entry ``entry``; a :class:`BenchError` when it has none."""
+    if not entry.get("weights"):
+        raise BenchError(f"method '{method}' is a learned method, but its job names no weights file "
+                         f"(the plan's 'weights' of each learned method, from the config key weights_dir)")
+    return str(entry["weights"])
+
+
 #: (module, parameters) already warmed up in this process (a batch, or a warm worker of mcbench.pipeline.pool)
 _WARMED: set[tuple[str, str]] = set()
 
@@ -122,7 +149,7 @@ WARM_UP_SIZE = 32  # pixels per side of the untimed warm-up crop of run_methods
 
 def reads_rows(modules) -> bool:
     """Whether a job of these method modules reads its render and inputs by rows: every module
-    declares ``reads_rows`` (:class:`mcbench.io.method_spec.MethodSpec`; the ensemble), so no layer is held whole
+    declares ``reads_rows`` (:class:`mcbench.contracts.method.MethodSpec`; the ensemble), so no layer is held whole
     (``benchmarks/bench_ensemble.py`` measures the peak memory saved). Such a method reads the
     rows it needs inside its own call, so its recorded seconds include those reads (uncompressed
     scanlines, cheap next to its compute); a batch with any other
@@ -158,7 +185,7 @@ def _denoised_by_rows(path: str) -> Denoised:
 
 def render_layers(modules) -> tuple[str, ...] | None:
     """The render layers a job of these method modules reads: the union of their
-    declared ``render_layers`` (:class:`mcbench.io.method_spec.MethodSpec`), or None (every layer)
+    declared ``render_layers`` (:class:`mcbench.contracts.method.MethodSpec`), or None (every layer)
     when one does not declare them."""
     names: dict[str, None] = {}
     for module in modules:
@@ -172,9 +199,9 @@ def render_layers(modules) -> tuple[str, ...] | None:
 def needed_layers(module, *, halves: bool = True, params: dict | None = None) -> tuple[str, ...]:
     """The render layers a method cannot run without, checked against an imported render's when
     the DAG is parsed (:mod:`mcbench.pipeline.plan`): its declared ``render_layers``; or, for a
-    single-image denoiser declaring ``image_quantities`` (:class:`mcbench.io.method_spec.MethodSpec`), those quantities
-    of the full image plus the halves' own colour (and variance, if it reads variance) when
-    ``halves`` (half-buffer features fall back to the full image's,
+    single-image denoiser declaring ``image_quantities`` (:class:`mcbench.contracts.method.MethodSpec`),
+    those quantities of the full image plus the halves' own colour (and variance, if it reads
+    variance) when ``halves`` (half-buffer features fall back to the full image's,
     :meth:`mcbench.io.buffers.RenderBuffers.image`); else every layer of
     :data:`mcbench.io.buffers.REQUIRED_LAYERS`; plus, with ``params``, the layers its
     ``params_layers`` hook names for them."""
