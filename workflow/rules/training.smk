@@ -87,5 +87,6 @@ for _network in PLAN.training.networks:
             f"train_{_network}"
         localrule: True
         input:
-            STUDY.missing_weights(_network),
+            # its weights while they are missing (looked for when the DAG is built, not parsed)
+            lambda wildcards, network=_network: STUDY.missing_weights(network),
         default_target: False
