@@ -2,6 +2,7 @@
 # get_* input functions. The logic lives in mcbench.pipeline.study_setup; the rules read the
 # typed plan (mcbench.pipeline.study_plan.StudyPlan) directly.
 
+import os  # noqa: F401 (the train rule's params)
 import sys
 
 from snakemake.logging import logger
