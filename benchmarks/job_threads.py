@@ -12,8 +12,8 @@ polled every 20 ms). Two jobs:
 
 * ``methods`` -- :func:`mcbench.pipeline.methods.run_methods` on the case: OIDN, JBF and the
   ensemble of both (OIDN's TBB pool, numba's OpenMP pool);
-* ``metrics`` -- :func:`mcbench.pipeline.metrics.compute_case_metrics` with every metric
-  (HDR-FLIP's OpenMP pool, OpenBLAS under SciPy).
+* ``metrics`` -- the case job :func:`mcbench.pipeline.cases.run_case` with no method, evaluating the
+  noisy input with every metric and its viewer images (HDR-FLIP's OpenMP pool, OpenBLAS under SciPy).
 
 Configurations: ``defaults`` leaves the libraries their own pools (the method scripts set only
 ``NUMBA_NUM_THREADS`` and ``OMP_NUM_THREADS``, the metrics script nothing); ``limited`` is
@@ -50,10 +50,13 @@ run_methods(entries, render, scene="bench", spp=0, threads=1)
 """,
     "metrics": """
 import sys
-from mcbench.pipeline.metrics import compute_case_metrics
+from mcbench.pipeline.cases import run_case
 render, out, reference = sys.argv[1], sys.argv[2], sys.argv[3]
-compute_case_metrics("bench", 0, reference, render, {}, ["relmse", "relmse_corrected", "smape", "dssim", "flip"],
-                     f"{out}/metrics.csv", flip_maps_path=f"{out}/flip.exr")
+run_case({"scene": "bench", "spp": 0, "render": render, "reference": reference,
+          "metrics": ["relmse", "relmse_corrected", "smape", "dssim", "flip"], "methods": [],
+          "entries": [{"entry": "noisy", "image": render, "values": f"{out}/values/noisy.json",
+                       "viewer": f"{out}/viewer_entries/noisy", "weight_inputs": []}],
+          "outputs": {"metrics": f"{out}/metrics.csv", "viewer": f"{out}/viewer_case", "record": f"{out}/case.json"}})
 """,
 }
 

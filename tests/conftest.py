@@ -143,6 +143,39 @@ def make_render_buffers():
 
 # --- the smoke run shared by the slow end-to-end tests ----------------------------------------
 
+def case_job(folder, *, scene: str, spp: int, render, reference, metrics, methods=(), images=None,
+             weight_inputs=None, cache=None) -> dict:
+    """The job description of one case that ``workflow/rules/common.smk`` builds for
+    :func:`mcbench.pipeline.cases.run_case`, so a test runs the code the rules run.
+
+    ``methods`` [(name, module, params, inputs)] are made by the job (outputs under
+    ``folder/outputs``); ``images`` {entry: EXR} are candidates made elsewhere, evaluated as they
+    are (``weight_inputs`` {entry: input names} whose weight maps the viewer draws). The noisy
+    input comes first, then the methods, then ``images``. The case's products go in ``folder``
+    (``case.csv``, ``viewer_case/``, ``case_record.json``); the kept per-entry values and viewer
+    images under ``cache`` (default ``folder/cache``).
+    """
+    from mcbench import NOISY
+
+    folder = Path(folder)
+    cache = Path(cache) if cache is not None else folder / "cache"
+    weight_inputs = dict(weight_inputs or {})
+    method_rows = [{"name": name, "module": module, "params": dict(params), "inputs": list(inputs), "weights": None,
+                    "exr": str(folder / "outputs" / f"{name}.exr"), "timing": str(folder / "outputs" / f"{name}.json")}
+                   for name, module, params, inputs in methods]
+    sources = {NOISY: str(render), **{m["name"]: m["exr"] for m in method_rows},
+               **{name: str(path) for name, path in (images or {}).items()}}
+    inputs_of = {m["name"]: m["inputs"] for m in method_rows}
+    entries = [{"entry": entry, "image": image, "values": str(cache / "values" / f"{entry}.json"),
+                "viewer": str(cache / "viewer_entries" / entry),
+                "weight_inputs": list(weight_inputs.get(entry, inputs_of.get(entry, [])))}
+               for entry, image in sources.items()]
+    return {"scene": scene, "spp": int(spp), "render": str(render), "reference": str(reference),
+            "metrics": list(metrics), "methods": method_rows, "entries": entries,
+            "outputs": {"metrics": str(folder / "case.csv"), "viewer": str(folder / "viewer_case"),
+                        "record": str(folder / "case_record.json")}}
+
+
 REPO = Path(__file__).resolve().parents[1]
 SMOKE_CONFIG = REPO / "workflow" / "configs" / "smoke.yaml"
 

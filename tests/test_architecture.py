@@ -9,7 +9,7 @@ or ``__import__`` calls, hence rule 6.
 1. every module of ``mcbench`` is in a layer; no layer imports a higher one, directly or not; the
    layers of one level are independent;
 2. each layer is imported only by the packages declared to use it (the graph as it is);
-3. only ``mcbench.pipeline.registry`` imports the plugins (``methods``, ``scenes``); they never
+3. only ``mcbench.pipeline.registry`` imports the plugins (``methods``, ``scenes``, ``metrics``); they never
    import ``mcbench.pipeline``, even indirectly, nor each other;
 4. no import cycle between the modules (or subpackages) of one package, nor (checked here:
    the contract compares a package's children only) through a package's ``__init__``;
@@ -49,7 +49,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = "mcbench"
-PLUGINS = ("methods", "scenes")
+PLUGINS = ("methods", "scenes", "metrics")
 PROJECT_PACKAGES = (PACKAGE,) + PLUGINS
 PIPELINE = "mcbench.pipeline"
 MAX_PLUGIN_LINES = 600
@@ -561,7 +561,7 @@ PROBE = "\n\ndef _architecture_probe():\n    {}\n"
 #        report it, words of its report)
 BREAKAGES = {
     "upward import inside a function": (
-        {"mcbench/io/exr.py": PROBE.format("from mcbench.analysis.metrics import ALL_METRICS")},
+        {"mcbench/io/exr.py": PROBE.format("from mcbench.analysis.metrics import tonemap")},
         "1-layers", ["mcbench.io.exr -> mcbench.analysis.metrics"]),
     "upward relative import": (
         {"mcbench/render/seeds.py": PROBE.format("from ..nn import features")},
@@ -595,6 +595,9 @@ BREAKAGES = {
     "a layer a plugin does not use (scenes -> analysis)": (
         {"scenes/cornell_box.py": PROBE.format("from mcbench.analysis import metrics")},
         "2-analysis", ["scenes.cornell_box -> mcbench.analysis.metrics"]),
+    "a layer a plugin does not use (scenes -> contracts)": (
+        {"scenes/cornell_box.py": PROBE.format("from mcbench.contracts import metric")},
+        "2-contracts", ["scenes.cornell_box -> mcbench.contracts.metric"]),
     "the package's __init__ importing the pipeline": (
         {"mcbench/__init__.py": PROBE.format("from mcbench.pipeline import config")},
         "2-pipeline", ["mcbench -> mcbench.pipeline.config"]),
@@ -607,6 +610,9 @@ BREAKAGES = {
     "method importing the pipeline": (
         {"methods/oidn.py": PROBE.format("from mcbench.pipeline import registry")},
         "3-plugins-below-pipeline", ["methods.oidn -> mcbench.pipeline.registry"]),
+    "metric importing a method": (
+        {"metrics/relmse.py": PROBE.format("import methods.jbf")},
+        "3-plugins-independent", ["metrics.relmse -> methods.jbf"]),
     "method importing a scene": (
         {"methods/jbf.py": PROBE.format("import scenes.cornell_box")},
         "3-plugins-independent", ["methods.jbf -> scenes.cornell_box"]),

@@ -41,7 +41,6 @@ import pandas as pd
 from mcbench import BenchError
 from mcbench.combine.ensemble_weights import ENSEMBLE_DEFAULTS
 from mcbench.io.tables import read_table, write_csv, write_text
-from mcbench.analysis.metrics import METRIC_LABELS
 from mcbench.analysis.ranking import format_markdown, ranking_table
 
 __all__ = ["ENSEMBLE_DEFAULTS", "ABLATIONS", "ONE_HOT_VARIANTS", "PAPER_AVG", "CLAIMS", "ensemble_changes",
@@ -219,11 +218,12 @@ def _cell(value: float | None, digits: int = 1, unit: str = "") -> str:
 
 
 def beats_markdown(table: pd.DataFrame, excluded: dict[str, list[str]], *, number: int, metric: str,
-                   labels: dict[str, str]) -> str:
+                   labels: dict[str, str], metric_label: str | None = None) -> str:
     """Table ``number`` (1 or 2) as Markdown: percent (n) per size and spp, the paper's Avg. row
-    beside ours (relMSE, the paper's metric), and the full ensembles left out."""
+    beside ours (relMSE, the paper's metric), and the full ensembles left out; the metric named
+    by ``metric_label`` (its declared label; default its name)."""
     rivals = " and ".join(TABLE_VARIANTS[number])
-    shown_metric = METRIC_LABELS.get(metric, metric)
+    shown_metric = metric_label or metric
     spps = list(dict.fromkeys(table["spp"]))
     sizes = list(dict.fromkeys(table["size"]))
     lookup = table.set_index(["size", "spp"])
@@ -373,9 +373,10 @@ def comparison_ranking(metrics: pd.DataFrame, methods: dict[str, dict], metric: 
 
 
 def write_onehot_tables(metrics_csv: str, metric: str, *, methods: dict[str, dict], labels: dict[str, str],
-                        table1_csv: str, table1_md: str, table2_csv: str, table2_md: str) -> dict[int, pd.DataFrame]:
-    """Tables 1 and 2 for ``metric`` from ``metrics.csv``, each as CSV (long: size, spp, cases,
-    wins, percent) and Markdown, written atomically."""
+                        table1_csv: str, table1_md: str, table2_csv: str, table2_md: str,
+                        metric_label: str | None = None) -> dict[int, pd.DataFrame]:
+    """Tables 1 and 2 for ``metric`` (named ``metric_label`` in the Markdown) from ``metrics.csv``,
+    each as CSV (long: size, spp, cases, wins, percent) and Markdown, written atomically."""
     metrics = read_table(metrics_csv, columns=("scene", "spp", "candidate", "metric", "value"))
     comparisons = find_comparisons(methods)
     spps = sorted({int(s) for s in metrics["spp"]})
@@ -386,7 +387,8 @@ def write_onehot_tables(metrics_csv: str, metric: str, *, methods: dict[str, dic
                                       source=metrics_csv)
         table = beats_table(cases, sizes=sizes, spps=spps)
         write_csv(csv_path, table, float_format="%.4f")
-        write_text(md_path, beats_markdown(table, excluded, number=number, metric=metric, labels=labels))
+        write_text(md_path, beats_markdown(table, excluded, number=number, metric=metric, labels=labels,
+                                           metric_label=metric_label))
         out[number] = table
     return out
 
@@ -405,12 +407,13 @@ def write_ablation_table(metrics_csv: str, timings_csv: str, *, methods: dict[st
 
 
 def write_comparison_ranking(metrics_csv: str, metric: str, *, methods: dict[str, dict], labels: dict[str, str],
-                             csv_path: str, md_path: str) -> pd.DataFrame:
-    """The comparison methods' score-and-rank table for ``metric``, as CSV and Markdown."""
+                             csv_path: str, md_path: str, metric_label: str | None = None) -> pd.DataFrame:
+    """The comparison methods' score-and-rank table for ``metric`` (named ``metric_label`` in the
+    Markdown), as CSV and Markdown."""
     metrics = read_table(metrics_csv, columns=("scene", "spp", "candidate", "metric", "value"))
     table = comparison_ranking(metrics, methods, metric, source=metrics_csv)
     write_csv(csv_path, table.reset_index(), float_format="%.4f")
-    text = (f"# Comparison ranking by {METRIC_LABELS.get(metric, metric)}\n\nOne-hot variants, naive averages "
+    text = (f"# Comparison ranking by {metric_label or metric}\n\nOne-hot variants, naive averages "
             f"and ablations ranked beside the full ensembles they belong to (and the noisy input), scored "
             f"as the main ranking tables (Zheng et al. 2021 Sec. 5.3.3; higher is better), kept out of the "
             f"main ranking pool.\n\n")

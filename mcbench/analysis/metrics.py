@@ -5,7 +5,9 @@ Accumulation is in float64; the result is a Python float. ``image`` must be fini
 (callers validate inputs); the denominators below are guarded by their 0.01 terms.
 FLIP (HDR-FLIP of Andersson et al. 2021, NVIDIA's ``flip-evaluator``) validates its inputs
 itself, since the package's C++ core ends the process on inputs it cannot handle.
-The per-pixel maps (``relmse_map``, ``flip_map``) are for the report's viewer.
+The per-pixel maps (``relmse_map``, ``flip_map``) are for the report's viewer. Which metrics a
+study computes, their labels and maps are declared by the plugins of ``metrics/`` (one file per
+metric, :class:`mcbench.contracts.metric.MetricSpec`), which point to these functions.
 """
 
 from __future__ import annotations
@@ -13,8 +15,9 @@ from __future__ import annotations
 import numpy as np
 from skimage.metrics import structural_similarity
 
-__all__ = ["relmse", "relmse_map", "smape", "dssim", "flip", "flip_map", "flip_exposure_range",
-           "aces_filmic", "srgb_encode", "tonemap", "METRICS", "METRIC_LABELS", "DSSIM_MIN_SIZE", "FLIP_MIN_LUMINANCE"]
+__all__ = ["relmse", "relmse_map", "relmse_corrected", "relmse_corrected_map", "smape", "dssim", "flip", "flip_map",
+           "flip_with_map", "flip_exposure_range", "aces_filmic", "srgb_encode", "tonemap", "DSSIM_MIN_SIZE",
+           "FLIP_MIN_LUMINANCE"]
 
 RELMSE_EPSILON = 0.01
 SMAPE_EPSILON = 0.01
@@ -268,12 +271,3 @@ def relmse_corrected(image, reference, reference_variance) -> float:
     """
     return float(np.mean(relmse_corrected_map(image, reference, reference_variance)))
 
-
-METRICS = {"relmse": relmse, "smape": smape, "dssim": dssim, "flip": flip}
-# Metrics that also need the reference's per-pixel variance of the mean (image, reference, variance).
-REFERENCE_METRICS = {"relmse_corrected": relmse_corrected}
-# Every metric a config may name (the schema's enum; a test checks it).
-ALL_METRICS = (*METRICS, *REFERENCE_METRICS)
-# How tables, captions and the viewer name each metric (keys: those of ALL_METRICS).
-METRIC_LABELS = {"relmse": "relMSE", "smape": "SMAPE", "dssim": "DSSIM", "flip": "HDR-FLIP",
-                 "relmse_corrected": "relMSE (reference-noise corrected)"}

@@ -7,9 +7,9 @@ What the viewer shows, per test case (scene, spp):
   sRGB curve as DSSIM (:func:`mcbench.analysis.metrics.tonemap`) at the exposures :data:`EXPOSURES_EV`:
   exposure ``k`` EV multiplies linear radiance by ``2**k`` before tone mapping (Eq. E1 below),
   written as JPEG at full resolution;
-* per-pixel error maps of the noisy input and every candidate against the reference, relMSE
-  (:func:`mcbench.analysis.metrics.relmse_map`) and HDR-FLIP (:func:`mcbench.analysis.metrics.flip_map`), and the
-  filtered weight maps of ensembles (``weights_filtered_{i}``, mean over RGB), each quantised to
+* per-pixel error maps of the noisy input and every candidate against the reference, one per
+  metric of the study that declares a map (``metrics/<name>.py``: ``error_map`` and ``map_scale``,
+  e.g. relMSE and HDR-FLIP; the caller computes them), and the filtered weight maps of ensembles (``weights_filtered_{i}``, mean over RGB), each quantised to
   :data:`LEVELS` levels of a fixed :class:`ColourScale` and written as an indexed PNG whose palette is the
   scale's colour map, so a pixel's index gives its value back (:func:`index_values`); the same
   palette draws the legend (:func:`legend_indices`);
@@ -31,19 +31,19 @@ import json
 import math
 import os
 import shutil
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from mcbench import BenchError
-from mcbench.analysis import metrics as error_metrics
+from mcbench.analysis.metrics import tonemap
+from mcbench.contracts.metric import ColourScale  # re-exported: the scales of the maps
 from mcbench.io.tables import write_atomically
 
 __all__ = ["EXPOSURES_EV", "JPEG_QUALITY", "LEVELS", "REFERENCE", "REFERENCE_LABEL", "CASE_RECORD",
-           "ColourScale", "RELMSE_SCALE", "FLIP_SCALE", "WEIGHT_SCALE", "ERROR_SCALES",
+           "ColourScale", "RELMSE_SCALE", "FLIP_SCALE", "WEIGHT_SCALE",
            "exposure_tag", "exposed_display", "display_bytes", "scale_positions", "scale_indices",
-           "index_values", "palette", "legend_indices", "scale_ticks", "weight_map", "error_maps",
+           "index_values", "palette", "legend_indices", "scale_ticks", "weight_map",
            "write_jpeg", "write_indexed_png", "write_case_images", "case_folder", "case_numbers",
            "build_manifest", "manifest_script", "manifest_files", "assemble_viewer", "directory_bytes"]
 
@@ -58,33 +58,16 @@ REFERENCE_LABEL = "Reference"
 CASE_RECORD = "case.json"       # a case folder's fragment of the manifest (write_case_images)
 
 
-@dataclass(frozen=True)
-class ColourScale:
-    """A fixed value range drawn with a matplotlib colour map, linear or log10.
-
-    ``low``/``high``: the values at the ends of the map; values outside are clamped to the end
-    colours (saturation, not wrap-around). ``log``: positions are log10(value) between
-    log10(low) and log10(high) (``low > 0``).
-    """
-
-    name: str
-    colormap: str
-    low: float
-    high: float
-    log: bool
-    description: str
-
-
 # Per-pixel relMSE spans decades (about 1e-5 at 1024 spp after denoising, above 1 on fireflies
 # at 4 spp): log10 over [1e-5, 10], viridis. HDR-FLIP is in [0, 1] by definition: linear, magma
-# (the FLIP paper's own map). Ensemble weights are in [0, 1] (simplex): linear, cividis.
+# (the FLIP paper's own map); metrics/relmse.py and metrics/flip.py declare them as their maps'
+# scales. Ensemble weights are in [0, 1] (simplex): linear, cividis.
 RELMSE_SCALE = ColourScale("relmse", "viridis", 1e-5, 10.0, log=True,
                            description="per-pixel relMSE, mean over RGB of (y - r)^2 / (r^2 + 0.01); log10 scale")
 FLIP_SCALE = ColourScale("flip", "magma", 0.0, 1.0, log=False,
                          description="per-pixel HDR-FLIP error (Andersson et al. 2021); linear scale")
 WEIGHT_SCALE = ColourScale("weights", "cividis", 0.0, 1.0, log=False,
                            description="filtered ensemble weight of one input, mean over RGB; linear scale")
-ERROR_SCALES = {"relmse": RELMSE_SCALE, "flip": FLIP_SCALE}
 
 
 def exposure_tag(ev: int) -> str:
@@ -96,7 +79,7 @@ def exposure_tag(ev: int) -> str:
 def exposed_display(image, *, ev: float) -> np.ndarray:
     """Display values (H, W, 3) float64 in [0, 1] of linear radiance ``image`` at ``ev`` stops:
     ``tonemap(2**ev * image)`` (Eq. E1; the ACES + sRGB curve of DSSIM)."""
-    return error_metrics.tonemap(np.asarray(image, dtype=np.float64) * 2.0 ** ev)
+    return tonemap(np.asarray(image, dtype=np.float64) * 2.0 ** ev)
 
 
 def display_bytes(display) -> np.ndarray:
@@ -174,13 +157,6 @@ def weight_map(layer) -> np.ndarray:
     return np.clip(layer.mean(axis=2), 0.0, 1.0)
 
 
-def error_maps(image, reference) -> dict[str, np.ndarray]:
-    """Per-pixel errors (H, W) of ``image`` against ``reference`` (both (H, W, 3) linear):
-    ``relmse`` (:func:`mcbench.analysis.metrics.relmse_map`) and ``flip`` (:func:`mcbench.analysis.metrics.flip_map`)."""
-    return {"relmse": error_metrics.relmse_map(image, reference),
-            "flip": error_metrics.flip_map(image, reference)}
-
-
 def write_jpeg(path, rgb, *, quality: int = JPEG_QUALITY) -> None:
     """Write (H, W, 3) uint8 sRGB ``rgb`` as a baseline JPEG with 4:4:4 chroma, atomically."""
     from PIL import Image
@@ -214,18 +190,18 @@ def _check_image(name: str, image, shape) -> np.ndarray:
 
 
 def write_case_images(case_dir, *, reference, images: dict, weights: dict | None = None,
-                      exposures=EXPOSURES_EV, flip_maps: dict | None = None) -> dict:
+                      exposures=EXPOSURES_EV, error_maps: dict | None = None) -> dict:
     """Write one case's viewer images into ``case_dir`` and return their manifest fragment.
 
     ``reference`` (H, W, 3) and ``images`` {entry name: (H, W, 3)} (the noisy input and the
     candidates): linear radiance. ``weights`` {entry name: [(input name, weights_filtered layer
-    (H, W, 3)), ...]} for ensembles. ``flip_maps`` {entry name: (H, W)}: per-pixel HDR-FLIP
-    computed already (:func:`mcbench.analysis.metrics.flip_with_map`); missing entries are evaluated here.
+    (H, W, 3)), ...]} for ensembles. ``error_maps`` {entry name: {metric: (ColourScale, (H, W)
+    values)}}: each entry's per-pixel error maps (:func:`write_entry_images`).
     Returns (file names relative to ``case_dir``)::
 
         {"width": W, "height": H,
          "images": {entry: {"<ev>": "<entry>_<tag>.jpg"}},       # reference first
-         "errors": {entry: {"relmse": "<entry>_relmse.png", "flip": "<entry>_flip.png"}},
+         "errors": {entry: {"<metric>": "<entry>_<metric>.png"}},  # e.g. relmse, flip
          "weights": {entry: [{"input": name, "file": "<entry>_weights<i>.png"}]}}
 
     The same as :func:`merge_fragments` of :func:`write_entry_images` for the reference and each entry.
@@ -239,17 +215,17 @@ def write_case_images(case_dir, *, reference, images: dict, weights: dict | None
     for name, image in images.items():
         fragments.append(write_entry_images(case_dir, name, image, reference=reference,
                                             weights=(weights or {}).get(name), exposures=exposures,
-                                            flip_map=(flip_maps or {}).get(name)))
+                                            error_maps=(error_maps or {}).get(name, {})))
     return merge_fragments(fragments)
 
 
 def write_entry_images(folder, name: str, image, *, reference, weights: list | None = None,
-                       exposures=EXPOSURES_EV, flip_map=None) -> dict:
+                       exposures=EXPOSURES_EV, error_maps: dict | None = None) -> dict:
     """Write one entry's viewer images into ``folder`` and return its fragment (the shape of
     :func:`write_case_images`' for this entry alone): ``image`` (H, W, 3) tone-mapped at each
-    exposure; unless ``name`` is the reference's, its relMSE and FLIP error maps against
-    ``reference`` (``flip_map`` (H, W) when computed already) and the weight maps ``weights``
-    [(input name, (H, W, 3) layer), ...]."""
+    exposure; unless ``name`` is the reference's, its error maps ``error_maps`` {metric:
+    (ColourScale, (H, W) values)} (in that order, each quantised on its scale into
+    ``<name>_<metric>.png``) and the weight maps ``weights`` [(input name, (H, W, 3) layer), ...]."""
     folder = Path(folder)
     reference = _check_image(REFERENCE, reference, None)
     if name == REFERENCE:
@@ -267,11 +243,11 @@ def write_entry_images(folder, name: str, image, *, reference, weights: list | N
     if name == REFERENCE:
         return fragment
     fragment["errors"][name] = {}
-    maps = ({"relmse": error_metrics.relmse_map(image, reference), "flip": flip_map}
-            if flip_map is not None else error_maps(image, reference))
-    for metric, values in maps.items():
+    for metric, (scale, values) in (error_maps or {}).items():
+        if np.shape(values) != (height, width):
+            raise BenchError(f"viewer: {metric} map of '{name}' is {np.shape(values)}, images are {(height, width)}")
         file_name = f"{name}_{metric}.png"
-        write_indexed_png(folder / file_name, scale_indices(values, ERROR_SCALES[metric]), ERROR_SCALES[metric])
+        write_indexed_png(folder / file_name, scale_indices(values, scale), scale)
         fragment["errors"][name][metric] = file_name
     if weights is not None:
         fragment["weights"][name] = []
@@ -331,13 +307,18 @@ def _scale_record(scale: ColourScale, legend_file: str) -> dict:
 
 
 def build_manifest(*, scenes: list[str], spps: list[int], entries: list[str], labels: dict,
-                   metric_names: list[str], cases: dict, numbers: dict, exposures=EXPOSURES_EV) -> dict:
+                   metric_names: list[str], cases: dict, numbers: dict, exposures=EXPOSURES_EV,
+                   metric_labels: dict | None = None, lower_is_better: dict | None = None,
+                   error_scales: dict | None = None) -> dict:
     """The viewer's manifest (``window.MCBENCH_VIEWER``): every path relative to the viewer folder.
 
     ``entries``: the noisy input and the candidates in table order (the reference is added
     first); ``labels`` {entry: label}; ``cases`` {(scene, spp): fragment of
     :func:`write_case_images`}; ``numbers`` {(scene, spp): :func:`case_numbers`}. Each case's
     paths are prefixed with :func:`case_folder`; weight-map inputs get their labels.
+    ``metric_labels`` and ``lower_is_better`` {metric: ...} (default: the name, True) and
+    ``error_scales`` {metric: ColourScale} of the metrics with maps (in the order the page
+    draws them: ``maps``) come from the metrics' declarations.
     """
     labels = {REFERENCE: REFERENCE_LABEL, **labels}
     missing = [entry for entry in entries if entry not in labels]
@@ -346,8 +327,11 @@ def build_manifest(*, scenes: list[str], spps: list[int], entries: list[str], la
     manifest = {"version": 1, "scenes": list(scenes), "spp": [int(s) for s in spps],
                 "entries": [REFERENCE] + [e for e in entries if e != REFERENCE], "labels": labels,
                 "metrics": list(metric_names), "exposures": [int(ev) for ev in exposures],
+                "metric_labels": {m: (metric_labels or {}).get(m, m) for m in metric_names},
+                "lower_is_better": {m: bool((lower_is_better or {}).get(m, True)) for m in metric_names},
+                "maps": list(error_scales or {}),
                 "scales": {name: _scale_record(scale, f"legends/{name}.png")
-                           for name, scale in {**ERROR_SCALES, "weights": WEIGHT_SCALE}.items()},
+                           for name, scale in {**(error_scales or {}), "weights": WEIGHT_SCALE}.items()},
                 "cases": {}}
     for scene in scenes:
         manifest["cases"][scene] = {}
@@ -419,8 +403,10 @@ def assemble_viewer(output_dir, *, static_dir, case_dirs: dict, manifest: dict) 
     for source in sorted(static_dir.iterdir()):
         if source.is_file() and not source.name.startswith("."):
             shutil.copyfile(source, output_dir / source.name)
-    for name, scale in {**ERROR_SCALES, "weights": WEIGHT_SCALE}.items():
-        write_indexed_png(output_dir / manifest["scales"][name]["legend"], legend_indices(), scale)
+    for name, record in manifest["scales"].items():
+        scale = ColourScale(name, record["colormap"], record["low"], record["high"], log=record["log"],
+                            description=record["description"])
+        write_indexed_png(output_dir / record["legend"], legend_indices(), scale)
     for (scene, spp), source in case_dirs.items():
         shutil.copytree(source, output_dir / case_folder(scene, spp), dirs_exist_ok=True,
                         ignore=shutil.ignore_patterns(CASE_RECORD, ".*"), copy_function=_link_or_copy)

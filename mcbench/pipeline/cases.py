@@ -15,7 +15,7 @@ whatever exists under ``results/``; the job itself decides, item by item, what i
   they were computed from (:func:`mcbench.pipeline.metrics.read_metric_values`): an added metric
   is the only one computed.
 * an entry's viewer images (``viewer_entries/<scene>/spp<N>/<entry>/``) are kept when their record
-  names the same image, reference and weight inputs (:func:`viewer_key`).
+  names the same image, reference, weight inputs and error maps (:func:`viewer_key`).
 
 Snakemake reruns a case's job when its plan changes (the rule's params: the case's methods and
 their settings, the entries, the metrics), when its render, reference or a learned method's
@@ -56,10 +56,11 @@ def method_key(*, module: str, params: dict, input_keys: list[str], weights_sha2
                     "weights_sha256": weights_sha256, "render": render})
 
 
-def viewer_key(*, image: str, reference: str, weight_inputs: list[str]) -> str:
-    """The key of an entry's viewer images: its image's and the reference's content checksums and
-    the names of the inputs whose weight maps it draws."""
-    return _digest({"image": image, "reference": reference, "weight_inputs": list(weight_inputs)})
+def viewer_key(*, image: str, reference: str, weight_inputs: list[str], maps: list[str]) -> str:
+    """The key of an entry's viewer images: its image's and the reference's content checksums, the
+    names of the inputs whose weight maps it draws and of the metrics whose error maps it draws
+    (with their code digests, :func:`mcbench.pipeline.metrics.metric_code_digest`)."""
+    return _digest({"image": image, "reference": reference, "weight_inputs": list(weight_inputs), "maps": list(maps)})
 
 
 def _stored_method_key(exr: str, timing: str) -> str | None:
@@ -137,14 +138,17 @@ def _evaluate_case(case: dict) -> dict[str, dict]:
     """Each entry's metric values and viewer images, made where not kept; per entry, which it
     made (``{"metrics": [names computed], "viewer": bool}``) and its metric values
     (``"values"``, in the order of the case's metrics)."""
-    from mcbench.pipeline.metrics import evaluate_entry_values
+    from mcbench.pipeline.metrics import evaluate_entry_values, metric_code_digest
+    from mcbench.pipeline.registry import load_metrics
 
     scene, spp = case["scene"], int(case["spp"])
     reference = content_checksum(case["reference"])
+    maps = [f"{name}:{metric_code_digest(name)}" for name, spec in load_metrics(case["metrics"]).items()
+            if spec.error_map is not None]
     done = {}
     for item in case["entries"]:
         image = content_checksum(item["image"])
-        key = viewer_key(image=image, reference=reference, weight_inputs=item.get("weight_inputs") or [])
+        key = viewer_key(image=image, reference=reference, weight_inputs=item.get("weight_inputs") or [], maps=maps)
         make_viewer = _stored_viewer_key(item["viewer"]) != key
         values, computed = evaluate_entry_values(
             scene, spp, item["entry"], item["image"], case["reference"], list(case["metrics"]),

@@ -6,6 +6,20 @@ comparison methods' ranking. The tables are built and written by
 
 from __future__ import annotations
 
-from mcbench.analysis.comparisons import write_ablation_table, write_comparison_ranking, write_onehot_tables
+from mcbench.analysis import comparisons
+from mcbench.analysis.comparisons import write_ablation_table
+from mcbench.pipeline.registry import load_metric
 
 __all__ = ["write_onehot_tables", "write_ablation_table", "write_comparison_ranking"]
+
+
+def write_onehot_tables(metrics_csv: str, metric: str, **kwargs):
+    """Tables 1 and 2 for ``metric`` (:func:`mcbench.analysis.comparisons.write_onehot_tables`), the
+    metric named by its declared label (``metrics/<metric>.py``)."""
+    return comparisons.write_onehot_tables(metrics_csv, metric, metric_label=load_metric(metric).label, **kwargs)
+
+
+def write_comparison_ranking(metrics_csv: str, metric: str, **kwargs):
+    """The comparison methods' ranking for ``metric`` (:func:`mcbench.analysis.comparisons.write_comparison_ranking`),
+    the metric named by its declared label (``metrics/<metric>.py``)."""
+    return comparisons.write_comparison_ranking(metrics_csv, metric, metric_label=load_metric(metric).label, **kwargs)

@@ -1,73 +1,23 @@
-"""The work behind ``workflow/rules/metrics.smk``: each case's errors against its reference, and
-the gathered metrics and timings tables (refused unless every case is whole).
+"""The work behind ``workflow/rules/metrics.smk``: each entry's errors against its reference (the
+metrics declared by the plugins of ``metrics/``, resolved through :mod:`mcbench.pipeline.registry`),
+and the gathered metrics and timings tables (refused unless every case is whole).
 """
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import functools
-import time
 from pathlib import Path
-
+from typing import TYPE_CHECKING
 
 from mcbench import NOISY, BenchError
 from mcbench.io.buffers import Denoised, RenderBuffers
-from mcbench.io.exr import check_finite, check_resolution, read_layers, write_layers
+from mcbench.io.exr import check_finite, check_resolution, read_layers
 from mcbench.io.tables import read_json, read_table, write_csv
-from mcbench.analysis.metrics import METRICS, REFERENCE_METRICS
 
 if TYPE_CHECKING:  # pandas is imported inside the steps that build tables
     import pandas as pd
 
-
-def compute_case_metrics(scene: str, spp: int, reference_path: str, render_path: str,
-                         candidate_paths: dict[str, str], metrics: list[str], output_path: str, *,
-                         flip_maps_path: str | None = None) -> pd.DataFrame:
-    """Errors of the noisy input and every candidate against the reference for one test case.
-
-    Writes a tidy CSV with columns scene, spp, candidate, metric, value; with ``flip_maps_path``
-    also every entry's per-pixel HDR-FLIP map (one (H, W) layer per entry, named like it), from
-    the same evaluation as the ``flip`` metric, so the viewer does not evaluate FLIP again.
-    """
-    import pandas as pd
-
-    from mcbench.analysis.metrics import flip_with_map
-
-    start = time.perf_counter()
-    needs_variance = any(metric in REFERENCE_METRICS for metric in metrics)
-    reference = read_layers(reference_path, ["color", "variance"] if needs_variance else ["color"])
-    check_finite(reference_path, reference)
-    check_resolution(reference_path, reference["color"].shape)
-    reference_variance = reference.get("variance")
-    reference = reference["color"]
-    images = {NOISY: RenderBuffers.load(render_path).color}
-    for candidate, path in candidate_paths.items():
-        images[candidate] = Denoised.load(path).full
-    rows, flip_maps = [], {}
-    for candidate, image in images.items():
-        if image.shape != reference.shape:
-            source = render_path if candidate == NOISY else candidate_paths[candidate]
-            raise BenchError(f"{source}: shape {image.shape} does not match reference "
-                             f"{reference_path} of shape {reference.shape}")
-        flip_value = None
-        if flip_maps_path is not None:
-            flip_maps[candidate], flip_value = flip_with_map(image, reference)
-        for metric in metrics:
-            if metric == "flip" and flip_value is not None:
-                value = flip_value
-            elif metric in REFERENCE_METRICS:
-                value = REFERENCE_METRICS[metric](image, reference, reference_variance)
-            else:
-                value = METRICS[metric](image, reference)
-            rows.append({"scene": scene, "spp": spp, "candidate": candidate, "metric": metric, "value": value})
-    frame = pd.DataFrame(rows)
-    if flip_maps_path is not None:
-        # seconds: this step's reading and computing (benchmarks/dag_overhead.py's metric compute)
-        write_layers(flip_maps_path, flip_maps, metadata={"scene": scene, "spp": spp, "what": "HDR-FLIP maps",
-                                                          "seconds": f"{time.perf_counter() - start:.6f}"})
-    write_csv(output_path, frame)
-    return frame
+    from mcbench.contracts.metric import MetricSpec
 
 
 def read_case_metrics(path: str, *, candidates: list[str], metric_names: list[str],
@@ -137,7 +87,7 @@ def gather_timings(paths: list[str], output_path: str) -> pd.DataFrame:
     return frame
 
 
-#: An entry's viewer fragment in its folder (mcbench.pipeline.metrics.evaluate_entry).
+#: An entry's viewer fragment in its folder (mcbench.pipeline.metrics.evaluate_entry_values).
 ENTRY_RECORD = "entry.json"
 
 
@@ -165,56 +115,73 @@ def evaluate_entry_values(scene: str, spp: int, entry: str, image_path: str, ref
     """The metric values of one entry of a test case (the noisy input ``NOISY``, read from its
     render, or a candidate's output EXR) against the reference, ``({metric: value}`` in the order
     of ``metrics``, the metrics computed here), and with ``viewer_dir`` the entry's viewer images.
+    Each metric is the declaration of ``metrics/<name>.py`` (:func:`mcbench.pipeline.registry.load_metric`),
+    computed by :func:`entry_metrics`.
 
     With ``values_path``: the entry's metric values already computed for these very files (any
     metric list) are kept there (:func:`read_metric_values`), so a metric added to the config is
     the only one computed; a value is reused only when the image's and the reference's content
     checksums (:func:`mcbench.io.exr.content_checksum`, or ``checksums``: ``{"image", "reference"}``
-    already read) and the metric code's digest (:func:`metric_code_digest`) are those it was
+    already read) and its metric's code digest (:func:`metric_code_digest`) are those it was
     computed from. The image and reference are decoded only when something is computed.
 
     With ``viewer_dir``: the entry's images (:func:`mcbench.analysis.viewer.write_entry_images`:
-    tone-mapped at each exposure, relMSE and HDR-FLIP maps, and for a candidate whose inputs
-    ``weight_inputs`` names and whose EXR holds ``weights_filtered_{i}``, its weight maps) with
-    their fragment, CRC-32s and ``viewer_key`` as :data:`ENTRY_RECORD`; the noisy entry's folder
-    also holds the reference's images. Made together, the FLIP map drawn is the one the ``flip``
-    metric's value comes from (one evaluation). The reference and the image are read through
+    tone-mapped at each exposure, the error map of each metric that declares one, and for a
+    candidate whose inputs ``weight_inputs`` names and whose EXR holds ``weights_filtered_{i}``,
+    its weight maps) with their fragment, CRC-32s and ``viewer_key`` as :data:`ENTRY_RECORD`; the
+    noisy entry's folder also holds the reference's images. A metric declaring ``value_and_map``
+    gives its value and its map from one evaluation. The reference and the image are read through
     :func:`mcbench.io.file_cache.cached_read` (a warm worker reads them once per case).
     """
     from mcbench.io.exr import content_checksum
+    from mcbench.pipeline.registry import load_metrics
 
-    known, sources = {}, None
+    specs = load_metrics(metrics)
+    known, sources, codes = {}, None, {}
     if values_path is not None:
         checksums = checksums or {"image": content_checksum(image_path), "reference": content_checksum(reference_path)}
-        sources = {"image": checksums["image"], "reference": checksums["reference"], "code": metric_code_digest()}
-        known = read_metric_values(values_path, sources)
+        sources = {"image": checksums["image"], "reference": checksums["reference"]}
+        codes = {name: metric_code_digest(name) for name in metrics}
+        known = read_metric_values(values_path, sources, codes)
     missing = [metric for metric in metrics if metric not in known]
     if not missing and viewer_dir is None:
         return {metric: known[metric] for metric in metrics}, []
     image, weights, reference, reference_variance = _read_entry(
-        entry, image_path, reference_path, variance=any(metric in REFERENCE_METRICS for metric in missing),
+        entry, image_path, reference_path, variance=any(specs[metric].reads_reference_variance for metric in missing),
         weight_inputs=weight_inputs)
-    flip_map = flip_value = None
-    if "flip" in missing or viewer_dir is not None:
-        from mcbench.analysis.metrics import flip_with_map
-
-        flip_map, flip_value = flip_with_map(image, reference)
-    values = dict(known)
-    for metric in missing:
-        if metric == "flip":
-            value = flip_value
-        elif metric in REFERENCE_METRICS:
-            value = REFERENCE_METRICS[metric](image, reference, reference_variance)
-        else:
-            value = METRICS[metric](image, reference)
-        values[metric] = float(value)
-    if values_path is not None and values != known:
-        from mcbench.io.tables import write_json
-
-        write_json(values_path, {**sources, "values": values})
+    computed, maps = entry_metrics({name: specs[name] for name in metrics}, image, reference, reference_variance,
+                                   values=missing, maps=viewer_dir is not None)
+    values = {**known, **computed}
+    if values_path is not None and computed:
+        _keep_metric_values(values_path, sources, {name: codes[name] for name in computed}, computed)
     if viewer_dir is not None:
-        _write_entry_viewer(Path(viewer_dir), scene, spp, entry, image, reference, weights, flip_map, viewer_key)
+        _write_entry_viewer(Path(viewer_dir), scene, spp, entry, image, reference, weights, maps, viewer_key)
     return {metric: values[metric] for metric in metrics}, missing
+
+
+def entry_metrics(specs: dict[str, MetricSpec], image, reference, reference_variance=None, *,
+                  values=None, maps: bool = False) -> tuple[dict[str, float], dict[str, tuple]]:
+    """One entry's metric values and error maps: ``({name: value}, {name: (ColourScale, (H, W)
+    map)})``, both in the order of ``specs`` ({name: declaration}); values of the metrics named in
+    ``values`` (default: all), maps (with ``maps``) of every metric that declares one. A metric
+    reading the reference's variance gets ``reference_variance``; a metric with ``value_and_map``
+    whose value and map are both wanted is evaluated once."""
+    wanted = list(specs) if values is None else list(values)
+    computed, drawn = {}, {}
+    for name, spec in specs.items():
+        wants_value, wants_map = name in wanted, maps and spec.error_map is not None
+        if wants_value and wants_map and spec.value_and_map is not None:
+            values_map, value = spec.value_and_map(image, reference)
+        else:
+            values_map = spec.error_map(image, reference) if wants_map else None
+            if wants_value:
+                value = (spec.value(image, reference, reference_variance) if spec.reads_reference_variance
+                         else spec.value(image, reference))
+        if wants_value:
+            computed[name] = float(value)
+        if wants_map:
+            drawn[name] = (spec.map_scale, values_map)
+    return computed, drawn
 
 
 def _read_entry(entry: str, image_path: str, reference_path: str, *, variance: bool, weight_inputs) -> tuple:
@@ -248,16 +215,17 @@ def _read_entry(entry: str, image_path: str, reference_path: str, *, variance: b
     return image, weights, reference, reference_layers.get("variance")
 
 
-def _write_entry_viewer(folder: Path, scene: str, spp: int, entry: str, image, reference, weights, flip_map,
+def _write_entry_viewer(folder: Path, scene: str, spp: int, entry: str, image, reference, weights, maps: dict,
                         key: str | None) -> None:
-    """An entry's viewer images and its record (:data:`ENTRY_RECORD`: fragment, CRC-32s, key)."""
+    """An entry's viewer images (``maps``: its error maps, :func:`entry_metrics`) and its record
+    (:data:`ENTRY_RECORD`: fragment, CRC-32s, key)."""
     from mcbench.analysis.viewer import REFERENCE, case_files, merge_fragments, write_entry_images
     from mcbench.io.checksums import crc32_hex
     from mcbench.io.tables import write_json
 
     folder.mkdir(parents=True, exist_ok=True)
     fragments = [write_entry_images(folder, REFERENCE, reference, reference=reference)] if entry == NOISY else []
-    fragments.append(write_entry_images(folder, entry, image, reference=reference, weights=weights, flip_map=flip_map))
+    fragments.append(write_entry_images(folder, entry, image, reference=reference, weights=weights, error_maps=maps))
     fragment = merge_fragments(fragments)
     checksums = {name: crc32_hex((folder / name).read_bytes()) for name in sorted(case_files(fragment))}
     write_json(folder / ENTRY_RECORD, {"scene": scene, "spp": int(spp), "entry": entry, **fragment,
@@ -265,14 +233,16 @@ def _write_entry_viewer(folder: Path, scene: str, spp: int, entry: str, image, r
 
 
 @functools.lru_cache(maxsize=None)
-def metric_code_digest() -> str:
-    """A digest of what computes the metric values: the source of :mod:`mcbench.analysis.metrics`
-    and the versions of NumPy, scikit-image and flip-evaluator. A kept value computed by other
-    code is not reused (:func:`read_metric_values`)."""
+def metric_code_digest(name: str) -> str:
+    """A digest of what computes the values of metric ``name``: the source of its plugin
+    ``metrics/<name>.py``, of :mod:`mcbench.analysis.metrics` and the versions of NumPy,
+    scikit-image and flip-evaluator. A kept value computed by other code is not reused
+    (:func:`read_metric_values`)."""
     import hashlib
     from importlib import metadata
 
     import mcbench.analysis.metrics as metrics_module
+    from mcbench.pipeline.registry import metric_source
 
     versions = []
     for package in ("numpy", "scikit-image", "flip-evaluator"):
@@ -280,25 +250,45 @@ def metric_code_digest() -> str:
             versions.append(f"{package}=={metadata.version(package)}")
         except metadata.PackageNotFoundError:
             versions.append(f"{package}==none")
-    source = Path(metrics_module.__file__).read_bytes()
+    source = metric_source(name) + Path(metrics_module.__file__).read_bytes()
     return hashlib.sha256(source + "\n".join(versions).encode()).hexdigest()[:16]
 
 
-def read_metric_values(path: str | Path, sources: dict) -> dict[str, float]:
-    """The metric values kept in ``path`` ({metric: value}) when they were computed from
-    ``sources`` (the image's and reference's content checksums, the metric code's digest), else none: a
-    missing, damaged or stale record is recomputed, never trusted (a wrong number would reach
-    the tables)."""
+def _metric_record(path: str | Path, sources: dict) -> tuple[dict, dict]:
+    """``(values, code digests)`` of a values record computed from ``sources`` (the image's and
+    the reference's content checksums), each {metric: ...}; empty when the record is missing,
+    damaged or of other files."""
     import math
 
     try:
         record = read_json(path)
     except (OSError, ValueError, BenchError):
-        return {}
+        return {}, {}
     if not isinstance(record, dict) or any(record.get(key) != value for key, value in sources.items()):
-        return {}
-    values = record.get("values")
-    if not isinstance(values, dict):
-        return {}
-    return {str(metric): float(value) for metric, value in values.items()
-            if isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)}
+        return {}, {}
+    values, codes = record.get("values"), record.get("code")
+    if not (isinstance(values, dict) and isinstance(codes, dict)):
+        return {}, {}
+    values = {str(metric): float(value) for metric, value in values.items()
+              if isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+              and isinstance(codes.get(metric), str)}
+    return values, {metric: codes[metric] for metric in values}
+
+
+def read_metric_values(path: str | Path, sources: dict, codes: dict[str, str]) -> dict[str, float]:
+    """The metric values kept in ``path`` ({metric: value}) of the metrics of ``codes`` ({metric:
+    code digest}) computed from ``sources`` (the image's and reference's content checksums) by
+    that very code; a missing, damaged or stale record or value is recomputed, never trusted (a
+    wrong number would reach the tables)."""
+    values, kept_codes = _metric_record(path, sources)
+    return {metric: value for metric, value in values.items()
+            if metric in codes and kept_codes[metric] == codes[metric]}
+
+
+def _keep_metric_values(path: str | Path, sources: dict, codes: dict[str, str], values: dict[str, float]) -> None:
+    """Add ``values`` (computed by the code of ``codes``) to the values record ``path`` of the files
+    ``sources``, keeping the other metrics' values it holds for the same files."""
+    from mcbench.io.tables import write_json
+
+    kept, kept_codes = _metric_record(path, sources)
+    write_json(path, {**sources, "code": {**kept_codes, **codes}, "values": {**kept, **values}})

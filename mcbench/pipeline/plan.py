@@ -22,6 +22,9 @@ Checks here beyond the method table's (:func:`methods.method_table`):
   curve's references (block-averaged over ``downscale``², so worth that many times more samples)
   above ``oracle.spp`` and every ``progressive_curve.spp``. A reference with as many samples as
   the render it judges is no reference: its own noise is as large as the error it measures;
+* every name under ``metrics`` is a plugin ``metrics/<name>.py`` (a misspelt one is named with
+  its key and the closest metric) whose values are errors (lower is better: the rankings and the
+  study score them so);
 * ``progressive_curve.scene`` names a scene (with the key), the comparison tables' roles are
   unique (:func:`mcbench.analysis.comparisons.find_comparisons`, which the comparison jobs
   would otherwise raise hours later), ``training.first_seed + training.count`` fits the object
@@ -29,7 +32,7 @@ Checks here beyond the method table's (:func:`methods.method_table`):
   training crops fit ``training.resolution``;
 * a scene of renders made elsewhere (``scenes/<name>.yaml``, :mod:`mcbench.io.render_folders`)
   has a case for every ``spp`` and a reference, at the config's ``resolution`` if one is set,
-  a reference variance if ``relmse_corrected`` is computed, and every layer each configured
+  a reference variance if a metric that reads it is computed (``relmse_corrected``), and every layer each configured
   method reads (:func:`mcbench.pipeline.methods.needed_layers`): a method that needs what the
   folder lacks (half buffers, variance, depth) is refused for that scene, naming the files
   that would supply it; the oracle study and the progressive curve render their scene again,
@@ -46,7 +49,7 @@ from mcbench.analysis.pool import POOL
 from mcbench.io.method_spec import method_spec
 from mcbench.pipeline.config import ConfigError, key_path, schema_defaults
 from mcbench.pipeline.oracle import oracle_size, usable_downscale
-from mcbench.pipeline.registry import available_scenes, config_method_table, load_method, load_scene
+from mcbench.pipeline.registry import available_scenes, config_method_table, load_method, load_metrics, load_scene
 from mcbench.pipeline.study_plan import (CasePlan, MethodPlan, RankingPlan, SideStudyPlan, StudyPlan, TrainingPlan,
                                          frozen_mapping)
 from mcbench.render.seeds import FIBRE_SEED_BASE, spp_code, training_seeds
@@ -71,6 +74,7 @@ def plan_study(config: dict, *, written: dict | None = None, source: str = "conf
     if is_learned is None:
         from mcbench.io.weights import is_learned_method as is_learned
     try:
+        _check_metrics(config["metrics"])
         return _plan(config, is_learned)
     except BenchError as error:
         message = str(error)
@@ -174,6 +178,17 @@ def _plan(config: dict, is_learned) -> StudyPlan:
                            progressive_downscale=progressive_downscale))
 
 
+def _check_metrics(names: list[str]) -> None:
+    """Every metric is a plugin ``metrics/<name>.py`` (else an error naming ``metrics[i]`` and the
+    closest name) whose values are errors: the score-and-rank tables and the study score the lower
+    value better, so a metric declaring ``lower_is_better=False`` is refused, naming its file."""
+    for index, (name, spec) in enumerate(load_metrics(names).items()):
+        if not spec.lower_is_better:
+            raise BenchError(f"metrics[{index}]: metrics/{name}.py declares lower_is_better=False, but the rankings "
+                             f"and the study score lower values as better; declare the metric as an error "
+                             f"(e.g. 1 - value) with lower_is_better=True")
+
+
 def _check_case_files(methods: dict, scenes: list[str], spps: list[int]) -> None:
     """Files a method needs per case (its declared ``required_files``, e.g. precomputed results) exist for
     every (scene, spp) of the config; else a BenchError naming the method and the first missing
@@ -210,10 +225,11 @@ def _check_render_folders(config: dict, methods: dict, scenes: list[str], spps: 
         references = reference_files(folder)
         if "color" not in references:
             raise BenchError(f"{key}: no reference image: expected {reference_names(folder)}")
-        if "relmse_corrected" in config["metrics"] and "variance" not in references:
-            raise BenchError(f"{key}: metric relmse_corrected needs the reference's variance of the mean "
-                             f"({folder.path / 'reference_variance.exr'}; the OIDN naming has none): supply it or "
-                             f"leave relmse_corrected out of metrics")
+        for metric, spec in load_metrics(config["metrics"]).items():
+            if spec.reads_reference_variance and "variance" not in references:
+                raise BenchError(f"{key}: metric {metric} needs the reference's variance of the mean "
+                                 f"({folder.path / 'reference_variance.exr'}; the OIDN naming has none): supply it "
+                                 f"or leave {metric} out of metrics")
         height, width = image_size(references["color"])
         if config["resolution"] is not None and tuple(config["resolution"]) != (width, height):
             raise BenchError(f"resolution: {list(config['resolution'])}, but the renders of scene '{scene}' are "

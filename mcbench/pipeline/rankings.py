@@ -13,6 +13,7 @@ from pathlib import Path
 from mcbench import BenchError
 from mcbench.io.exr import check_finite, check_resolution, read_layers, read_metadata
 from mcbench.io.tables import read_table, write_csv, write_text
+from mcbench.pipeline.registry import load_metric
 
 if TYPE_CHECKING:  # pandas is imported inside the steps that build tables
     import pandas as pd
@@ -50,7 +51,6 @@ def write_rankings(metrics_csv: str, metric: str, csv_path: str, md_path: str, *
     (e.g. that the pool is partial, so the scores are on another scale than the paper's).
     ``scenes_csv``: the scene table, whose reference floors mark with ``‡`` the spp columns the
     references cannot rank (:func:`unrankable_from_scene_table`; the CSV is not marked)."""
-    from mcbench.analysis.metrics import METRIC_LABELS
     from mcbench.analysis.ranking import check_complete, format_latex, format_markdown, ranking_table
     from mcbench.analysis.scene_summary import unrankable_note
 
@@ -73,7 +73,7 @@ def write_rankings(metrics_csv: str, metric: str, csv_path: str, md_path: str, *
     write_text(md_path, f"# Ranking by {metric}\n\n{scoring}{shown_note}\n\n"
                + format_markdown(table, labels, marked=marked) + floor_note + "\n")
     if tex_path is not None:
-        caption = (f"Ranking by {METRIC_LABELS.get(metric, metric)}. " + scoring.replace("`", "")
+        caption = (f"Ranking by {load_metric(metric).label}. " + scoring.replace("`", "")
                    + " Best per column in bold." + (" " + unrankable_note(marked).replace("`", "") if marked else ""))
         write_text(tex_path, format_latex(table, labels, caption=caption, label=f"tab:ranking-{metric}",
                                           marked=marked))
@@ -88,7 +88,6 @@ def write_extras_rankings(metrics_csv: str, metric: str, csv_path: str, md_path:
     input), as CSV, Markdown and LaTeX (label ``tab:extras-<metric>``). No extras: a table with a
     sentence saying so. ``scenes_csv`` marks the columns as :func:`write_rankings` does (by the
     pool's best relMSE)."""
-    from mcbench.analysis.metrics import METRIC_LABELS
     from mcbench.analysis.ranking import extras_table, format_latex, format_markdown
     from mcbench.analysis.scene_summary import unrankable_note
 
@@ -104,9 +103,10 @@ def write_extras_rankings(metrics_csv: str, metric: str, csv_path: str, md_path:
     floor_note = f"\n\n{unrankable_note(marked)}" if marked else ""
     body = (format_markdown(table, labels, marked=marked) + floor_note if len(table)
             else "No method outside the ranking pool in this config.")
-    write_text(md_path, f"# Extra methods by {METRIC_LABELS.get(metric, metric)}\n\n{scoring}\n\n{body}\n")
+    label = load_metric(metric).label
+    write_text(md_path, f"# Extra methods by {label}\n\n{scoring}\n\n{body}\n")
     if tex_path is not None:
-        text = (format_latex(table, labels, caption=f"Extra methods by {METRIC_LABELS.get(metric, metric)}. "
+        text = (format_latex(table, labels, caption=f"Extra methods by {label}. "
                              + scoring + " Best per column in bold."
                              + (" " + unrankable_note(marked).replace("`", "") if marked else ""),
                              label=f"tab:extras-{metric}", marked=marked)

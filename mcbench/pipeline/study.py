@@ -15,13 +15,16 @@ def write_study(metrics_csv: str, out_dir: str, *, metrics: list[str], labels: d
     """The 39-candidate study's tables (:func:`mcbench.analysis.study.writers.write_study_tables`) under ``out_dir``:
     beside the paper's Table 3, recommendations, findings, bootstrap intervals, summary;
     ``summary.md`` ends with the provenance block of ``manifest_json`` (the run's
-    ``results/manifest.json``, :mod:`mcbench.pipeline.provenance`) when given."""
+    ``results/manifest.json``, :mod:`mcbench.pipeline.provenance`) when given; each metric named by
+    its declared label (``metrics/<name>.py``)."""
     from mcbench.analysis.study.writers import write_study_tables
+    from mcbench.pipeline.registry import load_metrics
 
     provenance = None if manifest_json is None else read_json(manifest_json)
+    metric_labels = {name: spec.label for name, spec in load_metrics(metrics).items()}
     return write_study_tables(metrics_csv, out_dir, metrics=list(metrics), labels=labels,
                               candidates=[c for c in candidates if c != NOISY], noisy=NOISY,
-                              n_resamples=n_resamples, seed=seed, provenance=provenance)
+                              n_resamples=n_resamples, seed=seed, provenance=provenance, metric_labels=metric_labels)
 
 
 def recommended_names(recommendations_csv: str, metric: str) -> list[str]:

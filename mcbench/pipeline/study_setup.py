@@ -19,21 +19,20 @@ from pathlib import Path
 from typing import Mapping
 
 from mcbench import NOISY, BenchError
-from mcbench.analysis.metrics import ALL_METRICS
 from mcbench.analysis.study.figures import STUDY_FIGURES, curve_candidates, paper_recommended
 from mcbench.io.method_spec import method_spec
 from mcbench.io.weights import COMMITTED_WEIGHTS, check_trained_features, file_sha256, is_learned_method
 from mcbench.pipeline.config import config_digest, resolve_config
 from mcbench.pipeline.plan import plan_study
-from mcbench.pipeline.registry import load_method
+from mcbench.pipeline.registry import available_metrics, load_method, load_metric
 from mcbench.pipeline.render import folder_case_files, folder_reference_files
 from mcbench.pipeline.resources import StudyRequests, load_job_costs
 from mcbench.pipeline.study_plan import StudyPlan
 
 __all__ = ["METRIC_PATTERN", "STUDY_FIGURES", "StudySetup", "setup_study"]
 
-#: The ``metric`` wildcard's pattern: any metric the harness computes.
-METRIC_PATTERN = "|".join(ALL_METRICS)
+#: The ``metric`` wildcard's pattern: any metric plugin of ``metrics/``.
+METRIC_PATTERN = "|".join(available_metrics())
 
 
 @dataclass(frozen=True)
@@ -65,6 +64,11 @@ class StudySetup:
         otherwise (the params trigger reruns every render, and what follows, when it changes)."""
         features = self.config["features"]
         return {} if features == "first_hit" else {"features": features}
+
+    @functools.cached_property
+    def metric_labels(self) -> dict[str, str]:
+        """How the report's captions name each configured metric: its plugin's label."""
+        return {name: load_metric(name).label for name in self.plan.ranking.metrics}
 
     # -- learned methods' weights ----------------------------------------------------------------
 

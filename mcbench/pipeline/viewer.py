@@ -9,48 +9,7 @@ from pathlib import Path
 
 from mcbench import NOISY, BenchError
 from mcbench.io.checksums import crc32_hex
-from mcbench.io.exr import check_finite, check_resolution, read_layers
 from mcbench.io.tables import read_json, read_table, write_json
-
-
-def write_viewer_case(scene: str, spp: int, reference_path: str, render_path: str,
-                      candidate_paths: dict[str, str], case_dir: str, *,
-                      weight_inputs: dict[str, list[str]], flip_maps_path: str | None = None) -> dict:
-    """One case's images of the static viewer (mcbench.analysis.viewer.write_case_images) in
-    ``case_dir``, with its manifest fragment as ``case.json``: the reference, the noisy input
-    and every candidate tone-mapped at each exposure, their relMSE and FLIP error maps, and
-    the filtered weight maps of each candidate that ``weight_inputs`` gives inputs
-    ({candidate: input names}) and whose EXR holds ``weights_filtered_{i}`` for each input.
-    ``flip_maps_path``: the case's FLIP maps from :func:`compute_case_metrics` (else evaluated here)."""
-    from mcbench.analysis.viewer import CASE_RECORD, write_case_images
-
-    reference = read_layers(reference_path, ["color"])
-    check_finite(reference_path, reference)
-    check_resolution(reference_path, reference["color"].shape)
-    reference = reference["color"]
-    sources = {NOISY: render_path, **candidate_paths}
-    images, weights = {}, {}
-    for name, path in sources.items():
-        layers = read_layers(path)
-        check_finite(path, layers)
-        if layers.get("color") is None or layers["color"].shape != reference.shape:
-            shape = None if layers.get("color") is None else layers["color"].shape
-            raise BenchError(f"{path}: color of shape {shape} does not match reference {reference_path} "
-                             f"of shape {reference.shape}")
-        images[name] = layers["color"]
-        inputs = weight_inputs.get(name, [])
-        if inputs and all(f"weights_filtered_{i}" in layers for i in range(len(inputs))):
-            weights[name] = [(input_name, layers[f"weights_filtered_{i}"]) for i, input_name in enumerate(inputs)]
-    flip_maps = None
-    if flip_maps_path is not None:
-        flip_maps = read_layers(flip_maps_path, list(sources))
-        check_finite(flip_maps_path, flip_maps)
-    fragment = write_case_images(case_dir, reference=reference, images=images, weights=weights, flip_maps=flip_maps)
-    from mcbench.analysis.viewer import case_files
-
-    checksums = {name: crc32_hex(Path(case_dir, name).read_bytes()) for name in sorted(case_files(fragment))}
-    write_json(Path(case_dir) / CASE_RECORD, {"scene": scene, "spp": int(spp), **fragment, FILE_CHECKSUMS: checksums})
-    return fragment
 
 
 #: Key of a viewer case record holding the CRC-32 of each image file it names (checked on assembly).
@@ -58,7 +17,7 @@ FILE_CHECKSUMS = "files_crc32"
 
 
 def _check_case_record(record: dict, record_path: Path) -> None:
-    """Refuse a case record whose fields do not have the shape :func:`write_viewer_case` writes."""
+    """Refuse a case record whose fields do not have the shape :func:`assemble_viewer_case` writes."""
     def strings(mapping) -> bool:
         return isinstance(mapping, dict) and all(isinstance(k, str) and isinstance(v, str) for k, v in mapping.items())
 
@@ -113,9 +72,11 @@ def write_viewer(metrics_csv: str, case_dirs: list[str], output_dir: str, *, cas
                  static_dir: str) -> dict:
     """The static image viewer in ``output_dir``: the page of ``static_dir`` (index.html,
     viewer.js, viewer.css), every case folder (``case_dirs[i]`` holds ``cases[i]``, written by
-    :func:`write_viewer_case`) and ``data.js``, the manifest with each case's numbers from
-    ``metrics_csv`` (every entry must have every metric of ``metric_names``). Returns the manifest."""
+    :func:`assemble_viewer_case`) and ``data.js``, the manifest with each case's numbers from
+    ``metrics_csv`` (every entry must have every metric of ``metric_names``) and each metric's
+    label, direction and map scale from its declaration (``metrics/<name>.py``). Returns the manifest."""
     from mcbench.analysis.viewer import CASE_RECORD, assemble_viewer, build_manifest, case_numbers, directory_bytes
+    from mcbench.pipeline.registry import load_metrics
 
     if len(case_dirs) != len(cases):
         raise BenchError(f"{output_dir}: {len(case_dirs)} case folders for {len(cases)} cases")
@@ -135,8 +96,13 @@ def write_viewer(metrics_csv: str, case_dirs: list[str], output_dir: str, *, cas
                                                   metric_names=metric_names, source=metrics_csv)
     scenes = list(dict.fromkeys(scene for scene, _ in cases))
     spps = sorted({int(spp) for _, spp in cases})
+    specs = load_metrics(metric_names, config_key="metric_names")
     manifest = build_manifest(scenes=scenes, spps=spps, entries=entries, labels=labels,
-                              metric_names=metric_names, cases=fragments, numbers=numbers)
+                              metric_names=metric_names, cases=fragments, numbers=numbers,
+                              metric_labels={name: spec.label for name, spec in specs.items()},
+                              lower_is_better={name: spec.lower_is_better for name, spec in specs.items()},
+                              error_scales={name: spec.map_scale for name, spec in specs.items()
+                                            if spec.map_scale is not None})
     assemble_viewer(output_dir, static_dir=static_dir, case_dirs=dict(zip(fragments, case_dirs)),
                     manifest=manifest)
     print(f"viewer: {len(cases)} cases, {directory_bytes(output_dir) / 1e6:.2f} MB in {output_dir}", flush=True)
@@ -145,7 +111,7 @@ def write_viewer(metrics_csv: str, case_dirs: list[str], output_dir: str, *, cas
 
 def assemble_viewer_case(entry_dirs: dict[str, str], case_dir: str, *, scene: str, spp: int) -> dict:
     """One case's viewer folder from its entries' folders (``entry_dirs``: {entry: folder written
-    by :func:`mcbench.pipeline.metrics.evaluate_entry`}, the noisy entry first): every entry's
+    by :func:`mcbench.pipeline.metrics.evaluate_entry_values`}, the noisy entry first): every entry's
     images hard-linked (or copied) into ``case_dir`` after checking them against their record's
     CRC-32s, and the merged fragment with the checksums as ``case.json`` (what
     :func:`write_viewer` reads). Refused, naming the record, when an entry's folder holds another

@@ -21,6 +21,7 @@ from mcbench import BenchError
 from mcbench.analysis import viewer
 from mcbench.pipeline import viewer as viewer_step
 from mcbench.io.exr import write_layers
+from tests.conftest import case_job
 
 PAGE = Path(__file__).resolve().parents[2] / "workflow" / "report" / "viewer"
 
@@ -173,40 +174,44 @@ def test_weight_map_is_the_rgb_mean_clamped_to_the_simplex():
 
 
 def test_error_maps_are_relmse_and_hdr_flip_of_the_pair():
+    """The case job's error maps (mcbench.pipeline.metrics.entry_metrics): one per metric that
+    declares a map, on its scale, in the config's order; relMSE's closed form and NVIDIA's
+    flip_evaluator called directly."""
     import flip_evaluator
+
+    from mcbench.pipeline.metrics import entry_metrics
+    from mcbench.pipeline.registry import load_metrics
 
     reference = radiance(24, 24, seed=1)
     image = reference * np.random.default_rng(2).gamma(8.0, 1 / 8.0, size=reference.shape)
-    maps = viewer.error_maps(image, reference)
-    np.testing.assert_allclose(maps["relmse"], ((image - reference) ** 2 / (reference ** 2 + 0.01)).mean(axis=2),
+    values, maps = entry_metrics(load_metrics(["relmse", "smape", "flip"]), image, reference, maps=True)
+    assert list(values) == ["relmse", "smape", "flip"] and list(maps) == ["relmse", "flip"]
+    assert maps["relmse"][0] == viewer.RELMSE_SCALE and maps["flip"][0] == viewer.FLIP_SCALE
+    np.testing.assert_allclose(maps["relmse"][1], ((image - reference) ** 2 / (reference ** 2 + 0.01)).mean(axis=2),
                                rtol=1e-12)
-    package, _, _ = flip_evaluator.evaluate(reference.astype(np.float32), image.astype(np.float32), "HDR",
-                                            applyMagma=False)
-    np.testing.assert_allclose(maps["flip"], np.asarray(package).reshape(24, 24), atol=1e-6)
+    package, mean, _ = flip_evaluator.evaluate(reference.astype(np.float32), image.astype(np.float32), "HDR",
+                                               applyMagma=False, computeMeanError=True)
+    np.testing.assert_allclose(maps["flip"][1], np.asarray(package).reshape(24, 24), atol=1e-6)
+    assert values["flip"] == pytest.approx(mean, abs=1e-7)
 
 
 # --- one case's images ------------------------------------------------------------------------
 
-def stand_in_maps(monkeypatch):
+def stand_in_maps(height, width) -> dict:
     """Error maps with known values (pixel index scaled into each scale), so files can be checked
-    without FLIP's cost; error_maps must call mcbench.analysis.metrics' functions for this to take."""
-    from mcbench.analysis import metrics
-    def ramp(image, reference, low, high):
-        h, w = np.asarray(image).shape[:2]
-        return low + (high - low) * np.arange(h * w).reshape(h, w) / (h * w - 1)
-
-    monkeypatch.setattr(metrics, "relmse_map", lambda image, reference: 10.0 ** ramp(image, reference, -5, 1))
-    monkeypatch.setattr(metrics, "flip_map", lambda image, reference: ramp(image, reference, 0.0, 1.0))
+    without FLIP's cost: {metric: (scale, (H, W) values)}."""
+    ramp = np.arange(height * width).reshape(height, width) / (height * width - 1)
+    return {"relmse": (viewer.RELMSE_SCALE, 10.0 ** (-5 + 6 * ramp)), "flip": (viewer.FLIP_SCALE, ramp)}
 
 
-def test_case_images_files_and_fragment(tmp_path, monkeypatch):
-    stand_in_maps(monkeypatch)
+def test_case_images_files_and_fragment(tmp_path):
     height, width = 24, 40
     reference = smooth_radiance(height, width)
     images = {"noisy": reference * 1.5, "ens": reference * 0.9}
     weight = np.full((height, width, 3), 0.25)
     fragment = viewer.write_case_images(tmp_path, reference=reference, images=images,
-                                        weights={"ens": [("a", weight), ("b", 1 - weight)]})
+                                        weights={"ens": [("a", weight), ("b", 1 - weight)]},
+                                        error_maps={name: stand_in_maps(height, width) for name in images})
     assert (fragment["width"], fragment["height"]) == (width, height)
     assert list(fragment["images"]) == ["reference", "noisy", "ens"]
     for entry, image in {"reference": reference, **images}.items():
@@ -214,6 +219,8 @@ def test_case_images_files_and_fragment(tmp_path, monkeypatch):
         pixels = decoded(tmp_path / fragment["images"][entry]["1"])
         assert np.abs(pixels - viewer.display_bytes(aces_srgb(2.0 * image))).mean() < 2
     assert "reference" not in fragment["errors"]
+    assert {name: list(files) for name, files in fragment["errors"].items()} == {"noisy": ["relmse", "flip"],
+                                                                               "ens": ["relmse", "flip"]}
     flip_indices = palette_indices(tmp_path / fragment["errors"]["noisy"]["flip"])
     ramp = np.arange(height * width).reshape(height, width) / (height * width - 1)
     np.testing.assert_array_equal(flip_indices, np.minimum(np.floor(ramp * viewer.LEVELS), viewer.LEVELS - 1))
@@ -227,8 +234,7 @@ def test_case_images_files_and_fragment(tmp_path, monkeypatch):
     np.testing.assert_allclose(weights[1], 0.75, atol=0.5 / viewer.LEVELS)
 
 
-def test_case_images_refuse_bad_input(tmp_path, monkeypatch):
-    stand_in_maps(monkeypatch)
+def test_case_images_refuse_bad_input(tmp_path):
     reference = radiance(4, 4)
     with pytest.raises(BenchError, match="'jbf' has shape"):
         viewer.write_case_images(tmp_path, reference=reference, images={"jbf": np.zeros((4, 5, 3))})
@@ -236,6 +242,9 @@ def test_case_images_refuse_bad_input(tmp_path, monkeypatch):
         viewer.write_case_images(tmp_path, reference=reference, images={"jbf": np.full((4, 4, 3), np.nan)})
     with pytest.raises(BenchError, match="reserved|entry name"):
         viewer.write_case_images(tmp_path, reference=reference, images={"reference": reference})
+    with pytest.raises(BenchError, match="flip map of 'jbf' is"):
+        viewer.write_case_images(tmp_path, reference=reference, images={"jbf": reference},
+                                 error_maps={"jbf": {"flip": (viewer.FLIP_SCALE, np.zeros((4, 5)))}})
 
 
 # --- manifest ---------------------------------------------------------------------------------
@@ -301,14 +310,22 @@ def results(tmp_path, make_render_buffers):
     return tmp_path, paths, str(metrics_csv), cases
 
 
+def case_folder(root, scene, spp, files, *, weight_inputs=None) -> Path:
+    """The case job (rule run_case's code) on a case's files: its folder, whose ``viewer_case``
+    is the case's viewer folder."""
+    from mcbench.pipeline.cases import run_case
+
+    folder = root / "cases" / scene / f"spp{spp}"
+    run_case(case_job(folder, scene=scene, spp=spp, render=files["render"], reference=files["reference"],
+                      metrics=METRIC_NAMES, images=files["candidates"], weight_inputs=weight_inputs))
+    return folder
+
+
 def build_viewer(results):
     root, paths, metrics_csv, cases = results
     case_dirs = []
     for scene, spp in cases:
-        case_dir = root / "viewer_cases" / scene / f"spp{spp}"
-        files = paths[(scene, spp)]
-        viewer_step.write_viewer_case(scene, spp, files["reference"], files["render"], files["candidates"],
-                                str(case_dir), weight_inputs={"ens": ["jbf", "oidn"]})
+        case_dir = case_folder(root, scene, spp, paths[(scene, spp)], weight_inputs={"ens": ["jbf", "oidn"]}) / "viewer_case"
         (case_dir / ".snakemake_timestamp").write_text("")      # what Snakemake leaves in a directory()
         case_dirs.append(str(case_dir))
     output = root / "viewer"
@@ -334,6 +351,9 @@ def test_viewer_folder_from_a_results_folder(results):
     assert data["entries"] == ["reference", "noisy"] + CANDIDATES
     assert data["labels"]["reference"] == "Reference" and data["labels"]["ens"] == LABELS["ens"]
     assert data["metrics"] == METRIC_NAMES and data["exposures"] == list(viewer.EXPOSURES_EV)
+    assert data["maps"] == ["relmse", "flip"] and set(data["scales"]) == {"relmse", "flip", "weights"}
+    assert data["metric_labels"] == {"relmse": "relMSE", "flip": "HDR-FLIP"}
+    assert data["lower_is_better"] == {"relmse": True, "flip": True}
     named = viewer.manifest_files(data)
     assert named and all((output / name).is_file() for name in named)
     on_disk = {str(p.relative_to(output)) for p in output.rglob("*") if p.is_file()}
@@ -355,7 +375,7 @@ def test_viewer_folder_from_a_results_folder(results):
     assert viewer.directory_bytes(output) < 1_000_000
     # case images are hard links of the case folders' files (no second copy on disk)
     image = case["images"]["jbf"][next(iter(case["images"]["jbf"]))]
-    source = results[0] / "viewer_cases" / "room" / "spp16" / Path(image).name
+    source = results[0] / "cases" / "room" / "spp16" / "viewer_case" / Path(image).name
     assert (output / image).stat().st_ino == source.stat().st_ino
 
 
@@ -365,7 +385,7 @@ def test_assembling_again_replaces_stale_files_and_keeps_the_case_files(results)
     output, manifest = build_viewer(results)
     case = manifest["cases"]["room"]["16"]
     image = case["images"]["jbf"][next(iter(case["images"]["jbf"]))]
-    source = results[0] / "viewer_cases" / "room" / "spp16" / Path(image).name
+    source = results[0] / "cases" / "room" / "spp16" / "viewer_case" / Path(image).name
     before = source.read_bytes()
     (output / image).unlink()
     (output / image).write_bytes(b"edited in the viewer only")
@@ -377,10 +397,7 @@ def test_assembling_again_replaces_stale_files_and_keeps_the_case_files(results)
 
 def test_viewer_refuses_a_case_record_of_another_case(results):
     root, paths, metrics_csv, cases = results
-    files = paths[("box", 4)]
-    case_dir = root / "case"
-    viewer_step.write_viewer_case("box", 4, files["reference"], files["render"], files["candidates"], str(case_dir),
-                            weight_inputs={})
+    case_dir = case_folder(root, "box", 4, paths[("box", 4)]) / "viewer_case"
     with pytest.raises(BenchError, match=r"case\.json: holds case \(box, 4\), expected \(box, 16\)"):
         viewer_step.write_viewer(metrics_csv, [str(case_dir)], str(root / "viewer"), cases=[("box", 16)],
                            candidates=CANDIDATES, labels=LABELS, metric_names=METRIC_NAMES, static_dir=str(PAGE))
@@ -392,8 +409,7 @@ def test_viewer_case_names_a_candidate_file_of_the_wrong_shape(results):
     wrong = root / "wrong.exr"
     write_layers(wrong, {"color": np.zeros((8, 16, 3)), "color_a": np.zeros((8, 16, 3)), "color_b": np.zeros((8, 16, 3))})
     with pytest.raises(BenchError, match=re.escape(str(wrong))):
-        viewer_step.write_viewer_case("box", 4, files["reference"], files["render"], {"jbf": str(wrong)},
-                                str(root / "case"), weight_inputs={})
+        case_folder(root, "box", 4, {**files, "candidates": {"jbf": str(wrong)}})
 
 
 # --- the page: DOM contract, local files only -----------------------------------------------

@@ -41,8 +41,10 @@ def test_a_methods_key_changes_with_its_own_settings_and_its_inputs_keys_only():
     swapped = method_key(module="ensemble", params={}, input_keys=[base["oidn"], base["jbf"]], weights_sha256="",
                          render="crc32:1")
     assert swapped != base["ens"]                                # the inputs' order is part of it
-    assert viewer_key(image="a", reference="r", weight_inputs=[]) != viewer_key(image="a", reference="r",
-                                                                                weight_inputs=["jbf"])
+    assert viewer_key(image="a", reference="r", weight_inputs=[], maps=[]) != viewer_key(
+        image="a", reference="r", weight_inputs=["jbf"], maps=[])
+    assert viewer_key(image="a", reference="r", weight_inputs=[], maps=["relmse:1"]) != viewer_key(
+        image="a", reference="r", weight_inputs=[], maps=["relmse:1", "flip:2"])
 
 
 @pytest.fixture

@@ -12,7 +12,7 @@ import yaml
 import methods
 from mcbench import BenchError
 from mcbench.pipeline.config import ConfigError, key_path, load_schema, resolve_config, schema_defaults
-from mcbench.analysis.metrics import ALL_METRICS, DSSIM_MIN_SIZE
+from mcbench.analysis.metrics import DSSIM_MIN_SIZE
 
 REPO = Path(__file__).resolve().parents[2]
 CONFIGS = sorted((REPO / "workflow" / "configs").glob("*.yaml")) + [REPO / "config.yaml"]
@@ -93,9 +93,18 @@ def test_schema_resolution_minimum_is_dssims_window():
     assert resolve_config({"resolution": [11, 11]})["resolution"] == [11, 11]
 
 
-def test_schema_metric_names_are_the_implemented_metrics():
+def test_schema_metric_names_are_resolved_by_the_metric_plugins():
+    """The schema lists no metric names (a metric is a file metrics/<name>.py): its default names
+    plugins, and a misspelt name stops the plan naming the key and the closest metric."""
+    from mcbench.pipeline.plan import plan_study
+    from mcbench.pipeline.registry import available_metrics
+
     schema = load_schema()
-    assert schema["properties"]["metrics"]["items"]["enum"] == list(ALL_METRICS)
+    assert "enum" not in schema["properties"]["metrics"]["items"]
+    assert set(schema["properties"]["metrics"]["default"]) <= set(available_metrics())
+    config = resolve_config({"scenes": ["cornell_box"], "metrics": ["relmse", "dsim"]}, source="my.yaml")
+    with pytest.raises(BenchError, match=r"^my\.yaml: metrics\[1\]: unknown metric 'dsim' \(did you mean 'dssim'\?\)"):
+        plan_study(config, source="my.yaml", is_learned=lambda module: False)
 
 
 @pytest.mark.parametrize("path", CONFIGS, ids=lambda p: p.name)

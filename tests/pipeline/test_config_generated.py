@@ -44,7 +44,7 @@ from hypothesis import HealthCheck, event, given, note, settings, strategies as 
 import methods
 from mcbench import NOISY_LABEL, BenchError
 from mcbench.analysis.comparisons import comparison_role
-from mcbench.analysis.metrics import ALL_METRICS
+from mcbench.pipeline.registry import available_metrics
 from mcbench.analysis.pool import ENSEMBLE_IDS, pool_methods
 from mcbench.io.weights import is_learned_method
 from mcbench.pipeline.config import (ConfigError, config_digest, key_path, load_schema, parse_config_text,
@@ -230,7 +230,7 @@ def valid_configs(draw, *, max_scenes: int = 4, max_spp: int = 4, max_denoisers:
         config["spp"] = draw(st.lists(SPP_VALUES if not small else st.sampled_from([2, 4, 8, 16]),
                                       min_size=1, max_size=max_spp, unique=True))
     if draw(st.booleans()):
-        config["metrics"] = draw(st.permutations(ALL_METRICS).flatmap(
+        config["metrics"] = draw(st.permutations(available_metrics()).flatmap(
             lambda order: st.integers(1, len(order)).map(lambda n: list(order[:n]))))
     if draw(st.booleans()):
         config["resolution"] = draw(st.one_of(st.none(), st.lists(st.integers(11, 96 if small else 700), min_size=2, max_size=2)))

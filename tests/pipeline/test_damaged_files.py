@@ -2,8 +2,9 @@
 touched, no output is written from it.
 
 A small finished case is built once (a synthetic render with bins, a reference, the outputs and
-timing records of two base denoisers, a combiner and the ensemble, the per-case metrics CSV, the
-gathered ``metrics.csv``, Snakemake benchmark records, a viewer case, a copy of committed weights).
+timing records of two base denoisers, a combiner and the ensemble, the case job's metrics CSV and
+viewer case (:func:`mcbench.pipeline.cases.run_case` on those outputs), the gathered
+``metrics.csv``, Snakemake benchmark records, a copy of committed weights).
 Each generated damage picks one of those files and one way to damage it:
 
 * bytes: truncated at a random offset (zero length included), one bit flipped in the first
@@ -40,7 +41,7 @@ from mcbench import BenchError
 from mcbench.io.buffers import REQUIRED_LAYERS
 from mcbench.io.exr import read_layers, read_metadata, write_layers
 from mcbench.io.tables import write_csv, write_text
-from tests.conftest import REPO, build_render_buffers
+from tests.conftest import REPO, build_render_buffers, case_job
 
 SCENE, SPP = "cornell_box", 8        # a real scene name: the scene table imports its module
 HEIGHT, WIDTH = 20, 24
@@ -69,8 +70,7 @@ def _benchmark_record(path: Path, cpu_time: float) -> None:
 def build_case(tree: Path) -> None:
     """The finished case every damage starts from (see the module docstring)."""
     from mcbench.pipeline.methods import run_methods
-    from mcbench.pipeline.metrics import compute_case_metrics, gather_tables
-    from mcbench.pipeline.viewer import write_viewer_case
+    from mcbench.pipeline.metrics import gather_tables
 
     render = build_render_buffers(height=HEIGHT, width=WIDTH, spp=SPP, bins=True, seed=3)
     write_layers(tree / "render.exr", render.layers,
@@ -84,15 +84,11 @@ def build_case(tree: Path) -> None:
                _entry(tree, "naive", "naive_average", BASES)]
     run_methods(entries, str(tree / "render.exr"), scene=SCENE, spp=SPP)
     run_methods([_entry(tree, "ens", "ensemble", BASES)], str(tree / "render.exr"), scene=SCENE, spp=SPP)
-    candidates = {name: str(tree / "methods" / f"{name}.exr") for name in CANDIDATES}
-    compute_case_metrics(SCENE, SPP, str(tree / "reference.exr"), str(tree / "render.exr"), candidates,
-                         METRICS, str(tree / "case.csv"))
+    _run_case(tree, tree, cache=tree / "cache")
     gather_tables([str(tree / "case.csv")], str(tree / "metrics.csv"), candidates=ENTRIES,
                   metric_names=METRICS, cases=[(SCENE, SPP)])
     _benchmark_record(tree / "benchmarks" / f"{SCENE}_spp{SPP}.tsv", 2.5)
     _benchmark_record(tree / "benchmarks" / f"{SCENE}_chunk0.tsv", 40.0)
-    write_viewer_case(SCENE, SPP, str(tree / "reference.exr"), str(tree / "render.exr"), candidates,
-                      str(tree / "viewer_case"), weight_inputs={"ens": BASES})
     weights = tree / "weights"
     weights.mkdir()
     for name in ("kpcn.pt", "kpcn.json"):          # the weights and their record (with their SHA-256)
@@ -125,12 +121,16 @@ def _run_base(tree: Path, out: Path) -> None:
     run_methods([entry], str(tree / "render.exr"), scene=SCENE, spp=SPP)
 
 
-def _run_case_metrics(tree: Path, out: Path) -> None:
-    from mcbench.pipeline.metrics import compute_case_metrics
+def _run_case(tree: Path, out: Path, *, cache: Path | None = None) -> None:
+    """The case job (the code of rule run_case) on the case's method outputs: its metrics CSV, viewer
+    case and record in ``out``; the entries' kept values and images (the job's cache, no output of
+    the rule) beside ``out``, fresh each run."""
+    from mcbench.pipeline.cases import run_case
 
-    candidates = {name: str(tree / "methods" / f"{name}.exr") for name in CANDIDATES}
-    compute_case_metrics(SCENE, SPP, str(tree / "reference.exr"), str(tree / "render.exr"), candidates,
-                         METRICS, str(out / "case.csv"))
+    images = {name: tree / "methods" / f"{name}.exr" for name in CANDIDATES}
+    cache = cache if cache is not None else out.parent / f"{out.name}_cache"
+    run_case(case_job(out, scene=SCENE, spp=SPP, render=tree / "render.exr", reference=tree / "reference.exr",
+                      metrics=METRICS, images=images, weight_inputs={"ens": BASES}, cache=cache))
 
 
 def _run_gather(tree: Path, out: Path) -> None:
@@ -162,14 +162,6 @@ def _run_scene_table(tree: Path, out: Path) -> None:
                       reference_records=[str(tree / "benchmarks" / f"{SCENE}_chunk0.tsv")])
 
 
-def _run_viewer_case(tree: Path, out: Path) -> None:
-    from mcbench.pipeline.viewer import write_viewer_case
-
-    candidates = {name: str(tree / "methods" / f"{name}.exr") for name in CANDIDATES}
-    write_viewer_case(SCENE, SPP, str(tree / "reference.exr"), str(tree / "render.exr"), candidates,
-                      str(out / "viewer_case"), weight_inputs={"ens": BASES})
-
-
 def _run_viewer(tree: Path, out: Path) -> None:
     from mcbench.pipeline.viewer import write_viewer
 
@@ -191,17 +183,16 @@ def _run_weights(tree: Path, out: Path) -> None:
 
 STEPS = {
     "base method": _run_base, "combiner": _run_combiner, "ensemble (by rows)": _run_ensemble,
-    "case metrics": _run_case_metrics, "gather metrics": _run_gather, "gather timings": _run_timings,
-    "ranking table": _run_rankings, "scene table": _run_scene_table, "viewer case": _run_viewer_case,
-    "viewer": _run_viewer, "weights": _run_weights,
+    "case job": _run_case, "gather metrics": _run_gather, "gather timings": _run_timings,
+    "ranking table": _run_rankings, "scene table": _run_scene_table, "viewer": _run_viewer, "weights": _run_weights,
 }
 
 #: Each damageable file (relative to the case) and the steps that read it.
 TARGETS = {
-    "render.exr": ["base method", "combiner", "ensemble (by rows)", "case metrics", "viewer case"],
-    "reference.exr": ["case metrics", "scene table", "viewer case"],
-    "methods/oidn.exr": ["combiner", "ensemble (by rows)", "case metrics", "viewer case"],
-    "methods/ens.exr": ["case metrics", "viewer case"],
+    "render.exr": ["base method", "combiner", "ensemble (by rows)", "case job"],
+    "reference.exr": ["case job", "scene table"],
+    "methods/oidn.exr": ["combiner", "ensemble (by rows)", "case job"],
+    "methods/ens.exr": ["case job"],
     "timings/jbf.json": ["gather timings"],
     "case.csv": ["gather metrics"],
     "metrics.csv": ["ranking table", "scene table", "viewer"],

@@ -118,9 +118,9 @@ def test_a_folder_with_every_layer_takes_every_method(folder_scenes):
 
 
 def test_imported_case_is_denoised_and_scored_like_a_render(folder_scenes, tmp_path):
-    from mcbench.pipeline.methods import run_methods
-    from mcbench.pipeline.metrics import compute_case_metrics
+    from mcbench.pipeline.cases import run_case
     from mcbench.pipeline.render import merge_reference, render_noisy
+    from tests.conftest import case_job
 
     render, reference = tmp_path / "render.exr", tmp_path / "reference.exr"
     render_noisy("kitchen", 16, str(render))
@@ -130,13 +130,12 @@ def test_imported_case_is_denoised_and_scored_like_a_render(folder_scenes, tmp_p
     assert read_metadata(render)["imported_from"] == str((folder_scenes / "oidn").resolve())
     with pytest.raises(BenchError, match="no image 'a'"):
         buffers.image("a")
-    run_methods([{"name": "oidn", "module": "oidn", "params": {}, "input_paths": [],
-                  "exr": str(tmp_path / "oidn.exr"), "timing": str(tmp_path / "oidn.json")}],
-                str(render), scene="kitchen", spp=16)
-    output = Denoised.load(tmp_path / "oidn.exr")
+    case = tmp_path / "case"
+    run_case(case_job(case, scene="kitchen", spp=16, render=render, reference=reference, metrics=["relmse"],
+                      methods=[("oidn", "oidn", {}, [])]))
+    output = Denoised.load(case / "outputs" / "oidn.exr")
     assert output.a is None and output.b is None and output.full.shape == (H, W, 3)
-    table = compute_case_metrics("kitchen", 16, str(reference), str(render), {"oidn": str(tmp_path / "oidn.exr")},
-                                 ["relmse"], str(tmp_path / "metrics.csv"))
+    table = pd.read_csv(case / "case.csv")
     values = table.set_index("candidate")["value"]
     from mcbench.io.render_folders import read_image_any
     truth = read_image_any(folder_scenes / "oidn" / "kitchen_ref.hdr.exr")
@@ -144,7 +143,7 @@ def test_imported_case_is_denoised_and_scored_like_a_render(folder_scenes, tmp_p
     assert values["noisy"] == pytest.approx(relmse(noisy, truth), rel=1e-12)
     assert values["oidn"] == pytest.approx(relmse(output.full, truth), rel=1e-12)
     assert values["oidn"] < values["noisy"]
-    assert isinstance(pd.read_csv(tmp_path / "metrics.csv"), pd.DataFrame)
+    assert list(table.candidate) == ["noisy", "oidn"]
 
 
 @pytest.mark.extended     # a whole scratch study (75 s): beside the worked example's end-to-end run

@@ -11,11 +11,16 @@ import pytest
 
 from mcbench import NOISY, BenchError
 
-from mcbench.pipeline import methods, metrics, rankings, render, viewer
+from mcbench.pipeline import methods, metrics, rankings, render
+from mcbench.pipeline.cases import run_case
+from mcbench.pipeline.registry import load_metric
 from mcbench.io.buffers import Denoised, RenderBuffers
 from mcbench.io.exr import read_layers, read_metadata, write_layers
-from mcbench.analysis.metrics import METRICS
 from methods import load_method
+from tests.conftest import case_job
+
+#: The metrics of the case tables below (the reference has no variance: no relmse_corrected).
+METRICS = ["relmse", "smape", "dssim", "flip"]
 
 SCENE, SPP = "box", 8
 
@@ -113,50 +118,48 @@ def test_run_method_refuses_an_input_of_another_size(case_files, tmp_path, make_
         run("ens", render, tmp_path, module_name="ensemble", input_paths=[str(wrong)])
 
 
-def case_metrics(render, reference, tmp_path, *, scene=SCENE, spp=SPP):
-    output, _ = run("jbf", render, tmp_path, module_name="jbf")
-    csv = tmp_path / f"metrics_{scene}_{spp}.csv"
-    frame = metrics.compute_case_metrics(scene, spp, str(reference), str(render), {"jbf": str(output)},
-                                       list(METRICS), str(csv))
-    return frame, csv, output
+def case_metrics(render, reference, tmp_path, *, scene=SCENE, spp=SPP, metric_names=METRICS):
+    """The case job (rule run_case's code) with one method, jbf: its metrics table, the table's
+    path and jbf's output."""
+    folder = tmp_path / f"case_{scene}_{spp}"
+    run_case(case_job(folder, scene=scene, spp=spp, render=render, reference=reference, metrics=metric_names,
+                      methods=[("jbf", "jbf", {}, [])]))
+    csv = folder / "case.csv"
+    return pd.read_csv(csv), csv, folder / "outputs" / "jbf.exr"
 
 
-def test_compute_case_metrics_equals_the_metrics_recomputed(case_files, tmp_path):
+def test_the_case_table_equals_the_metrics_recomputed(case_files, tmp_path):
     render, reference = case_files
     frame, csv, output = case_metrics(render, reference, tmp_path)
     truth = read_layers(reference, ["color"])["color"]
     images = {NOISY: RenderBuffers.load(render).color, "jbf": Denoised.load(output).full}
-    assert len(frame) == len(images) * len(METRICS)
+    assert list(frame.columns) == ["scene", "spp", "candidate", "metric", "value"]
+    assert list(zip(frame.candidate, frame.metric)) == [(entry, m) for entry in images for m in METRICS]
     for row in frame.itertuples():
         assert (row.scene, row.spp) == (SCENE, SPP)
-        assert row.value == METRICS[row.metric](images[row.candidate], truth)
+        assert row.value == load_metric(row.metric).value(images[row.candidate], truth)
     assert frame.set_index(["candidate", "metric"]).loc[("jbf", "relmse"), "value"] < \
         frame.set_index(["candidate", "metric"]).loc[(NOISY, "relmse"), "value"]
-    pd.testing.assert_frame_equal(pd.read_csv(csv), frame)
 
 
-def test_case_metrics_write_the_flip_maps_the_viewer_uses(case_files, tmp_path):
-    """One FLIP evaluation per entry: the maps file holds each entry's per-pixel FLIP, whose
-    package mean is the table's flip value, and the viewer's FLIP images from it equal those it
-    evaluates itself."""
-    from mcbench.analysis.metrics import flip_map
+def test_the_case_job_draws_the_flip_map_its_flip_value_comes_from(case_files, tmp_path):
+    """One FLIP evaluation per entry: the viewer's FLIP map is HDR-FLIP's per-pixel map, on the
+    FLIP scale, and the table's flip value is the package's mean of it; the relMSE map is drawn
+    too, and no other metric has a map."""
+    from mcbench.analysis.metrics import flip, flip_map, relmse_map
+    from mcbench.analysis.viewer import FLIP_SCALE, RELMSE_SCALE, scale_indices, write_indexed_png
 
     render, reference = case_files
-    output, _ = run("jbf", render, tmp_path, module_name="jbf")
-    maps_path = tmp_path / "maps.exr"
-    frame = metrics.compute_case_metrics(SCENE, SPP, str(reference), str(render), {"jbf": str(output)},
-                                       ["relmse", "flip"], str(tmp_path / "m.csv"), flip_maps_path=str(maps_path))
-    maps = read_layers(maps_path)
+    frame, csv, output = case_metrics(render, reference, tmp_path, metric_names=["relmse", "smape", "flip"])
     truth = read_layers(reference, ["color"])["color"]
-    assert set(maps) == {NOISY, "jbf"}
-    np.testing.assert_allclose(maps["jbf"], flip_map(Denoised.load(output).full, truth), rtol=1e-6, atol=1e-7)
+    image = Denoised.load(output).full
     flip_values = frame[frame.metric == "flip"].set_index("candidate")["value"]
-    assert flip_values["jbf"] == METRICS["flip"](Denoised.load(output).full, truth)
-    with_maps, without = tmp_path / "with", tmp_path / "without"
-    for folder, path in ((with_maps, str(maps_path)), (without, None)):
-        viewer.write_viewer_case(SCENE, SPP, str(reference), str(render), {"jbf": str(output)}, str(folder),
-                                weight_inputs={}, flip_maps_path=path)
-    assert (with_maps / "jbf_flip.png").read_bytes() == (without / "jbf_flip.png").read_bytes()
+    assert flip_values["jbf"] == flip(image, truth)
+    case = csv.parent / "viewer_case"
+    assert sorted(p.name for p in case.glob("jbf_*.png")) == ["jbf_flip.png", "jbf_relmse.png"]
+    for name, function, scale in (("flip", flip_map, FLIP_SCALE), ("relmse", relmse_map, RELMSE_SCALE)):
+        write_indexed_png(tmp_path / f"{name}.png", scale_indices(function(image, truth), scale), scale)
+        assert (case / f"jbf_{name}.png").read_bytes() == (tmp_path / f"{name}.png").read_bytes()
 
 
 def test_gather_tables_concatenates_the_cases(case_files, tmp_path):
@@ -165,7 +168,7 @@ def test_gather_tables_concatenates_the_cases(case_files, tmp_path):
     second, csv_b, _ = case_metrics(render, reference, tmp_path, scene="room", spp=16)
     out = tmp_path / "metrics.csv"
     frame = metrics.gather_tables([str(csv_a), str(csv_b)], str(out), candidates=[NOISY, "jbf"],
-                                metric_names=list(METRICS), cases=[("box", 8), ("room", 16)])
+                                metric_names=METRICS, cases=[("box", 8), ("room", 16)])
     expected = pd.concat([first, second], ignore_index=True)
     pd.testing.assert_frame_equal(frame.reset_index(drop=True), expected)
     pd.testing.assert_frame_equal(pd.read_csv(out), expected)
@@ -263,16 +266,18 @@ def test_an_added_metric_is_the_only_one_computed_and_a_changed_file_recomputes_
     """evaluate_entry with a values record: the metric list [relmse] then [relmse, smape, dssim]
     computes relMSE once and each added metric once, with the values of a from-scratch
     evaluation; a rewritten image, a record of other metric code, or a damaged record recompute."""
-    from mcbench.analysis import metrics as metric_functions
+    import dataclasses
+    import sys
+
     from mcbench.io.file_cache import clear_cache
 
     render, reference = case_files
     output, _ = run("jbf", render, tmp_path, module_name="jbf")
     calls = []
     for name in ("relmse", "smape", "dssim"):
-        function = metric_functions.METRICS[name]
-        monkeypatch.setitem(metric_functions.METRICS, name,
-                            lambda image, ref, _f=function, _n=name: calls.append(_n) or _f(image, ref))
+        spec = load_metric(name)
+        counted = dataclasses.replace(spec, value=lambda image, ref, _f=spec.value, _n=name: calls.append(_n) or _f(image, ref))
+        monkeypatch.setattr(sys.modules[f"metrics.{name}"], "METRIC", counted)
     values = tmp_path / "values" / "jbf.json"
 
     def evaluate(metric_list, folder):
@@ -298,7 +303,7 @@ def test_an_added_metric_is_the_only_one_computed_and_a_changed_file_recomputes_
     assert changed.value.iloc[0] != second.value.iloc[0]
 
     calls.clear()
-    monkeypatch.setattr(metrics, "metric_code_digest", lambda: "other metric code")
+    monkeypatch.setattr(metrics, "metric_code_digest", lambda name: "other metric code")
     evaluate(["relmse"], "five")
     assert calls == ["relmse"]
     monkeypatch.undo()

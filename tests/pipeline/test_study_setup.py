@@ -36,6 +36,7 @@ def test_the_config_is_resolved_planned_and_summarised(study):
     assert study.weights_dir == str(COMMITTED_WEIGHTS)
     assert study.summary == f"mcbench: configuration test.yaml with the schema's defaults, digest {study.digest}"
     assert "relmse" in METRIC_PATTERN.split("|") and "flip" in METRIC_PATTERN.split("|")
+    assert list(study.metric_labels) == ["smape", "dssim"] and all(study.metric_labels.values())
 
 
 def test_a_config_mistake_names_the_source_and_the_key():

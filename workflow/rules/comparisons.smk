@@ -26,6 +26,7 @@ rule comparison_onehot:
         ),
         table2_md="results/tables/comparisons/table2_{metric}.md",
     params:
+        metric_label=lambda wildcards: STUDY.metric_labels[wildcards.metric],
         methods=PLAN.comparison_methods,
         labels=dict(PLAN.ranking.labels),
     threads: 1
@@ -81,6 +82,7 @@ rule comparison_ranking:
         ),
         md="results/tables/comparisons/ranking_{metric}.md",
     params:
+        metric_label=lambda wildcards: STUDY.metric_labels[wildcards.metric],
         methods=PLAN.comparison_methods,
         labels=dict(PLAN.ranking.labels),
     threads: 1

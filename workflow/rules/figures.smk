@@ -17,6 +17,7 @@ rule error_curves:
             labels={"metric": "{metric}", "figure": "error against spp, per scene"},
         ),
     params:
+        metric_label=lambda wildcards: STUDY.metric_labels[wildcards.metric],
         labels=dict(PLAN.ranking.labels),
         candidates=STUDY.curve_entries,
     threads: 1
@@ -44,6 +45,7 @@ rule speed_error:
             labels={"metric": PLAN.ranking.speed_metric, "figure": "speed against error"},
         ),
     params:
+        metric_label=STUDY.metric_labels[PLAN.ranking.speed_metric],
         labels=dict(PLAN.ranking.labels),
         inputs=PLAN.method_inputs,
         metric=PLAN.ranking.speed_metric,

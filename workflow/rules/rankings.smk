@@ -17,6 +17,7 @@ rule ranking_table:
         md="results/tables/ranking_{metric}.md",
         tex="results/tables/ranking_{metric}.tex",
     params:
+        metric_label=lambda wildcards: STUDY.metric_labels[wildcards.metric],
         candidates=PLAN.ranking.ranked_entries,
         labels=dict(PLAN.ranking.labels),
         order=PLAN.ranking.table_order,
@@ -49,6 +50,7 @@ rule extras_table:
         md="results/tables/extras_{metric}.md",
         tex="results/tables/extras_{metric}.tex",
     params:
+        metric_label=lambda wildcards: STUDY.metric_labels[wildcards.metric],
         pool=PLAN.ranking.ranked_entries,
         extras=list(PLAN.ranking.extras),
         labels=dict(PLAN.ranking.labels),

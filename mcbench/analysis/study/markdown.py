@@ -7,7 +7,6 @@ from __future__ import annotations
 import pandas as pd
 
 from mcbench.analysis import pool
-from mcbench.analysis.metrics import METRIC_LABELS
 from mcbench.analysis.study.data import BAND_TEXT, PAPER_ENTRIES, Resampling, finite_or_none, is_pool_name
 from mcbench.analysis.study.findings import CLAIMS
 from mcbench.analysis.study.pair_members import ALMOST, ALMOST_ALWAYS
@@ -40,6 +39,12 @@ def _ci_text(low, high, digits: int = 1) -> str:
     if finite_or_none(low) is None or finite_or_none(high) is None:
         return "no CI"
     return f"[{low:.{digits}f}, {high:.{digits}f}]"
+
+def _metric_label(metric, metric_labels: dict[str, str] | None) -> str:
+    """How a metric is named in the text: its label in ``metric_labels`` (the metrics'
+    declarations, ``metrics/<name>.py``), else its name."""
+    return (metric_labels or {}).get(metric, metric)
+
 
 def _label(name, labels: dict[str, str]) -> str:
     if name is None:
@@ -109,13 +114,14 @@ def paper_comparison_markdown(ranking: pd.DataFrame, *, names: dict[int, str] | 
     return "\n".join(lines) + "\n"
 
 def recommendation_sentences(table: pd.DataFrame, *, labels: dict[str, str] | None = None,
-                             n_resamples: int | None = None) -> list[str]:
-    """One sentence a user can act on per row of :func:`~mcbench.analysis.study.recommendations.recommendations`."""
+                             n_resamples: int | None = None, metric_labels: dict[str, str] | None = None) -> list[str]:
+    """One sentence a user can act on per row of :func:`~mcbench.analysis.study.recommendations.recommendations`
+    (each metric named by its label in ``metric_labels``)."""
     labels = labels or {}
     out = []
     for r in map(_clean, table.to_dict("records")):
         r["paper_id"] = None if r["paper_id"] is None else int(r["paper_id"])
-        metric = METRIC_LABELS.get(r["metric"], r["metric"])
+        metric = _metric_label(r["metric"], metric_labels)
         if r["scope"] == "size":
             lead = f"With {r['key']} base denoisers ({metric})"
         elif r["scope"] == "band":
@@ -157,8 +163,9 @@ def recommendation_sentences(table: pd.DataFrame, *, labels: dict[str, str] | No
 
 
 def recommendations_markdown(table: pd.DataFrame, *, labels: dict[str, str] | None = None,
-                             resampling: Resampling = Resampling()) -> str:
-    """The recommendations as a short Markdown table and the sentences."""
+                             resampling: Resampling = Resampling(), metric_labels: dict[str, str] | None = None) -> str:
+    """The recommendations as a short Markdown table and the sentences (each metric named by its
+    label in ``metric_labels``)."""
     labels = labels or {}
     level = f"{100 * resampling.confidence:.0f} %"
     lines = ["# Recommendations derived from the data (Zheng et al. 2021 Sec. 5.3.5-5.3.6)", "",
@@ -173,7 +180,7 @@ def recommendations_markdown(table: pd.DataFrame, *, labels: dict[str, str] | No
              "score | resamples | ours - paper | real? |",
              "|---" * 12 + "|"]
     for r in map(_clean, table.to_dict("records")):
-        lines.append(f"| {METRIC_LABELS.get(r['metric'], r['metric'])} | {_scope_text(r['scope'], r['key'])} | "
+        lines.append(f"| {_metric_label(r['metric'], metric_labels)} | {_scope_text(r['scope'], r['key'])} | "
                      f"{_of(r['ours'], r['candidates'], labels)} | "
                      f"{_score_ci(r['ours_score'], r['ours_ci_low'], r['ours_ci_high'])} | "
                      f"{_percent(r['ours_fraction'])} | {_of(r.get('named'), r.get('named_candidates'), labels)} | "
@@ -181,8 +188,8 @@ def recommendations_markdown(table: pd.DataFrame, *, labels: dict[str, str] | No
                      f"{_percent(r['paper_fraction'])} | {_cell(r['difference'])} "
                      f"{'' if r['difference'] is None else _ci_text(r['difference_ci_low'], r['difference_ci_high'])}"
                      f" | {r['real_difference'] or '–'} |")
-    lines += ["", *[f"- {s}" for s in recommendation_sentences(table, labels=labels,
-                                                                n_resamples=resampling.n_resamples)]]
+    lines += ["", *[f"- {s}" for s in recommendation_sentences(table, labels=labels, n_resamples=resampling.n_resamples,
+                                                                metric_labels=metric_labels)]]
     return "\n".join(lines) + "\n"
 
 
@@ -236,9 +243,11 @@ def recommendations_both_markdown(table: pd.DataFrame, *, labels: dict[str, str]
     return "\n".join(lines) + "\n"
 
 def pair_members_markdown(table: pd.DataFrame, *, labels: dict[str, str] | None = None,
-                          resampling: Resampling = Resampling(), skipped: dict[str, str] | None = None) -> str:
-    """:func:`~mcbench.analysis.study.pair_members.pair_members` as Markdown: per metric, wins/cases per spp and
-    overall with the interval and verdict, then the cases each pair fails."""
+                          resampling: Resampling = Resampling(), skipped: dict[str, str] | None = None,
+                          metric_labels: dict[str, str] | None = None) -> str:
+    """:func:`~mcbench.analysis.study.pair_members.pair_members` as Markdown: per metric (named by its
+    label in ``metric_labels``), wins/cases per spp and overall with the interval and verdict, then
+    the cases each pair fails."""
     labels = labels or {}
     lines = ["# Finding (b): size-2 ensembles against each of their members (Zheng et al. 2021 Sec. 5.3.4)", "",
              "The paper: \"a combination of 2 base denoisers almost always outperforms the corresponding individual "
@@ -249,12 +258,12 @@ def pair_members_markdown(table: pd.DataFrame, *, labels: dict[str, str] | None 
              f"{100 * resampling.confidence:.0f} % scene-bootstrap interval of the fraction lies above it, not "
              "reproduced when below, inconclusive otherwise.", ""]
     for metric, reason in (skipped or {}).items():
-        lines += [f"- {METRIC_LABELS.get(metric, metric)}: {reason}"]
+        lines += [f"- {_metric_label(metric, metric_labels)}: {reason}"]
     if table.empty:
         return "\n".join(lines + ["", "No size-2 ensemble of the pool with both members in our data."]) + "\n"
     for metric, by_metric in table.groupby("metric", sort=False):
         spps = [s for s in dict.fromkeys(by_metric["spp"]) if s != "all"]
-        lines += ["", f"## {METRIC_LABELS.get(metric, metric)}", "",
+        lines += ["", f"## {_metric_label(metric, metric_labels)}", "",
                   "| size-2 ensemble | outperforms | " + " | ".join(f"{s} spp" for s in spps)
                   + " | all spp | fraction | interval | verdict |", "|---" * (len(spps) + 6) + "|"]
         failed = []
@@ -273,15 +282,17 @@ def pair_members_markdown(table: pd.DataFrame, *, labels: dict[str, str] | None 
     return "\n".join(lines) + "\n"
 
 
-def findings_markdown(table: pd.DataFrame, *, resampling: Resampling = Resampling()) -> str:
-    """The findings as Markdown, one section per metric and finding."""
+def findings_markdown(table: pd.DataFrame, *, resampling: Resampling = Resampling(),
+                      metric_labels: dict[str, str] | None = None) -> str:
+    """The findings as Markdown, one section per metric (named by its label in ``metric_labels``)
+    and finding."""
     level = f"{100 * resampling.confidence:.0f} %"
     lines = ["# The paper's findings (Zheng et al. 2021 Sec. 5.3.4), checked with numbers", "",
              f"Means over scenes with {level} paired scene-bootstrap intervals ({resampling.n_resamples} resamples, "
              f"seed {resampling.seed}; BCa, percentile where BCa is degenerate). A claim 'above t' is reproduced "
              f"when its interval lies above t, not reproduced when below, inconclusive when it contains t.", ""]
     for metric, by_metric in table.groupby("metric", sort=False):
-        lines += [f"## {METRIC_LABELS.get(metric, metric)}", ""]
+        lines += [f"## {_metric_label(metric, metric_labels)}", ""]
         for finding, group in by_metric.groupby("finding", sort=True):
             lines += [f"### {finding}. {CLAIMS[finding]}", "", "| quantity | estimate | interval | verdict | note |",
                       "|---|---|---|---|---|"]
@@ -368,13 +379,14 @@ def summary_markdown(tables: StudyTables, *, source: str, provenance: dict | Non
              f"{100 * resampling.confidence:.0f} % intervals. Rows of the pool marked 'filled' are our choice, "
              f"not the paper's (see mcbench/analysis/pool.py).", ""]
     for metric, data in tables.data.items():
-        lines.append(f"- {METRIC_LABELS.get(metric, metric)}: {len(data.scenes)} scene(s), spp "
+        lines.append(f"- {_metric_label(metric, tables.metric_labels)}: {len(data.scenes)} scene(s), spp "
                      f"{', '.join(map(str, data.spps))}, {data.entries} entries"
                      + ("" if data.entries == PAPER_ENTRIES else f" (the paper: {PAPER_ENTRIES})"))
     lines += [f"- {m}: no values in {source}; skipped" for m in tables.skipped]
     lines += ["", "## Recommendations", ""]
     lines += [f"- {s}" for s in recommendation_sentences(tables.recommendations, labels=shown,
-                                                          n_resamples=resampling.n_resamples)]
+                                                          n_resamples=resampling.n_resamples,
+                                                          metric_labels=tables.metric_labels)]
     both = tables.recommendations_metrics
     lines += ["", "## Recommendations by relMSE and DSSIM together", "", f"Combined rule: {COMBINED_RULE}.", ""]
     lines += [f"- {s}" for s in recommendations_both_sentences(both, labels=shown)] if len(both) else \
@@ -394,7 +406,7 @@ def summary_markdown(tables: StudyTables, *, source: str, provenance: dict | Non
     for r in map(_clean, find_table[headline].to_dict("records")):
         numbers = "" if r["estimate"] is None else \
             f" ({_cell(r['estimate'], 3)}, {_ci_text(r['ci_low'], r['ci_high'], 3)})"
-        lines.append(f"- {METRIC_LABELS.get(r['metric'], r['metric'])}, {r['finding']}: {r['quantity']}: "
+        lines.append(f"- {_metric_label(r['metric'], tables.metric_labels)}, {r['finding']}: {r['quantity']}: "
                      f"**{r['verdict']}**{numbers}")
     if provenance is not None:
         lines += ["", PROVENANCE_HEADING, "", *provenance_markdown(provenance)]

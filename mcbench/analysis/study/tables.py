@@ -34,7 +34,8 @@ class StudyTables:
     without relMSE) with ``paper_table3`` and ``paper_kendall`` (``None`` without relMSE) beside
     the paper's Table 3, and ``reference_noise``
     (:func:`~mcbench.analysis.study.reference_noise.reference_noise_effect`; empty without both
-    relmse and relmse_corrected).
+    relmse and relmse_corrected); ``metric_labels``: how the text names each metric of
+    ``metrics`` (its declared label, else its name).
     """
 
     metrics: tuple[str, ...]
@@ -51,6 +52,7 @@ class StudyTables:
     paper_table3: pd.DataFrame
     paper_kendall: pd.DataFrame | None
     reference_noise: pd.DataFrame
+    metric_labels: dict[str, str]
 
     def by_stem(self) -> dict[str, pd.DataFrame]:
         """The tables by the stem of the file each is written to (``scores_ci_<metric>`` only
@@ -71,12 +73,12 @@ def display_labels(names, labels: dict[str, str] | None) -> dict[str, str]:
 
 def study_tables(table: pd.DataFrame, *, metrics=("relmse", "dssim"), labels: dict[str, str] | None = None,
                  candidates=None, noisy: str | None = NOISY, resampling: Resampling = Resampling(),
-                 source: str = "metrics") -> StudyTables:
+                 source: str = "metrics", metric_labels: dict[str, str] | None = None) -> StudyTables:
     """The study's tables of the tidy metrics ``table`` (columns scene, spp, candidate, metric,
     value) for each of ``metrics``; a metric without values in ``table`` is skipped.
     ``candidates`` (default: the pool candidates present) and ``noisy`` are the scored entries;
     a pool candidate missing in a case stops with a :class:`mcbench.BenchError` naming it and
-    ``source``."""
+    ``source``. ``metric_labels`` {metric: label}: how the Markdown names the metrics."""
     available = set(table["metric"])
     data, cis, recs, finds, pairs, skipped = {}, {}, [], [], [], []
     for metric in metrics:
@@ -106,4 +108,4 @@ def study_tables(table: pd.DataFrame, *, metrics=("relmse", "dssim"), labels: di
         relmse_ranking=ranking,
         paper_table3=paper_comparison(ranking) if ranking is not None else pd.DataFrame(columns=PAPER_COLUMNS),
         paper_kendall=paper_kendall(ranking) if ranking is not None else None,
-        reference_noise=noise)
+        reference_noise=noise, metric_labels={m: (metric_labels or {}).get(m, m) for m in metrics})

@@ -44,14 +44,18 @@ def write_study_files(tables: StudyTables, out_dir, *, source: str, provenance: 
         else:
             write_csv(path, pd.DataFrame(columns=SCORE_CI_COLUMNS))
     write_csv(out_dir / "recommendations.csv", tables.recommendations, float_format="%.4f")
+    metric_labels = tables.metric_labels
     write_text(out_dir / "recommendations.md", recommendations_markdown(tables.recommendations, labels=shown,
-                                                                        resampling=resampling))
+                                                                        resampling=resampling,
+                                                                        metric_labels=metric_labels))
     write_csv(out_dir / "findings.csv", tables.findings, float_format="%.4f")
-    write_text(out_dir / "findings.md", findings_markdown(tables.findings, resampling=resampling))
+    write_text(out_dir / "findings.md", findings_markdown(tables.findings, resampling=resampling,
+                                                                  metric_labels=metric_labels))
     write_csv(out_dir / "pair_members.csv", tables.pair_members, float_format="%.4f")
     skipped = {m: "no values; skipped" for m in tables.skipped}
     write_text(out_dir / "pair_members.md", pair_members_markdown(tables.pair_members, labels=shown,
-                                                                  resampling=resampling, skipped=skipped))
+                                                                  resampling=resampling, skipped=skipped,
+                                                                  metric_labels=metric_labels))
     write_csv(out_dir / "recommendations_metrics.csv", tables.recommendations_metrics, float_format="%.4f")
     write_text(out_dir / "recommendations_metrics.md", recommendations_both_markdown(
         tables.recommendations_metrics, labels=shown, resampling=resampling))
@@ -70,7 +74,8 @@ def write_study_files(tables: StudyTables, out_dir, *, source: str, provenance: 
 
 def write_study_tables(metrics_csv, out_dir, *, metrics=("relmse", "dssim"), labels: dict[str, str] | None = None,
                        candidates=None, noisy: str | None = NOISY, n_resamples: int = N_RESAMPLES, seed: int = SEED,
-                       confidence: float = CONFIDENCE, provenance: dict | None = None) -> dict[str, pd.DataFrame]:
+                       confidence: float = CONFIDENCE, provenance: dict | None = None,
+                       metric_labels: dict[str, str] | None = None) -> dict[str, pd.DataFrame]:
     """The study's tables from ``metrics.csv``, written atomically under ``out_dir``
     (``results/tables/study/``). Files (:func:`study_outputs`):
 
@@ -91,11 +96,12 @@ def write_study_tables(metrics_csv, out_dir, *, metrics=("relmse", "dssim"), lab
     ``metrics`` absent from the data are skipped (their CSV holds the header only, summary.md
     says so); a pool candidate missing in a case stops with a :class:`mcbench.BenchError`
     naming it. ``candidates`` (default: the pool candidates present) and ``noisy`` are the
-    scored entries. Returns the tables by file stem.
+    scored entries; ``metric_labels`` {metric: label} name the metrics in the Markdown (default:
+    their names). Returns the tables by file stem.
     """
     table = read_table(metrics_csv, columns=("scene", "spp", "candidate", "metric", "value"))
     resampling = Resampling(n_resamples=n_resamples, seed=seed, confidence=confidence)
     tables = study_tables(table, metrics=metrics, labels=labels, candidates=candidates, noisy=noisy,
-                          resampling=resampling, source=str(metrics_csv))
+                          resampling=resampling, source=str(metrics_csv), metric_labels=metric_labels)
     write_study_files(tables, out_dir, source=Path(metrics_csv).name, provenance=provenance)
     return tables.by_stem()

@@ -2,9 +2,11 @@
  *
  * Reads the manifest window.MCBENCH_VIEWER set by data.js (a <script>, because file:// pages
  * may not fetch), written by mcbench.viewer.build_manifest:
- *   {scenes, spp, entries, labels, metrics, exposures, scales: {relmse|flip|weights: {legend,
- *    ticks, description, ...}}, cases: {scene: {spp: {width, height, images: {entry: {ev: file}},
- *    errors: {entry: {relmse: file, flip: file}}, weights: {entry: [{input, label, file}]},
+ *   {scenes, spp, entries, labels, metrics, metric_labels: {metric: label},
+ *    lower_is_better: {metric: bool}, maps: [metric with an error map, ...], exposures,
+ *    scales: {<metric of maps>|weights: {legend, ticks, description, ...}},
+ *    cases: {scene: {spp: {width, height, images: {entry: {ev: file}},
+ *    errors: {entry: {<metric>: file}}, weights: {entry: [{input, label, file}]},
  *    numbers: {entry: {metric: value}}}}}}
  *
  * DOM contract (tests rely on it): #scene, #spp, #image-a, #image-b (option values are entry
@@ -58,6 +60,9 @@
   // Helpers
 
   function label(entry) { return (data.labels && data.labels[entry]) || entry; }
+  function metricLabel(metric) { return (data.metric_labels && data.metric_labels[metric]) || metric; }
+  function lowerIsBetter(metric) { return !data.lower_is_better || data.lower_is_better[metric] !== false; }
+  function better(value, other, metric) { return lowerIsBetter(metric) ? value < other : value > other; }
 
   function currentCase() {
     var perSpp = data.cases[state.scene];
@@ -318,7 +323,7 @@
       var v = numbers[other][metric];
       if (typeof v !== "number") { return; }
       count += 1;
-      if (v < value) { rank += 1; }
+      if (better(v, value, metric)) { rank += 1; }
     });
     return {rank: rank, count: count};
   }
@@ -357,7 +362,7 @@
           cell.appendChild(span);
         }
         var other = values[1 - i];
-        if (typeof values[i] === "number" && typeof other === "number" && values[i] < other) {
+        if (typeof values[i] === "number" && typeof other === "number" && better(values[i], other, metric)) {
           cell.classList.add("better");
         }
       });
@@ -365,7 +370,7 @@
     box.appendChild(table);
     var note = document.createElement("p");
     note.className = "note";
-    note.textContent = "Errors against the reference (results/metrics.csv); lower is better. " +
+    note.textContent = "Errors against the reference (results/metrics.csv); the better value is marked. " +
       "#k/n: rank among the n images of this case, the noisy input included.";
     box.appendChild(note);
   }
@@ -430,8 +435,9 @@
         none.textContent = "The reference: no error maps.";
         row.appendChild(none);
       } else {
-        if (errors.relmse) { row.appendChild(mapFigure(errors.relmse, "relMSE per pixel", "relmse", side)); }
-        if (errors.flip) { row.appendChild(mapFigure(errors.flip, "FLIP per pixel", "flip", side)); }
+        (data.maps || Object.keys(errors)).forEach(function (metric) {
+          if (errors[metric]) { row.appendChild(mapFigure(errors[metric], metricLabel(metric) + " per pixel", metric, side)); }
+        });
       }
       (record.weights[entry] || []).forEach(function (weight) {
         row.appendChild(mapFigure(weight.file, "weight of " + weight.label, "weights", side));

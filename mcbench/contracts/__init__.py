@@ -1,0 +1,1 @@
+"""The plugin contracts: the typed declarations the plugin packages export."""

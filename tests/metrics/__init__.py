@@ -1,0 +1,1 @@
+"""Tests of the metric plugins (``metrics/``) and their contract."""

@@ -1,0 +1,122 @@
+"""Where a reference comes from: the store only for this scene, resolution and renderer; a stored
+reference that disagrees with the local render stops the run naming the scene."""
+
+import importlib.metadata
+from pathlib import Path
+from types import ModuleType
+
+import numpy as np
+import pytest
+
+from mcbench import BenchError
+from mcbench.io.exr import read_layers, read_metadata, write_layers
+from mcbench.io.reference_store import write_stored_reference
+from mcbench.pipeline.reference_sources import (check_stored_reference, copy_stored_reference, reference_identity,
+                                                reference_source, scene_digest, scene_files)
+
+RESOLUTION = (32, 32)
+
+
+def _python_scene(folder: Path, text="from mcbench.render.geometry import quad\nX = 1\n") -> ModuleType:
+    path = folder / "box.py"
+    path.write_text(text)
+    module = ModuleType("scenes.box")
+    module.__file__ = str(path)
+    return module
+
+
+def _xml_scene(folder: Path, asset_bytes=b"v 0 0 0\n") -> ModuleType:
+    (folder / "meshes").mkdir(exist_ok=True)
+    (folder / "meshes" / "a.obj").write_bytes(asset_bytes)
+    path = folder / "room.xml"
+    path.write_text('<scene version="3.0.0"><shape type="obj"><string name="filename" value="meshes/a.obj"/>'
+                    '</shape></scene>')
+    module = ModuleType("scenes.room")
+    module.SOURCE = path
+    return module
+
+
+def test_a_python_scene_is_its_file_and_the_render_modules_it_builds_with(tmp_path):
+    files = scene_files(_python_scene(tmp_path))
+    assert "scene:box.py" in files and "module:mcbench.render.geometry" in files
+    assert all(path.exists() for path in files.values())
+
+
+def test_the_digest_follows_the_scene_file_and_its_assets(tmp_path):
+    module = _python_scene(tmp_path)
+    first = scene_digest(module)
+    assert scene_digest(module) == first
+    _python_scene(tmp_path, "from mcbench.render.geometry import quad\nX = 2\n")
+    assert scene_digest(module) != first
+    xml = _xml_scene(tmp_path / "x" if (tmp_path / "x").mkdir() is None else None)
+    xml_digest = scene_digest(xml)
+    assert "asset:meshes/a.obj" in scene_files(xml)
+    _xml_scene(tmp_path / "x", asset_bytes=b"v 0 0 1\n")
+    assert scene_digest(xml) != xml_digest
+
+
+def test_the_digest_does_not_depend_on_where_the_checkout_is(tmp_path):
+    a, b = tmp_path / "a", tmp_path / "b"
+    a.mkdir(), b.mkdir()
+    assert scene_digest(_python_scene(a)) == scene_digest(_python_scene(b))
+
+
+def _store(tmp_path, module, *, identity_changes=None, seed=0):
+    rng = np.random.default_rng(seed)
+    layers = {"color": rng.uniform(0.2, 1.0, (*RESOLUTION, 3)).astype(np.float32),
+              "variance": np.full((*RESOLUTION, 3), 1e-6, np.float32)}
+    identity = {**reference_identity("box", module, RESOLUTION), **(identity_changes or {})}
+    store = tmp_path / "store"
+    write_stored_reference(store, "box", layers, identity=identity, provenance={"spp": 4096})
+    return store, layers
+
+
+def test_the_store_is_used_only_for_this_identity(tmp_path):
+    module = _python_scene(tmp_path)
+    store, _ = _store(tmp_path, module)
+    assert reference_source("box", module, RESOLUTION, requested="store", store=store).kind == "store"
+    assert reference_source("box", module, RESOLUTION, requested="render", store=store).kind == "render"
+    other_size = reference_source("box", module, (16, 16), requested="store", store=store)
+    assert other_size.kind == "render" and "no reference" in other_size.reason
+    _python_scene(tmp_path, "X = 3\n")          # the scene edited: its stored reference is not used
+    edited = reference_source("box", module, RESOLUTION, requested="store", store=store)
+    assert edited.kind == "render" and "scene_digest" in edited.reason
+
+
+def test_a_store_of_another_mitsuba_is_not_used_and_says_so(tmp_path):
+    module = _python_scene(tmp_path)
+    store, _ = _store(tmp_path, module, identity_changes={"mitsuba": "0.0.1"})
+    source = reference_source("box", module, RESOLUTION, requested="store", store=store)
+    assert source.kind == "render"
+    assert f"mitsuba: stored '0.0.1', this run '{importlib.metadata.version('mitsuba')}'" in source.reason
+
+
+def test_a_misspelt_source_names_the_key(tmp_path):
+    with pytest.raises(ValueError, match="reference.source"):
+        reference_source("box", _python_scene(tmp_path), RESOLUTION, requested="stored")
+
+
+def _render(path, color, variance):
+    write_layers(path, {"color": color, "variance": variance})
+
+
+def test_a_consistent_stored_reference_passes_and_a_biased_one_stops_the_run(tmp_path):
+    module = _python_scene(tmp_path)
+    store, layers = _store(tmp_path, module)
+    stored = reference_source("box", module, RESOLUTION, requested="store", store=store).stored
+    reference_path = tmp_path / "reference.exr"
+    copy_stored_reference(stored, str(reference_path))
+    np.testing.assert_array_equal(read_layers(reference_path, ["color"])["color"], layers["color"])
+    assert read_metadata(reference_path)["stored_reference"] == "box.json"
+    rng = np.random.default_rng(5)
+    variance = np.full((*RESOLUTION, 3), 1e-4, np.float32)
+    noisy = (layers["color"] + rng.normal(0, 1e-2, layers["color"].shape)).astype(np.float32)
+    _render(tmp_path / "render.exr", noisy, variance)
+    check_stored_reference("box", str(reference_path), str(tmp_path / "render.exr"), str(tmp_path / "check.json"))
+    assert (tmp_path / "check.json").exists()
+    biased = noisy.copy()
+    biased[8:24, 8:24, 1] *= 1.02           # 2 % in one channel over a 16x16 region
+    _render(tmp_path / "biased.exr", biased, variance)
+    with pytest.raises(BenchError, match=r"scene 'box'.*max \|z\|"):
+        check_stored_reference("box", str(reference_path), str(tmp_path / "biased.exr"), str(tmp_path / "c2.json"))
+    assert not (tmp_path / "c2.json").exists()
