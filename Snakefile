@@ -54,9 +54,9 @@ rule all:
         expand(rules.comparison_onehot.output, metric=config["metrics"]),
         rules.comparison_ablations.output,
         expand(rules.comparison_ranking.output, metric=config["metrics"]),
-        oracle_targets(),
-        study_targets(),
-        progressive_targets(),
+        get_oracle_targets(),
+        get_study_targets(),
+        get_progressive_targets(),
     default_target: True
 
 

@@ -644,8 +644,8 @@ BREAKAGES = {
         {"methods/jbf.py": PROBE.format("from mcbench.io.exr import _private_helper")},
         8, ["methods/jbf.py", "imports mcbench.io.exr._private_helper"]),
     "script importing below the pipeline": (
-        {"workflow/scripts/figures.py": "from mcbench.analysis.figures import error_curves\n"},
-        9, ["workflow/scripts/figures.py", "imports mcbench.analysis.figures"]),
+        {"workflow/scripts/error_curves.py": "from mcbench.analysis.figures import error_curves\n"},
+        9, ["workflow/scripts/error_curves.py", "imports mcbench.analysis.figures"]),
     "script importing a plugin": (
         {"workflow/scripts/gather_timings.py": "import methods\n"},
         9, ["workflow/scripts/gather_timings.py", "imports methods"]),

@@ -93,7 +93,7 @@ def _stored_viewer_key(folder: str) -> str | None:
 def run_case(case: dict, *, threads: int = 1) -> dict:
     """Make what one case lacks and assemble it; return the case record.
 
-    ``case`` (built by ``workflow/rules/common.smk``, JSON-able):
+    ``case`` (:meth:`mcbench.pipeline.study_plan.StudyPlan.case_job`, JSON-able):
     ``scene``, ``spp``, ``render``, ``reference`` (paths), ``metrics`` (metric names),
     ``methods``: ``[{name, module, params, inputs, weights, weights_read, exr, timing}]`` in
     dependency order (``inputs``: method names; ``weights``: the weights file a learned method is

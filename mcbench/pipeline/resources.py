@@ -1,8 +1,8 @@
 """Per-job resources for a cluster: memory and run time of each rule's jobs, from measured costs.
 
 Every rule of the workflow declares ``threads``, ``mem_mb`` and ``runtime`` (minutes), and the
-rules that can use a GPU declare ``gpu`` (:class:`StudyRequests`, which ``workflow/rules/common.smk``
-wraps). A
+rules that can use a GPU declare ``gpu`` (:class:`StudyRequests`, which
+:meth:`mcbench.pipeline.study_setup.StudySetup.resources` turns into a rule's ``resources:``). A
 local run ignores ``mem_mb`` and ``runtime`` unless ``--resources`` limits them; the SLURM
 executor turns them into ``--mem`` and ``-t`` (``profiles/slurm``).
 

@@ -82,6 +82,15 @@ class CasePlan:
     def rendered_scenes(self) -> list[str]:
         return [scene for scene in self.scenes if scene not in self.render_folders]
 
+    @property
+    def case_list(self) -> list[dict]:
+        """Every case as ``{"scene": ..., "spp": ...}``, scene-major (a rule's params)."""
+        return [{"scene": scene, "spp": spp} for scene, spp in self.pairs]
+
+    def chunk_spp(self, scene: str) -> int:
+        """The samples of one reference chunk of a rendered scene."""
+        return self.reference_spp[scene] // self.reference_chunks
+
 
 @dataclass(frozen=True)
 class RankingPlan:
@@ -101,6 +110,28 @@ class RankingPlan:
     def entries(self) -> list[str]:
         """A case's entries: the noisy input, then every candidate."""
         return [NOISY, *self.candidates]
+
+    @property
+    def ranked_entries(self) -> list[str]:
+        """The entries of the ranking tables: the noisy input, then the ranked pool."""
+        return [NOISY, *self.ranked]
+
+    @property
+    def table_order(self) -> list[str] | None:
+        """The ranking tables' row order: with the paper's pool, the pool then the noisy input
+        (ID order); else None (by score)."""
+        return [*self.ranked, NOISY] if self.pool_study else None
+
+    @property
+    def speed_metric(self) -> str:
+        """The speed-against-error figure's metric: relMSE (the paper's), else the first metric."""
+        return "relmse" if "relmse" in self.metrics else self.metrics[0]
+
+    @property
+    def progressive_metrics(self) -> list[str]:
+        """The metrics of progressive denoising's tables: relMSE and SMAPE where configured, else
+        the first metric."""
+        return [m for m in ("relmse", "smape") if m in self.metrics] or list(self.metrics[:1])
 
 
 @dataclass(frozen=True)
@@ -205,6 +236,19 @@ class StudyPlan:
         return {"scene": scene, "spp": spp, "render": paths.render(scene, spp), "reference": paths.reference(scene),
                 "metrics": list(self.ranking.metrics), "methods": methods, "entries": entries,
                 "outputs": {key: str(outputs[key]) for key in ("metrics", "viewer", "record")}}
+
+    @property
+    def method_inputs(self) -> dict[str, list[str]]:
+        """Each method's input methods (method name -> names)."""
+        return {name: list(m.inputs) for name, m in self.methods.items()}
+
+    @property
+    def comparison_methods(self) -> dict[str, dict]:
+        """The method table the comparison tables read: each method's module, kind, inputs,
+        params, label and comparison role."""
+        return {name: {key: m.as_dict()[key] for key in ("module", "kind", "inputs", "params", "label",
+                                                         "comparison_role")}
+                for name, m in self.methods.items()}
 
     def weights_names(self) -> list[str]:
         """The weights files the methods read (names in the weights folder), each once, in plan order."""

@@ -268,23 +268,24 @@ def job_threads_restored(monkeypatch):
     numba.set_num_threads(threads)
 
 
-def test_rule_script_runs_each_step_without_snakemake(tmp_path, job_threads_restored):
+def test_rule_scripts_run_each_step_without_snakemake(tmp_path, job_threads_restored):
+    """Each comparison rule's script (workflow/scripts/<rule>.py) runs its step on a stand-in
+    ``snakemake`` object."""
     metrics_csv, timings_csv = write_inputs(tmp_path)
     labels = {name: s["label"] for name, s in METHODS.items()}
     params = SimpleNamespace(methods=METHODS, labels=labels)
-    fake = SimpleNamespace(rule="comparison_ablations",
-                           input=SimpleNamespace(metrics=metrics_csv, timings=timings_csv),
+    fake = SimpleNamespace(input=SimpleNamespace(metrics=metrics_csv, timings=timings_csv),
                            output=SimpleNamespace(csv=str(tmp_path / "a.csv"), md=str(tmp_path / "a.md")),
                            params=params, wildcards=SimpleNamespace(), log=[str(tmp_path / "a.log")], threads=1)
-    runpy.run_path(str(ROOT / "workflow/scripts/comparison_tables.py"), init_globals={"snakemake": fake})
+    runpy.run_path(str(ROOT / "workflow/scripts/comparison_ablations.py"), init_globals={"snakemake": fake})
     assert "naive averaging (5.2.5)" in (tmp_path / "a.md").read_text()
-    fake.rule, fake.wildcards = "comparison_ranking", SimpleNamespace(metric="relmse")
+    fake.wildcards = SimpleNamespace(metric="relmse")
     fake.output = SimpleNamespace(csv=str(tmp_path / "r.csv"), md=str(tmp_path / "r.md"))
-    runpy.run_path(str(ROOT / "workflow/scripts/comparison_tables.py"), init_globals={"snakemake": fake})
+    runpy.run_path(str(ROOT / "workflow/scripts/comparison_ranking.py"), init_globals={"snakemake": fake})
     assert "[one-hot post]" in (tmp_path / "r.md").read_text()
-    fake.rule = "no_such_rule"
-    with pytest.raises(ValueError, match="no step for rule 'no_such_rule'"):
-        runpy.run_path(str(ROOT / "workflow/scripts/comparison_tables.py"), init_globals={"snakemake": fake})
+    fake.output = SimpleNamespace(**{f"table{k}_{ext}": str(tmp_path / f"t{k}.{ext}") for k in (1, 2) for ext in ("csv", "md")})
+    runpy.run_path(str(ROOT / "workflow/scripts/comparison_onehot.py"), init_globals={"snakemake": fake})
+    assert (tmp_path / "t1.md").read_text() and (tmp_path / "t2.csv").read_text()
 
 
 def test_ensemble_defaults_are_the_ensembles_own():

@@ -11,15 +11,15 @@ rule export_study:
     input:
         rules.all.input,
     output:
-        f"{RESULTS}/bundle/study.tar",
+        "results/bundle/study.tar",
     params:
-        config_digest=config_digest(config),
+        config_digest=STUDY.digest,
     threads: 1
     resources:
-        **job_resources("export_study"),
+        **STUDY.resources("export_study"),
     conda:
         "../envs/mcbench.yaml"
     log:
-        f"{RESULTS}/logs/export_study.log",
+        "results/logs/export_study.log",
     script:
         "../scripts/export_study.py"

@@ -2,9 +2,6 @@
 # against one-hot selection), the ablation table and the comparison methods' own ranking.
 # Which method compares with which is read from the method table (module docstring).
 
-COMPARISON_METHODS = {name: {key: spec.as_dict()[key] for key in ("module", "kind", "inputs", "params", "label",
-                                                                       "comparison_role")}
-                      for name, spec in METHODS.items()}
 
 
 rule comparison_onehot:
@@ -13,34 +10,34 @@ rule comparison_onehot:
         metrics=rules.gather_metrics.output[0],
     output:
         table1_csv=report(
-            f"{RESULTS}/tables/comparisons/table1_{{metric}}.csv",
+            "results/tables/comparisons/table1_{metric}.csv",
             caption="../report/comparisons_onehot.rst",
             category="Comparisons",
             subcategory="Tables 1-2: one-hot selection",
             labels={"metric": "{metric}", "table": "Table 1 (pre-filtering SBF, NFOR)"},
         ),
-        table1_md=f"{RESULTS}/tables/comparisons/table1_{{metric}}.md",
+        table1_md="results/tables/comparisons/table1_{metric}.md",
         table2_csv=report(
-            f"{RESULTS}/tables/comparisons/table2_{{metric}}.csv",
+            "results/tables/comparisons/table2_{metric}.csv",
             caption="../report/comparisons_onehot.rst",
             category="Comparisons",
             subcategory="Tables 1-2: one-hot selection",
             labels={"metric": "{metric}", "table": "Table 2 (post-filtering)"},
         ),
-        table2_md=f"{RESULTS}/tables/comparisons/table2_{{metric}}.md",
+        table2_md="results/tables/comparisons/table2_{metric}.md",
     params:
-        metric_label=lambda wildcards: METRIC_LABELS[wildcards.metric],
-        methods=COMPARISON_METHODS,
-        labels=LABELS,
+        metric_label=lambda wildcards: STUDY.metric_labels[wildcards.metric],
+        methods=PLAN.comparison_methods,
+        labels=dict(PLAN.ranking.labels),
     threads: 1
     resources:
-        **job_resources("comparison_onehot"),
+        **STUDY.resources("comparison_onehot"),
     conda:
         "../envs/mcbench.yaml"
     log:
-        f"{RESULTS}/logs/comparison_onehot_{{metric}}.log",
+        "results/logs/comparison_onehot_{metric}.log",
     script:
-        "../scripts/comparison_tables.py"
+        "../scripts/comparison_onehot.py"
 
 
 rule comparison_ablations:
@@ -50,25 +47,25 @@ rule comparison_ablations:
         timings=rules.gather_timings.output[0],
     output:
         csv=report(
-            f"{RESULTS}/tables/comparisons/ablations.csv",
+            "results/tables/comparisons/ablations.csv",
             caption="../report/comparisons_ablations.rst",
             category="Comparisons",
             subcategory="Ablations",
             labels={"table": "ablations", "metric": "relmse, dssim"},
         ),
-        md=f"{RESULTS}/tables/comparisons/ablations.md",
+        md="results/tables/comparisons/ablations.md",
     params:
-        methods=COMPARISON_METHODS,
-        labels=LABELS,
+        methods=PLAN.comparison_methods,
+        labels=dict(PLAN.ranking.labels),
     threads: 1
     resources:
-        **job_resources("comparison_ablations"),
+        **STUDY.resources("comparison_ablations"),
     conda:
         "../envs/mcbench.yaml"
     log:
-        f"{RESULTS}/logs/comparison_ablations.log",
+        "results/logs/comparison_ablations.log",
     script:
-        "../scripts/comparison_tables.py"
+        "../scripts/comparison_ablations.py"
 
 
 rule comparison_ranking:
@@ -77,23 +74,23 @@ rule comparison_ranking:
         metrics=rules.gather_metrics.output[0],
     output:
         csv=report(
-            f"{RESULTS}/tables/comparisons/ranking_{{metric}}.csv",
+            "results/tables/comparisons/ranking_{metric}.csv",
             caption="../report/comparisons_ranking.rst",
             category="Comparisons",
             subcategory="Comparison rankings",
             labels={"metric": "{metric}", "table": "comparison methods beside their ensembles"},
         ),
-        md=f"{RESULTS}/tables/comparisons/ranking_{{metric}}.md",
+        md="results/tables/comparisons/ranking_{metric}.md",
     params:
-        metric_label=lambda wildcards: METRIC_LABELS[wildcards.metric],
-        methods=COMPARISON_METHODS,
-        labels=LABELS,
+        metric_label=lambda wildcards: STUDY.metric_labels[wildcards.metric],
+        methods=PLAN.comparison_methods,
+        labels=dict(PLAN.ranking.labels),
     threads: 1
     resources:
-        **job_resources("comparison_ranking"),
+        **STUDY.resources("comparison_ranking"),
     conda:
         "../envs/mcbench.yaml"
     log:
-        f"{RESULTS}/logs/comparison_ranking_{{metric}}.log",
+        "results/logs/comparison_ranking_{metric}.log",
     script:
-        "../scripts/comparison_tables.py"
+        "../scripts/comparison_ranking.py"

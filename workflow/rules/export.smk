@@ -9,17 +9,17 @@ rule export_case:
         render=rules.render_noisy.output[0],
         reference=rules.merge_reference.output[0],
     output:
-        directory(f"{RESULTS}/export/{{scene}}/spp{{spp}}"),
+        directory("results/export/{scene}/spp{spp}"),
     params:
-        candidates=CANDIDATES,
-        candidate_paths=case_outputs,
+        candidates=list(PLAN.ranking.candidates),
+        candidate_paths=get_case_outputs,
     threads: 1
     resources:
-        **job_resources("export_case"),
+        **STUDY.resources("export_case"),
     conda:
         "../envs/mcbench.yaml"
     log:
-        f"{RESULTS}/logs/export/{{scene}}_spp{{spp}}.log",
+        "results/logs/export/{scene}_spp{spp}.log",
     script:
         "../scripts/export_case.py"
 
@@ -27,4 +27,4 @@ rule export_case:
 rule export_cases:
     localrule: True
     input:
-        expand(rules.export_case.output[0], scene=SCENES, spp=SPPS),
+        expand(rules.export_case.output[0], scene=PLAN.cases.scenes, spp=PLAN.cases.spps),

@@ -1,12 +1,7 @@
 # Figures of the report (mcbench.analysis.figures): error against spp per scene for each metric, and
 # each method's speed against its error.
 
-# the speed-against-error figure's metric: relMSE (the paper's), or the first metric configured
-SPEED_METRIC = "relmse" if "relmse" in METRIC_NAMES else METRIC_NAMES[0]
-# the error curves' lines: with the pool, its bases and the paper's recommended ensembles (40
-# lines would hide each other; the study's figures draw the ensembles the data recommends),
-# otherwise every ranked candidate
-CURVES = ([name for name in curve_candidates(paper_recommended()) if name in RANKED] if POOL_STUDY else RANKED)
+# The speed figure's metric: PLAN.ranking.speed_metric; the curves' lines: STUDY.curve_entries.
 
 
 rule error_curves:
@@ -15,25 +10,25 @@ rule error_curves:
         metrics=rules.gather_metrics.output[0],
     output:
         report(
-            f"{RESULTS}/figures/error_{{metric}}.png",
+            "results/figures/error_{metric}.png",
             caption="../report/error_curves.rst",
             category="Figures",
             subcategory="Error against spp",
             labels={"metric": "{metric}", "figure": "error against spp, per scene"},
         ),
     params:
-        metric_label=lambda wildcards: METRIC_LABELS[wildcards.metric],
-        labels=LABELS,
-        candidates=[NOISY] + CURVES,
+        metric_label=lambda wildcards: STUDY.metric_labels[wildcards.metric],
+        labels=dict(PLAN.ranking.labels),
+        candidates=STUDY.curve_entries,
     threads: 1
     resources:
-        **job_resources("error_curves"),
+        **STUDY.resources("error_curves"),
     conda:
         "../envs/mcbench.yaml"
     log:
-        f"{RESULTS}/logs/figures/error_{{metric}}.log",
+        "results/logs/figures/error_{metric}.log",
     script:
-        "../scripts/figures.py"
+        "../scripts/error_curves.py"
 
 
 rule speed_error:
@@ -43,23 +38,23 @@ rule speed_error:
         timings=rules.gather_timings.output[0],
     output:
         report(
-            f"{RESULTS}/figures/speed_error.png",
+            "results/figures/speed_error.png",
             caption="../report/speed_error.rst",
             category="Figures",
             subcategory="Speed against error",
-            labels={"metric": SPEED_METRIC, "figure": "speed against error"},
+            labels={"metric": PLAN.ranking.speed_metric, "figure": "speed against error"},
         ),
     params:
-        labels=LABELS,
-        inputs={name: list(spec.inputs) for name, spec in METHODS.items()},
-        metric=SPEED_METRIC,
-        metric_label=METRIC_LABELS[SPEED_METRIC],
+        metric_label=STUDY.metric_labels[PLAN.ranking.speed_metric],
+        labels=dict(PLAN.ranking.labels),
+        inputs=PLAN.method_inputs,
+        metric=PLAN.ranking.speed_metric,
     threads: 1
     resources:
-        **job_resources("speed_error"),
+        **STUDY.resources("speed_error"),
     conda:
         "../envs/mcbench.yaml"
     log:
-        f"{RESULTS}/logs/figures/speed_error.log",
+        "results/logs/figures/speed_error.log",
     script:
-        "../scripts/figures.py"
+        "../scripts/speed_error.py"

@@ -18,16 +18,16 @@ rule run_case:
         render=rules.render_noisy.output[0],
         reference=rules.merge_reference.output[0],
     output:
-        metrics=f"{RESULTS}/metrics/{{scene}}/spp{{spp}}.csv",
-        viewer=directory(f"{RESULTS}/viewer_cases/{{scene}}/spp{{spp}}"),
-        record=f"{RESULTS}/cases/{{scene}}/spp{{spp}}.json",
+        metrics="results/metrics/{scene}/spp{spp}.csv",
+        viewer=directory("results/viewer_cases/{scene}/spp{spp}"),
+        record="results/cases/{scene}/spp{spp}.json",
     params:
-        plan=case_plan,
+        plan=get_case_plan,
     threads: 1
     resources:
-        **case_resources(),
+        **STUDY.case_resources(),
     log:
-        f"{RESULTS}/logs/cases/{{scene}}/spp{{spp}}.log",
+        "results/logs/cases/{scene}/spp{spp}.log",
     run:
         run_in_pool("mcbench.pipeline.cases:run_case", case_job(wildcards, output), log=log[0],
                     threads=threads)

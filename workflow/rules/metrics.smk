@@ -7,26 +7,26 @@
 rule gather_metrics:
     localrule: True
     input:
-        all_case_metrics,
+        get_case_files("metrics"),
     output:
         report(
-            f"{RESULTS}/metrics.csv",
+            "results/metrics.csv",
             caption="../report/metrics.rst",
             category="Data",
             subcategory="Errors",
             labels={"table": "metrics.csv", "rows": "scene, spp, candidate, metric"},
         ),
     params:
-        candidates=[NOISY] + CANDIDATES,
-        metrics=METRIC_NAMES,
-        cases=[{"scene": scene, "spp": spp} for scene in SCENES for spp in SPPS],
+        candidates=PLAN.ranking.entries,
+        metrics=list(PLAN.ranking.metrics),
+        cases=PLAN.cases.case_list,
     threads: 1
     resources:
-        **job_resources("gather_metrics"),
+        **STUDY.resources("gather_metrics"),
     conda:
         "../envs/mcbench.yaml"
     log:
-        f"{RESULTS}/logs/gather_metrics.log",
+        "results/logs/gather_metrics.log",
     script:
         "../scripts/gather_metrics.py"
 
@@ -34,24 +34,24 @@ rule gather_metrics:
 rule gather_timings:
     localrule: True
     input:
-        all_case_records,
+        get_case_files("record"),
     output:
         report(
-            f"{RESULTS}/timings.csv",
+            "results/timings.csv",
             caption="../report/timings.rst",
             category="Data",
             subcategory="Timings",
             labels={"table": "timings.csv", "rows": "scene, spp, method"},
         ),
     params:
-        candidates=CANDIDATES,
-        cases=[{"scene": scene, "spp": spp} for scene in SCENES for spp in SPPS],
+        candidates=list(PLAN.ranking.candidates),
+        cases=PLAN.cases.case_list,
     threads: 1
     resources:
-        **job_resources("gather_timings"),
+        **STUDY.resources("gather_timings"),
     conda:
         "../envs/mcbench.yaml"
     log:
-        f"{RESULTS}/logs/gather_timings.log",
+        "results/logs/gather_timings.log",
     script:
         "../scripts/gather_timings.py"

@@ -4,12 +4,8 @@
 # per-spp errors and added time beside each entry's input, and one scene rendered up to
 # progressive_curve.spp (8192 by default) with its base, progressive and noisy curves.
 
-PROGRESSIVE_DIR = f"{RESULTS}/tables/progressive"
-PROGRESSIVE_CURVE = config["progressive_curve"]
-# the curve's scene: progressive_curve.scene, or the config's first scene that Mitsuba renders
-# when null (cornell_box), and its downscale: checked by the plan
-PROGRESSIVE_SCENE = PLAN.side.progressive_scene
-PROGRESSIVE_DOWNSCALE = PLAN.side.progressive_downscale
+# The curve's scene: progressive_curve.scene, or the config's first scene that Mitsuba renders
+# when null (cornell_box), and its downscale: in the plan (PLAN.side).
 
 
 rule progressive_tables:
@@ -19,73 +15,73 @@ rule progressive_tables:
         timings=rules.gather_timings.output[0],
     output:
         consistency=report(
-            f"{PROGRESSIVE_DIR}/consistency.md",
+            "results/tables/progressive/consistency.md",
             caption="../report/progressive.rst",
             category="Progressive denoising",
             subcategory="Tables",
             labels={"table": "consistency against the noisy input"},
         ),
-        consistency_csv=f"{PROGRESSIVE_DIR}/consistency.csv",
+        consistency_csv="results/tables/progressive/consistency.csv",
         per_spp=report(
-            f"{PROGRESSIVE_DIR}/per_spp.md",
+            "results/tables/progressive/per_spp.md",
             caption="../report/progressive.rst",
             category="Progressive denoising",
             subcategory="Tables",
             labels={"table": "errors and added time per spp"},
         ),
-        per_spp_csv=f"{PROGRESSIVE_DIR}/per_spp.csv",
+        per_spp_csv="results/tables/progressive/per_spp.csv",
     params:
-        pairs=PROGRESSIVE,
-        labels=LABELS,
-        metrics=[m for m in ("relmse", "smape") if m in METRIC_NAMES] or METRIC_NAMES[:1],
+        pairs=dict(PLAN.side.progressive),
+        labels=dict(PLAN.ranking.labels),
+        metrics=[m for m in ("relmse", "smape") if m in list(PLAN.ranking.metrics)] or list(PLAN.ranking.metrics)[:1],
     threads: 1
     resources:
-        **job_resources("progressive_tables"),
+        **STUDY.resources("progressive_tables"),
     conda:
         "../envs/mcbench.yaml"
     log:
-        f"{RESULTS}/logs/progressive_tables.log",
+        "results/logs/progressive_tables.log",
     script:
-        "../scripts/progressive_study.py"
+        "../scripts/progressive_tables.py"
 
 
 rule progressive_curve:
     input:
         reference=rules.merge_reference.output[0],
     output:
-        table=f"{RESULTS}/progressive/{{scene}}/curve.csv",
+        table="results/progressive/{scene}/curve.csv",
         markdown=report(
-            f"{RESULTS}/progressive/{{scene}}/curve.md",
+            "results/progressive/{scene}/curve.md",
             caption="../report/progressive_curve.rst",
             category="Progressive denoising",
             subcategory="Consistency up to high spp",
             labels={"scene": "{scene}", "figure": "table"},
         ),
         figure=report(
-            f"{RESULTS}/progressive/{{scene}}/curve.png",
+            "results/progressive/{scene}/curve.png",
             caption="../report/progressive_curve.rst",
             category="Progressive denoising",
             subcategory="Consistency up to high spp",
             labels={"scene": "{scene}", "figure": "error against spp"},
         ),
     params:
-        spp=list(PROGRESSIVE_CURVE["spp"]),
-        base=PROGRESSIVE_CURVE["base"],
-        divergence=PROGRESSIVE_CURVE["divergence"],
-        downscale=PROGRESSIVE_DOWNSCALE,
+        spp=list(config["progressive_curve"]["spp"]),
+        base=config["progressive_curve"]["base"],
+        divergence=config["progressive_curve"]["divergence"],
+        downscale=PLAN.side.progressive_downscale,
         resolution=config["resolution"],
         variant=config["variant"],
-        **feature_params(),
+        **STUDY.feature_params,
         seed=config["seed"],
-        weights_dir=WEIGHTS_DIR,
+        weights_dir=STUDY.weights_dir,
     threads: 1
     resources:
-        **job_resources("progressive_curve"),
+        **STUDY.resources("progressive_curve"),
     conda:
         "../envs/mcbench.yaml"
     log:
-        f"{RESULTS}/logs/progressive/{{scene}}.log",
+        "results/logs/progressive/{scene}.log",
     benchmark:
-        f"{RESULTS}/benchmarks/progressive/{{scene}}.tsv"
+        "results/benchmarks/progressive/{scene}.tsv"
     script:
-        "../scripts/progressive_study.py"
+        "../scripts/progressive_curve.py"

@@ -8,26 +8,24 @@
 # finished study plans nothing, and a new commit alone does not rerun it (the commit it names is
 # the one of the run that last wrote the tables).
 
-MANIFEST = f"{RESULTS}/manifest.json"
-
 
 rule provenance_manifest:
     localrule: True
     input:
         metrics=rules.gather_metrics.output[0],
         timings=rules.gather_timings.output[0],
-        rankings=expand(rules.ranking_table.output.csv, metric=METRIC_NAMES),
-        extras=expand(rules.extras_table.output.csv, metric=METRIC_NAMES),
+        rankings=expand(rules.ranking_table.output.csv, metric=list(PLAN.ranking.metrics)),
+        extras=expand(rules.extras_table.output.csv, metric=list(PLAN.ranking.metrics)),
     output:
         json=report(
-            MANIFEST,
+            "results/manifest.json",
             caption="../report/provenance.rst",
             category="Data",
             subcategory="Provenance",
             labels={"file": "manifest.json"},
         ),
         md=report(
-            f"{RESULTS}/manifest.md",
+            "results/manifest.md",
             caption="../report/provenance.rst",
             category="Data",
             subcategory="Provenance",
@@ -36,13 +34,13 @@ rule provenance_manifest:
     params:
         # a params entry: a changed config reruns the rule (the script reads the config itself,
         # and the checkout from the script's own folder: a moved checkout reruns nothing)
-        config_digest=config_digest(config),
+        config_digest=STUDY.digest,
     threads: 1
     resources:
-        **job_resources("provenance_manifest"),
+        **STUDY.resources("provenance_manifest"),
     conda:
         "../envs/mcbench.yaml"
     log:
-        f"{RESULTS}/logs/provenance_manifest.log",
+        "results/logs/provenance_manifest.log",
     script:
         "../scripts/provenance.py"

@@ -5,30 +5,30 @@ rule ranking_table:
     localrule: True
     input:
         rules.gather_metrics.output[0],
-        scenes=f"{RESULTS}/tables/scenes.csv",
+        scenes="results/tables/scenes.csv",
     output:
         csv=report(
-            f"{RESULTS}/tables/ranking_{{metric}}.csv",
+            "results/tables/ranking_{metric}.csv",
             caption="../report/ranking.rst",
             category="Rankings",
             subcategory="Score-and-rank tables",
             labels={"metric": "{metric}", "table": "score and rank per spp"},
         ),
-        md=f"{RESULTS}/tables/ranking_{{metric}}.md",
-        tex=f"{RESULTS}/tables/ranking_{{metric}}.tex",
+        md="results/tables/ranking_{metric}.md",
+        tex="results/tables/ranking_{metric}.tex",
     params:
-        metric_label=lambda wildcards: METRIC_LABELS[wildcards.metric],
-        candidates=[NOISY] + RANKED,
-        labels=LABELS,
-        order=RANKED + [NOISY] if POOL_STUDY else None,
-        note=POOL_NOTE,
+        metric_label=lambda wildcards: STUDY.metric_labels[wildcards.metric],
+        candidates=PLAN.ranking.ranked_entries,
+        labels=dict(PLAN.ranking.labels),
+        order=PLAN.ranking.table_order,
+        note=PLAN.ranking.pool_note,
     threads: 1
     resources:
-        **job_resources("ranking_table"),
+        **STUDY.resources("ranking_table"),
     conda:
         "../envs/mcbench.yaml"
     log:
-        f"{RESULTS}/logs/ranking_{{metric}}.log",
+        "results/logs/ranking_{metric}.log",
     script:
         "../scripts/ranking_table.py"
 
@@ -38,59 +38,59 @@ rule extras_table:
     localrule: True
     input:
         rules.gather_metrics.output[0],
-        scenes=f"{RESULTS}/tables/scenes.csv",
+        scenes="results/tables/scenes.csv",
     output:
         csv=report(
-            f"{RESULTS}/tables/extras_{{metric}}.csv",
+            "results/tables/extras_{metric}.csv",
             caption="../report/extras.rst",
             category="Extra methods",
             subcategory="Scored alone against the pool",
             labels={"metric": "{metric}", "table": "extra methods, each added alone to the pool"},
         ),
-        md=f"{RESULTS}/tables/extras_{{metric}}.md",
-        tex=f"{RESULTS}/tables/extras_{{metric}}.tex",
+        md="results/tables/extras_{metric}.md",
+        tex="results/tables/extras_{metric}.tex",
     params:
-        metric_label=lambda wildcards: METRIC_LABELS[wildcards.metric],
-        pool=[NOISY] + RANKED,
-        extras=EXTRAS,
-        labels=LABELS,
+        metric_label=lambda wildcards: STUDY.metric_labels[wildcards.metric],
+        pool=PLAN.ranking.ranked_entries,
+        extras=list(PLAN.ranking.extras),
+        labels=dict(PLAN.ranking.labels),
     threads: 1
     resources:
-        **job_resources("extras_table"),
+        **STUDY.resources("extras_table"),
     conda:
         "../envs/mcbench.yaml"
     log:
-        f"{RESULTS}/logs/extras_{{metric}}.log",
+        "results/logs/extras_{metric}.log",
     script:
-        "../scripts/ranking_table.py"
+        "../scripts/extras_table.py"
 
 
 rule scene_table:
     localrule: True
     input:
-        unpack(render_cost_records),
+        unpack(get_render_cost_records),
         metrics=rules.gather_metrics.output[0],
-        references=list(reference_paths().values()),
+        references=list(get_references().values()),
     output:
         csv=report(
-            f"{RESULTS}/tables/scenes.csv",
+            "results/tables/scenes.csv",
             caption="../report/scenes.rst",
             category="Scenes",
             subcategory="Scene table",
             labels={"table": "scenes", "metric": "relmse"},
         ),
-        md=f"{RESULTS}/tables/scenes.md",
-        tex=f"{RESULTS}/tables/scenes.tex",
+        md="results/tables/scenes.md",
+        tex="results/tables/scenes.tex",
     params:
-        references=reference_paths(),
-        reference_spp=REFERENCE_SPP,
+        references=get_references(),
+        reference_spp=dict(PLAN.cases.reference_spp),
     threads: 1
     resources:
-        **job_resources("scene_table"),
+        **STUDY.resources("scene_table"),
     conda:
         "../envs/mcbench.yaml"
     log:
-        f"{RESULTS}/logs/scene_table.log",
+        "results/logs/scene_table.log",
     script:
         "../scripts/scene_table.py"
 
@@ -98,23 +98,23 @@ rule scene_table:
 rule gallery:
     localrule: True
     input:
-        list(reference_paths().values()),
+        list(get_references().values()),
     output:
         report(
-            f"{RESULTS}/figures/gallery.png",
+            "results/figures/gallery.png",
             caption="../report/gallery.rst",
             category="Scenes",
             subcategory="Gallery",
             labels={"figure": "references", "scene": "all"},
         ),
     params:
-        references=reference_paths(),
+        references=get_references(),
     threads: 1
     resources:
-        **job_resources("gallery"),
+        **STUDY.resources("gallery"),
     conda:
         "../envs/mcbench.yaml"
     log:
-        f"{RESULTS}/logs/gallery.log",
+        "results/logs/gallery.log",
     script:
         "../scripts/gallery.py"

@@ -4,64 +4,64 @@
 
 rule render_noisy:
     input:
-        imported_case_files,
+        get_imported_case_files,
     output:
-        f"{RESULTS}/renders/{{scene}}/spp{{spp}}.exr",
+        "results/renders/{scene}/spp{spp}.exr",
     params:
         resolution=config["resolution"],
         variant=config["variant"],
-        **feature_params(),
+        **STUDY.feature_params,
         seed=config["seed"],
     threads: config["render_threads"]
     resources:
-        **job_resources("render_noisy"),
+        **STUDY.resources("render_noisy"),
     conda:
         "../envs/mcbench.yaml"
     log:
-        f"{RESULTS}/logs/render_noisy/{{scene}}_spp{{spp}}.log",
+        "results/logs/render_noisy/{scene}_spp{spp}.log",
     benchmark:
-        f"{RESULTS}/benchmarks/render_noisy/{{scene}}_spp{{spp}}.tsv"
+        "results/benchmarks/render_noisy/{scene}_spp{spp}.tsv"
     script:
         "../scripts/render_noisy.py"
 
 
 rule render_reference_chunk:
     output:
-        temp(f"{RESULTS}/references/{{scene}}/chunk{{chunk}}.exr"),
+        temp("results/references/{scene}/chunk{chunk}.exr"),
     params:
-        spp=reference_chunk_spp,
+        spp=lambda wildcards: PLAN.cases.chunk_spp(wildcards.scene),
         resolution=config["resolution"],
         variant=config["variant"],
-        **feature_params(),
+        **STUDY.feature_params,
         seed=config["seed"],
     threads: config["render_threads"]
     resources:
-        **job_resources("render_reference_chunk"),
+        **STUDY.resources("render_reference_chunk"),
     conda:
         "../envs/mcbench.yaml"
     log:
-        f"{RESULTS}/logs/render_reference/{{scene}}_chunk{{chunk}}.log",
+        "results/logs/render_reference/{scene}_chunk{chunk}.log",
     benchmark:
-        f"{RESULTS}/benchmarks/render_reference/{{scene}}_chunk{{chunk}}.tsv"
+        "results/benchmarks/render_reference/{scene}_chunk{chunk}.tsv"
     script:
         "../scripts/render_reference_chunk.py"
 
 
 rule merge_reference:
     input:
-        reference_inputs,
+        get_reference_inputs,
     output:
-        f"{RESULTS}/references/{{scene}}.exr",
+        "results/references/{scene}.exr",
     params:
-        chunks=REFERENCE_CHUNKS,
-        spp=lambda wildcards: REFERENCE_SPP[wildcards.scene],
-        folder=lambda wildcards: str(RENDER_FOLDERS.get(wildcards.scene) or ""),
+        chunks=PLAN.cases.reference_chunks,
+        spp=lambda wildcards: PLAN.cases.reference_spp[wildcards.scene],
+        folder=lambda wildcards: str(PLAN.cases.render_folders.get(wildcards.scene) or ""),
     threads: 1
     resources:
-        **job_resources("merge_reference"),
+        **STUDY.resources("merge_reference"),
     conda:
         "../envs/mcbench.yaml"
     log:
-        f"{RESULTS}/logs/merge_reference/{{scene}}.log",
+        "results/logs/merge_reference/{scene}.log",
     script:
         "../scripts/merge_reference.py"

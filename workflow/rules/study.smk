@@ -4,10 +4,7 @@
 # and DSSIM side by side with a combined rule of ours), the paper's findings with verdicts (finding
 # (b) per size-2 ensemble and member in pair_members), bootstrap intervals, and
 # the study's figures (error and score curves, score against size, speed against score, equal
-# time). Ranked over the pool and the noisy input only (RANKED, common.smk).
-
-STUDY_DIR = f"{RESULTS}/tables/study"
-STUDY_FIGURES_DIR = f"{RESULTS}/figures/study"
+# time). Ranked over the pool and the noisy input only (PLAN.ranking.ranked_entries).
 
 
 rule study_tables:
@@ -18,76 +15,76 @@ rule study_tables:
         manifest=rules.provenance_manifest.output.json,
     output:
         paper=report(
-            f"{STUDY_DIR}/paper_table3.md",
+            "results/tables/study/paper_table3.md",
             caption="../report/study.rst",
             category="Study",
             subcategory="Tables",
             labels={"table": "beside the paper's Table 3"},
         ),
-        paper_csv=f"{STUDY_DIR}/paper_table3.csv",
+        paper_csv="results/tables/study/paper_table3.csv",
         recommendations=report(
-            f"{STUDY_DIR}/recommendations.md",
+            "results/tables/study/recommendations.md",
             caption="../report/study.rst",
             category="Study",
             subcategory="Tables",
             labels={"table": "recommendations"},
         ),
-        recommendations_csv=f"{STUDY_DIR}/recommendations.csv",
+        recommendations_csv="results/tables/study/recommendations.csv",
         recommendations_metrics=report(
-            f"{STUDY_DIR}/recommendations_metrics.md",
+            "results/tables/study/recommendations_metrics.md",
             caption="../report/study.rst",
             category="Study",
             subcategory="Tables",
             labels={"table": "recommendations by relMSE and DSSIM together"},
         ),
-        recommendations_metrics_csv=f"{STUDY_DIR}/recommendations_metrics.csv",
+        recommendations_metrics_csv="results/tables/study/recommendations_metrics.csv",
         findings=report(
-            f"{STUDY_DIR}/findings.md",
+            "results/tables/study/findings.md",
             caption="../report/study.rst",
             category="Study",
             subcategory="Tables",
             labels={"table": "the paper's findings"},
         ),
-        findings_csv=f"{STUDY_DIR}/findings.csv",
+        findings_csv="results/tables/study/findings.csv",
         pair_members=report(
-            f"{STUDY_DIR}/pair_members.md",
+            "results/tables/study/pair_members.md",
             caption="../report/study.rst",
             category="Study",
             subcategory="Tables",
             labels={"table": "finding (b): size-2 ensembles against each member"},
         ),
-        pair_members_csv=f"{STUDY_DIR}/pair_members.csv",
+        pair_members_csv="results/tables/study/pair_members.csv",
         reference_noise=report(
-            f"{STUDY_DIR}/reference_noise.md",
+            "results/tables/study/reference_noise.md",
             caption="../report/study.rst",
             category="Study",
             subcategory="Tables",
             labels={"table": "raw against reference-noise-corrected relMSE"},
         ),
-        reference_noise_csv=f"{STUDY_DIR}/reference_noise.csv",
+        reference_noise_csv="results/tables/study/reference_noise.csv",
         summary=report(
-            f"{STUDY_DIR}/summary.md",
+            "results/tables/study/summary.md",
             caption="../report/study.rst",
             category="Study",
             subcategory="Tables",
             labels={"table": "summary"},
         ),
-        scores_ci=expand(f"{STUDY_DIR}/scores_ci_{{metric}}.csv", metric=METRIC_NAMES),
+        scores_ci=expand("results/tables/study/scores_ci_{metric}.csv", metric=list(PLAN.ranking.metrics)),
     params:
-        metrics=METRIC_NAMES,
-        labels=LABELS,
-        candidates=[NOISY] + RANKED,
+        metrics=list(PLAN.ranking.metrics),
+        labels=dict(PLAN.ranking.labels),
+        candidates=PLAN.ranking.ranked_entries,
         n_resamples=config["study"]["bootstrap"],
         seed=config["study"]["seed"],
     threads: 1
     resources:
-        **job_resources("study_tables"),
+        **STUDY.resources("study_tables"),
     conda:
         "../envs/mcbench.yaml"
     log:
-        f"{RESULTS}/logs/study_tables.log",
+        "results/logs/study_tables.log",
     script:
-        "../scripts/study.py"
+        "../scripts/study_tables.py"
 
 
 rule study_figures:
@@ -96,29 +93,29 @@ rule study_figures:
         metrics=rules.gather_metrics.output[0],
         timings=rules.gather_timings.output[0],
         recommendations=rules.study_tables.output.recommendations_csv,
-        scores_ci=f"{STUDY_DIR}/scores_ci_{{metric}}.csv",
-        renders=expand(rules.render_noisy.output[0], scene=SCENES, spp=SPPS),
+        scores_ci="results/tables/study/scores_ci_{metric}.csv",
+        renders=expand(rules.render_noisy.output[0], scene=PLAN.cases.scenes, spp=PLAN.cases.spps),
     output:
         **{
             key: report(
-                f"{STUDY_FIGURES_DIR}/{key}_{{metric}}.png",
+                f"results/figures/study/{key}_{{metric}}.png",
                 caption="../report/study_figures.rst",
                 category="Study",
                 subcategory="Figures",
                 labels={"metric": "{metric}", "figure": key.replace("_", " ")},
             )
-            for key in STUDY_FIGURE_KEYS
+            for key in STUDY_FIGURES
         },
     params:
-        candidates=[NOISY] + RANKED,
-        labels=LABELS,
-        inputs={name: list(spec.inputs) for name, spec in METHODS.items()},
+        candidates=PLAN.ranking.ranked_entries,
+        labels=dict(PLAN.ranking.labels),
+        inputs=PLAN.method_inputs,
     threads: 1
     resources:
-        **job_resources("study_figures"),
+        **STUDY.resources("study_figures"),
     conda:
         "../envs/mcbench.yaml"
     log:
-        f"{RESULTS}/logs/study_figures_{{metric}}.log",
+        "results/logs/study_figures_{metric}.log",
     script:
-        "../scripts/study.py"
+        "../scripts/study_figures.py"

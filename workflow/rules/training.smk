@@ -8,43 +8,42 @@
 
 rule training_example:
     output:
-        [f"{RESULTS}/training/example_{{seed}}_{k}.exr" for k in range(TRAINING["crops"])],
+        [f"results/training/example_{{seed}}_{k}.exr" for k in range(PLAN.training.settings["crops"])],
     params:
         # the settings one example depends on (fibre_count only says how many scenes exist)
-        settings={key: value for key, value in TRAINING.items() if key != "fibre_count"},
+        settings={key: value for key, value in PLAN.training.settings.items() if key != "fibre_count"},
         variant=config["variant"],
-        **feature_params(),
+        **STUDY.feature_params,
     threads: config["render_threads"]
     resources:
-        **job_resources("training_example"),
+        **STUDY.resources("training_example"),
     conda:
         "../envs/mcbench.yaml"
     log:
-        f"{RESULTS}/logs/training/example_{{seed}}.log",
+        "results/logs/training/example_{seed}.log",
     benchmark:
-        f"{RESULTS}/benchmarks/training/example_{{seed}}.tsv"
+        "results/benchmarks/training/example_{seed}.tsv"
     script:
         "../scripts/training_example.py"
 
 
 rule training_correlated:
     input:
-        lambda wildcards: [rules.training_example.output[k].format(seed=wildcards.seed)
-                           for k in range(COMBINER_TRAINING["crops"])],
+        list(rules.training_example.output)[: PLAN.training.combiner_settings["crops"]],
     output:
-        [f"{RESULTS}/training/correlated/{{base}}/example_{{seed}}_{k}.exr" for k in range(COMBINER_TRAINING["crops"])],
+        [f"results/training/correlated/{{base}}/example_{{seed}}_{k}.exr" for k in range(PLAN.training.combiner_settings["crops"])],
     params:
-        weights=lambda wildcards: weights_digest_of(wildcards.base),
-        weights_dir=WEIGHTS_DIR,
+        weights=lambda wildcards: STUDY.weights_sha256(wildcards.base),
+        weights_dir=STUDY.weights_dir,
     threads: 1
     resources:
-        **job_resources("training_correlated"),
+        **STUDY.resources("training_correlated"),
     conda:
         "../envs/mcbench.yaml"
     log:
-        f"{RESULTS}/logs/training/correlated_{{base}}_{{seed}}.log",
+        "results/logs/training/correlated_{base}_{seed}.log",
     benchmark:
-        f"{RESULTS}/benchmarks/training/correlated_{{base}}_{{seed}}.tsv"
+        "results/benchmarks/training/correlated_{base}_{seed}.tsv"
     script:
         "../scripts/training_correlated.py"
 
@@ -52,42 +51,43 @@ rule training_correlated:
 rule training_data:
     localrule: True
     input:
-        training_crop_files(),
+        get_training_crops(),
     default_target: False
 
 
 rule train_network:
     input:
-        unpack(train_network_inputs),
+        unpack(get_train_inputs),
     output:
-        weights=f"{WEIGHTS_DIR}/{{network}}.pt",
-        record=f"{WEIGHTS_DIR}/{{network}}.json",
+        weights=f"{STUDY.weights_dir}/{{network}}.pt",
+        record=f"{STUDY.weights_dir}/{{network}}.json",
     params:
-        overrides=lambda wildcards: TRAINING_OVERRIDES.get(wildcards.network, {}),
-        checkpoint=f"{RESULTS}/training/checkpoints/{{network}}.ckpt",
+        overrides=lambda wildcards: PLAN.training.overrides.get(wildcards.network, {}),
+        checkpoint="results/training/checkpoints/{network}.ckpt",
         weights_dir=lambda wildcards, output: os.path.dirname(output.weights),
     wildcard_constraints:
-        network="|".join(NETWORKS),
+        network="|".join(PLAN.training.networks),
     # the networks train with 2 torch threads (mcbench.nn.train's default "threads")
     threads: 2
     resources:
-        **job_resources("train_network"),
+        **STUDY.resources("train_network"),
     conda:
         "../envs/mcbench.yaml"
     log:
-        f"{RESULTS}/logs/training/train_{{network}}.log",
+        "results/logs/training/train_{network}.log",
     benchmark:
-        f"{RESULTS}/benchmarks/training/train_{{network}}.tsv"
+        "results/benchmarks/training/train_{network}.tsv"
     script:
         "../scripts/train_network.py"
 
 
-for _network in NETWORKS:
+for _network in PLAN.training.networks:
 
     rule:
         name:
             f"train_{_network}"
         localrule: True
         input:
-            missing_weights(_network),
+            # its weights while they are missing (looked for when the DAG is built, not parsed)
+            lambda wildcards, network=_network: STUDY.missing_weights(network),
         default_target: False

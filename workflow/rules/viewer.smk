@@ -5,18 +5,16 @@
 # the page (workflow/report/viewer/) and every case folder into results/viewer with data.js,
 # the manifest holding each case's numbers from metrics.csv.
 
-# The page's static files (copied as they are; editing one rebuilds only the `viewer` job).
-VIEWER_PAGE = [f"{workflow.basedir}/workflow/report/viewer/{name}" for name in ("index.html", "viewer.js", "viewer.css")]
-
 
 rule viewer:
     input:
         metrics=rules.gather_metrics.output[0],
-        cases=expand(rules.run_case.output.viewer, scene=SCENES, spp=SPPS),
-        page=VIEWER_PAGE,
+        cases=expand(rules.run_case.output.viewer, scene=PLAN.cases.scenes, spp=PLAN.cases.spps),
+        # the page's static files (copied as they are; editing one reruns only this job)
+        page=multiext(f"{workflow.basedir}/workflow/report/viewer/", "index.html", "viewer.js", "viewer.css"),
     output:
         report(
-            directory(f"{RESULTS}/viewer"),
+            directory("results/viewer"),
             htmlindex="index.html",
             category="Images",
             subcategory="Image viewer",
@@ -24,19 +22,19 @@ rule viewer:
             caption="../report/viewer.rst",
         ),
     params:
-        cases=[{"scene": scene, "spp": spp} for scene in SCENES for spp in SPPS],  # the order of input.cases
-        candidates=CANDIDATES,
-        labels=LABELS,
-        metrics=METRIC_NAMES,
+        cases=PLAN.cases.case_list,  # the order of input.cases
+        candidates=list(PLAN.ranking.candidates),
+        labels=dict(PLAN.ranking.labels),
+        metrics=list(PLAN.ranking.metrics),
         static_dir=lambda wildcards, input: str(Path(input.page[0]).parent),
     threads: 1
     resources:
-        **job_resources("viewer"),
+        **STUDY.resources("viewer"),
     conda:
         "../envs/mcbench.yaml"
     log:
-        f"{RESULTS}/logs/viewer.log",
+        "results/logs/viewer.log",
     benchmark:
-        f"{RESULTS}/benchmarks/viewer.tsv"
+        "results/benchmarks/viewer.tsv"
     script:
         "../scripts/viewer.py"

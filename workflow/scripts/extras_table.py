@@ -1,0 +1,12 @@
+from mcbench.pipeline.threads import limit_threads
+
+limit_threads(snakemake.threads)  # before any heavy import (numba, torch, OpenBLAS, OIDN read it)  # noqa: F821
+
+from mcbench.pipeline.logs import run_logged  # noqa: E402
+from mcbench.pipeline.rankings import write_extras_rankings  # noqa: E402
+
+# rule extras_table of workflow/rules/rankings.smk
+run_logged(snakemake.log[0], write_extras_rankings, snakemake.input[0], snakemake.wildcards.metric,
+           snakemake.output.csv, snakemake.output.md, pool=list(snakemake.params.pool),
+           extras=list(snakemake.params.extras), labels=dict(snakemake.params.labels),
+           tex_path=snakemake.output.tex, scenes_csv=snakemake.input.scenes)
