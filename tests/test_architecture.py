@@ -103,7 +103,7 @@ def lint(root: Path) -> tuple[set[str], str]:
 
 def unit_of(module: str) -> str:
     """The package of the declared graph that ``module`` belongs to: its layer for a module of a
-    layer (``mcbench.nn.data`` -> ``nn``), its plugin package (``methods.kpcn`` -> ``methods``),
+    layer (``mcbench.nn.crops`` -> ``nn``), its plugin package (``methods.kpcn`` -> ``methods``),
     ``mcbench`` for the package's top-level modules, else its top-level name (a third party)."""
     parts = module.split(".")
     if parts[0] == PACKAGE and len(parts) > 1 and (ROOT / PACKAGE / parts[1] / "__init__.py").is_file():
@@ -508,7 +508,7 @@ def test_checkers_on_a_minimal_synthetic_tree(tmp_path):
     write(tmp_path / "scenes/s.py", "import importlib\nimportlib.import_module('mcbench.pipeline.x')\n"
                                     "__import__('numpy')\n")
     write(tmp_path / "workflow/scripts/run.py", "from mcbench import BenchError\nfrom mcbench.low.a import f\n"
-                                                "from mcbench.pipeline import render\n")
+                                                "from mcbench.pipeline import rendering\n")
 
     assert package_cycles(tmp_path) == [
         "cycle through package mcbench.pipeline: mcbench.pipeline -> mcbench.pipeline.step -> mcbench.pipeline"]
@@ -572,8 +572,8 @@ BREAKAGES = {
     "new top-level module": (
         {"mcbench/helpers.py": None}, "1-layers", ["not listed as layers", "mcbench.helpers"]),
     "import between the independent layers of one level": (
-        {"mcbench/analysis/figures.py": PROBE.format("from mcbench.training_data import fingerprints")},
-        "1-layers", ["mcbench.analysis.figures -> mcbench.training_data.fingerprints"]),
+        {"mcbench/analysis/error_speed_figures.py": PROBE.format("from mcbench.training_data import fingerprints")},
+        "1-layers", ["mcbench.analysis.error_speed_figures -> mcbench.training_data.fingerprints"]),
     "a lower layer the layer does not use (analysis -> nn)": (
         {"mcbench/analysis/metrics.py": PROBE.format("from mcbench.nn import losses")},
         "2-nn", ["mcbench.analysis.metrics -> mcbench.nn.losses"]),
@@ -633,8 +633,8 @@ BREAKAGES = {
         {"methods/jbf.py": PROBE.format("from mcbench.io.exr import _private_helper")},
         8, ["methods/jbf.py", "imports mcbench.io.exr._private_helper"]),
     "script importing below the pipeline": (
-        {"workflow/scripts/figures.py": "from mcbench.analysis.figures import error_curves\n"},
-        9, ["workflow/scripts/figures.py", "imports mcbench.analysis.figures"]),
+        {"workflow/scripts/figures.py": "from mcbench.analysis.error_speed_figures import error_curves\n"},
+        9, ["workflow/scripts/figures.py", "imports mcbench.analysis.error_speed_figures"]),
     "script importing a plugin": (
         {"workflow/scripts/gather_timings.py": "import methods\n"},
         9, ["workflow/scripts/gather_timings.py", "imports methods"]),

@@ -21,7 +21,7 @@ emulation on one machine of an AVX2-only CPU beside an AVX-512 one, not a second
 
 ``WORKDIR/<run>`` holds ``config.yaml``, ``results/``, ``cache/`` and ``snakemake.log``.
 Snakemake runs with ``--cores 1``; its jobs (scripts and the warm workers of
-:mod:`mcbench.pipeline.pool`, started by ``forkserver`` from the Snakemake process) inherit its
+:mod:`mcbench.pipeline.worker_pool`, started by ``forkserver`` from the Snakemake process) inherit its
 environment. ``ONEDNN_VERBOSE=1`` is set in every run (it prints, does not change results) so
 that the logs show which ISA oneDNN used inside the jobs; the numba cache index of each run names
 the CPU numba compiled for; the shim prints its target into the render jobs' logs. OIDN and

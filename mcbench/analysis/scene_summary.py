@@ -189,7 +189,7 @@ def gallery_figure(references: dict[str, np.ndarray], path: str | Path, columns:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from mcbench.analysis.figures import save_figure
+    from mcbench.analysis.error_speed_figures import save_figure
 
     names = list(references)
     columns = max(1, min(columns, len(names)))

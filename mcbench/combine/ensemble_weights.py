@@ -73,7 +73,7 @@ CHOICES = {"solver": SOLVERS, "weights": WEIGHTS, "channels": CHANNELS,
 #: src/main.cpp:34-43), the guide variance is blurred (9 x 9), the filtered maps pass the code's
 #: outlier pass (``remove_outliers<3>``, whole pixel -> 7 x 7 blur), windows reflect at the
 #: borders and Eq. 33's denominator is floored at 1e-6. docs/fidelity_ensemble.md measures each.
-#: ``mcbench.analysis.comparisons`` reads them to tell an ablation or a variant from the full
+#: ``mcbench.analysis.comparison_tables`` reads them to tell an ablation or a variant from the full
 #: method.
 ENSEMBLE_DEFAULTS = {"weights": "simplex", "channels": "rgb", "solver": "iterative", "filter": True,
                      "guide_variance_blur": "gaussian9", "outlier_removal": "public_code",

@@ -87,7 +87,7 @@ class MethodSpec:
     * ``correlated_bases`` -- a learned combiner's base denoisers, whose results on the training
       crops it is trained on.
     * ``training_keys`` -- a learned combiner's extra network inputs ``{key: channels}``
-      (``mcbench.nn.data``).
+      (``mcbench.nn.crops``).
 
     A learned method sets ``network``, ``training`` and ``build_network`` (all three or none; see
     :attr:`learned`), a learned combiner also ``correlated_bases`` and ``training_keys``; ``critic``

@@ -5,7 +5,7 @@
 * :mod:`mcbench.nn.kernels` -- applying per-pixel kernels (KPCN) and weight-shared kernels
   (Fan et al. 2021);
 * :mod:`mcbench.nn.losses` -- the training losses (L1 in log space, SMAPE, gradient L1);
-* :mod:`mcbench.nn.data` -- training crops from :mod:`mcbench.training_data` as tensors, the
+* :mod:`mcbench.nn.crops` -- training crops from :mod:`mcbench.training_data` as tensors, the
   train/validation split, seeded augmented batches;
 * :mod:`mcbench.nn.train` -- the seeded, resumable training loop with checkpoints, the optional
   adversarial critic, validation, and the weights + record it writes;
@@ -18,7 +18,7 @@ are in the torch-free :mod:`mcbench.io.weights`.
 A learned method is one module in ``methods/`` whose declaration
 (:class:`mcbench.io.method_spec.MethodSpec`) sets ``network`` (architecture hyperparameters),
 ``training`` (training settings) and ``build_network(**network)``; the network's
-``forward`` takes a dict of raw buffers (see :data:`mcbench.nn.data.BUFFER_KEYS`) and returns
+``forward`` takes a dict of raw buffers (see :data:`mcbench.nn.crops.BUFFER_KEYS`) and returns
 linear HDR radiance (N, 3, H, W). Its weights live in ``methods/weights/<name>.pt`` with a record
 ``methods/weights/<name>.json``. The functions here take the method's *module* (core never imports
 ``methods``; callers resolve names with ``methods.load_method``), and torch is imported only by

@@ -2,7 +2,7 @@
 
 ``train_network(module, crop_files, weights_path, record_path, checkpoint_path)`` trains the
 network of a learned method module (``methods/<name>.py``, resolved from its name by the caller:
-core code never imports ``methods``) on training crops (:mod:`mcbench.nn.data`) and writes
+core code never imports ``methods``) on training crops (:mod:`mcbench.nn.crops`) and writes
 
 * ``weights_path`` -- ``{"arch": network, "state_dict": ...}`` (``network`` of its declaration) (format and location:
   :mod:`mcbench.io.weights`), loadable with ``torch.load(..., weights_only=True)``;
@@ -65,7 +65,7 @@ import torch
 from mcbench import BenchError
 from mcbench.io.method_spec import method_spec
 from mcbench.io.tables import read_json, write_json
-from mcbench.nn.data import CropSet, crop_paths, load_crops, sample_batch, validation_batches
+from mcbench.nn.crops import CropSet, crop_paths, load_crops, sample_batch, validation_batches
 from mcbench.nn.losses import LOSSES
 from mcbench.progress import eta_seconds, progress_line
 from mcbench.io.weights import (CHECKPOINT_KEYS, WEIGHTS_DIGEST_KEY, check_learned_method, file_sha256, load_weights,
@@ -207,7 +207,7 @@ def train_network(module: ModuleType, data: list[str | Path] | CropSet, weights_
                   log=print, *, provenance: dict | None = None) -> dict:
     """Train the network of learned method ``module`` (resuming from ``checkpoint`` if present)
     on ``data``: training crop files, or a :class:`CropSet` already loaded (a combiner's, from
-    :func:`mcbench.nn.data.load_combiner_crops`); returns the record (``provenance``, e.g. the
+    :func:`mcbench.nn.crops.load_combiner_crops`); returns the record (``provenance``, e.g. the
     CPU, is added to it as given)."""
     name = method_name(check_learned_method(module))
     spec = method_spec(module)

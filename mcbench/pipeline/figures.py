@@ -11,8 +11,8 @@ from mcbench.io.tables import read_table
 def write_error_curves(metrics_csv: str, metric: str, png_path: str, *, labels: dict[str, str],
                        candidates: list[str] | None = None) -> None:
     """Error against spp of every candidate (or of ``candidates`` only), per scene and averaged, for
-    one metric (mcbench.analysis.figures, like Fig. 13 of Zheng et al.); ``labels``: candidate -> legend label."""
-    from mcbench.analysis.figures import error_curves, error_curves_figure
+    one metric (mcbench.analysis.error_speed_figures, like Fig. 13 of Zheng et al.); ``labels``: candidate -> legend label."""
+    from mcbench.analysis.error_speed_figures import error_curves, error_curves_figure
 
     metrics = read_table(metrics_csv, columns=["scene", "spp", "candidate", "metric", "value"])
     if candidates is not None:
@@ -24,7 +24,7 @@ def write_speed_error(metrics_csv: str, timings_csv: str, png_path: str, *, metr
                       labels: dict[str, str], inputs: dict[str, list[str]]) -> None:
     """Each method's mean compute time (timings.csv; a combiner's with the ``inputs`` it takes)
     against its mean ``metric`` error (metrics.csv), as a labelled log-log scatter."""
-    from mcbench.analysis.figures import speed_error_figure, speed_error_points
+    from mcbench.analysis.error_speed_figures import speed_error_figure, speed_error_points
 
     metrics = read_table(metrics_csv, columns=["scene", "spp", "candidate", "metric", "value"])
     timings = read_table(timings_csv, columns=["scene", "spp", "method", "seconds"])

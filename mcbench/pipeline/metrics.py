@@ -173,7 +173,7 @@ def evaluate_entry_values(scene: str, spp: int, entry: str, image_path: str, ref
     already read) and the metric code's digest (:func:`metric_code_digest`) are those it was
     computed from. The image and reference are decoded only when something is computed.
 
-    With ``viewer_dir``: the entry's images (:func:`mcbench.analysis.viewer.write_entry_images`:
+    With ``viewer_dir``: the entry's images (:func:`mcbench.analysis.viewer_images.write_entry_images`:
     tone-mapped at each exposure, relMSE and HDR-FLIP maps, and for a candidate whose inputs
     ``weight_inputs`` names and whose EXR holds ``weights_filtered_{i}``, its weight maps) with
     their fragment, CRC-32s and ``viewer_key`` as :data:`ENTRY_RECORD`; the noisy entry's folder
@@ -251,7 +251,7 @@ def _read_entry(entry: str, image_path: str, reference_path: str, *, variance: b
 def _write_entry_viewer(folder: Path, scene: str, spp: int, entry: str, image, reference, weights, flip_map,
                         key: str | None) -> None:
     """An entry's viewer images and its record (:data:`ENTRY_RECORD`: fragment, CRC-32s, key)."""
-    from mcbench.analysis.viewer import REFERENCE, case_files, merge_fragments, write_entry_images
+    from mcbench.analysis.viewer_images import REFERENCE, case_files, merge_fragments, write_entry_images
     from mcbench.io.checksums import crc32_hex
     from mcbench.io.tables import write_json
 

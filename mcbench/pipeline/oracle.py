@@ -1,12 +1,12 @@
 """The oracle study's step (Zheng et al. 2021 Sec. 5.2.7, Fig. 11): weights from ground-truth
 statistics next to the dual-buffer estimate. Like every pipeline module it resolves scene and
-method names (plugins); the maths is :mod:`mcbench.combine.oracle`.
+method names (plugins); the maths is :mod:`mcbench.combine.oracle_weights`.
 
 One test scene is rendered ``repetitions + 1`` times at ``spp`` with the oracle seeds of
 :func:`mcbench.render.seeds.oracle_render_seed` (repetition r, halves A and B as every render: the
 dual-buffer estimate needs them), at the harness's resolution divided by ``downscale``; the
 ground truth is the harness's reference averaged over ``downscale`` x ``downscale`` blocks
-(:func:`mcbench.combine.oracle.block_average`). The base denoisers run on every repetition; the first
+(:func:`mcbench.combine.oracle_weights.block_average`). The base denoisers run on every repetition; the first
 ``repetitions`` feed the MSE matrices M (full-buffer outputs, Eq. 7) and M^half (half-buffer
 outputs, Eq. 15, two samples per repetition), the last one is held out: the weights solved
 from M and M^half and the three dual-buffer combiners run on it give the nine panels of
@@ -30,7 +30,7 @@ from mcbench.io.buffers import Denoised, RenderBuffers
 from mcbench.io.exr import check_finite, read_layers
 from mcbench.io.tables import write_csv, write_text
 from mcbench.analysis.oracle_tables import error_table, table_markdown, weight_maps_figure
-from mcbench.combine.oracle import (MseMatrixAccumulator, block_average, one_hot_weights, simplex_weights,
+from mcbench.combine.oracle_weights import (MseMatrixAccumulator, block_average, one_hot_weights, simplex_weights,
                                     unconstrained_weights)
 from mcbench.progress import eta_seconds, progress_line
 from mcbench.render.seeds import oracle_render_seed

@@ -23,7 +23,7 @@ Checks here beyond the method table's (:func:`methods.method_table`):
   above ``oracle.spp`` and every ``progressive_curve.spp``. A reference with as many samples as
   the render it judges is no reference: its own noise is as large as the error it measures;
 * ``progressive_curve.scene`` names a scene (with the key), the comparison tables' roles are
-  unique (:func:`mcbench.analysis.comparisons.find_comparisons`, which the comparison jobs
+  unique (:func:`mcbench.analysis.comparison_tables.find_comparisons`, which the comparison jobs
   would otherwise raise hours later), ``training.first_seed + training.count`` fits the object
   seeds, ``training.spp`` are powers of two 2..32768 (the training render seeds) and the
   training crops fit ``training.resolution``;
@@ -41,7 +41,7 @@ from __future__ import annotations
 import re
 
 from mcbench import NOISY, NOISY_LABEL, BenchError
-from mcbench.analysis.comparisons import comparison_role, find_comparisons
+from mcbench.analysis.comparison_tables import comparison_role, find_comparisons
 from mcbench.analysis.pool import POOL
 from mcbench.io.method_spec import method_spec
 from mcbench.pipeline.config import ConfigError, key_path, schema_defaults

@@ -12,7 +12,7 @@ Choices:
   scene's ``RESOLUTION``) divided by ``downscale`` (config ``progressive_curve.downscale``, 2 by
   default), as the oracle study does: four times fewer pixels make the 8192-spp render affordable.
   The ground truth is the harness's reference averaged over ``downscale`` x ``downscale`` blocks
-  (:func:`mcbench.combine.oracle.block_average`: with the box pixel filter the block mean is the reference
+  (:func:`mcbench.combine.oracle_weights.block_average`: with the box pixel filter the block mean is the reference
   of the same camera at the lower resolution). The reference must be much less noisy than the
   top level, or the top of the curve measures the reference's noise: a reference of R spp
   averaged ``downscale`` x ``downscale`` is worth R x downscale² spp at the curve's resolution
@@ -56,11 +56,11 @@ from mcbench import NOISY, BenchError
 from mcbench.io.buffers import RenderBuffers
 from mcbench.io.exr import ExrError, check_finite, read_layers
 from mcbench.io.method_spec import method_spec
-from mcbench.analysis.figures import pyplot_agg, save_figure
+from mcbench.analysis.error_speed_figures import pyplot_agg, save_figure
 from mcbench.io.tables import read_table, write_csv, write_text
 from mcbench.analysis.metrics import relmse, relmse_corrected, smape
 from mcbench.analysis.oracle_tables import table_markdown
-from mcbench.combine.oracle import block_average
+from mcbench.combine.oracle_weights import block_average
 from mcbench.progress import eta_seconds, progress_line
 from mcbench.analysis.scene_summary import reference_relmse_floor
 from mcbench.render.seeds import MAX_PROGRESSIVE_CURVE_LEVELS, MAX_PROGRESSIVE_CURVE_PASSES, progressive_curve_seed

@@ -38,10 +38,10 @@ def recommended_names(recommendations_csv: str, metric: str) -> list[str]:
 def write_study_figures_of(metrics_csv: str, timings_csv: str, recommendations_csv: str, scores_ci_csv: str,
                            render_paths: list[str], paths: dict[str, str], *, metric: str, candidates: list[str],
                            labels: dict[str, str], inputs: dict[str, list[str]]) -> None:
-    """The study's figures for one metric (:func:`mcbench.analysis.study.figures.write_study_figures`): the
+    """The study's figures for one metric (:func:`mcbench.analysis.study.study_figures.write_study_figures`): the
     bases and the ensembles the study recommends (``recommendations_csv``) as curves, the bootstrap
     intervals of ``scores_ci_csv`` on the size figure, render times from the renders' EXRs."""
-    from mcbench.analysis.study.figures import curve_candidates, write_study_figures
+    from mcbench.analysis.study.study_figures import curve_candidates, write_study_figures
 
     recommended = [n for n in recommended_names(recommendations_csv, metric) if n in candidates]
     intervals = read_table(scores_ci_csv)

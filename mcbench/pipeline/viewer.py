@@ -16,13 +16,13 @@ from mcbench.io.tables import read_json, read_table, write_json
 def write_viewer_case(scene: str, spp: int, reference_path: str, render_path: str,
                       candidate_paths: dict[str, str], case_dir: str, *,
                       weight_inputs: dict[str, list[str]], flip_maps_path: str | None = None) -> dict:
-    """One case's images of the static viewer (mcbench.analysis.viewer.write_case_images) in
+    """One case's images of the static viewer (mcbench.analysis.viewer_images.write_case_images) in
     ``case_dir``, with its manifest fragment as ``case.json``: the reference, the noisy input
     and every candidate tone-mapped at each exposure, their relMSE and FLIP error maps, and
     the filtered weight maps of each candidate that ``weight_inputs`` gives inputs
     ({candidate: input names}) and whose EXR holds ``weights_filtered_{i}`` for each input.
     ``flip_maps_path``: the case's FLIP maps from :func:`compute_case_metrics` (else evaluated here)."""
-    from mcbench.analysis.viewer import CASE_RECORD, write_case_images
+    from mcbench.analysis.viewer_images import CASE_RECORD, write_case_images
 
     reference = read_layers(reference_path, ["color"])
     check_finite(reference_path, reference)
@@ -46,7 +46,7 @@ def write_viewer_case(scene: str, spp: int, reference_path: str, render_path: st
         flip_maps = read_layers(flip_maps_path, list(sources))
         check_finite(flip_maps_path, flip_maps)
     fragment = write_case_images(case_dir, reference=reference, images=images, weights=weights, flip_maps=flip_maps)
-    from mcbench.analysis.viewer import case_files
+    from mcbench.analysis.viewer_images import case_files
 
     checksums = {name: crc32_hex(Path(case_dir, name).read_bytes()) for name in sorted(case_files(fragment))}
     write_json(Path(case_dir) / CASE_RECORD, {"scene": scene, "spp": int(spp), **fragment, FILE_CHECKSUMS: checksums})
@@ -85,7 +85,7 @@ def _check_case_files(case_dir: Path, record: dict, record_path: Path) -> None:
     are not of the record's size."""
     from PIL import Image
 
-    from mcbench.analysis.viewer import case_files
+    from mcbench.analysis.viewer_images import case_files
 
     _check_case_record(record, record_path)
     checksums = record.get(FILE_CHECKSUMS)
@@ -115,7 +115,7 @@ def write_viewer(metrics_csv: str, case_dirs: list[str], output_dir: str, *, cas
     viewer.js, viewer.css), every case folder (``case_dirs[i]`` holds ``cases[i]``, written by
     :func:`write_viewer_case`) and ``data.js``, the manifest with each case's numbers from
     ``metrics_csv`` (every entry must have every metric of ``metric_names``). Returns the manifest."""
-    from mcbench.analysis.viewer import CASE_RECORD, assemble_viewer, build_manifest, case_numbers, directory_bytes
+    from mcbench.analysis.viewer_images import CASE_RECORD, assemble_viewer, build_manifest, case_numbers, directory_bytes
 
     if len(case_dirs) != len(cases):
         raise BenchError(f"{output_dir}: {len(case_dirs)} case folders for {len(cases)} cases")
@@ -152,7 +152,7 @@ def assemble_viewer_case(entry_dirs: dict[str, str], case_dir: str, *, scene: st
     case or entry, or an image differs from its checksum."""
     import shutil
 
-    from mcbench.analysis.viewer import CASE_RECORD, case_files, merge_fragments
+    from mcbench.analysis.viewer_images import CASE_RECORD, case_files, merge_fragments
     from mcbench.pipeline.metrics import ENTRY_RECORD
 
     fragments, checksums = [], {}

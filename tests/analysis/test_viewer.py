@@ -1,4 +1,4 @@
-"""Fast tests of the static image viewer (mcbench.analysis.viewer, the viewer steps and the page's DOM
+"""Fast tests of the static image viewer (mcbench.analysis.viewer_images, the viewer steps and the page's DOM
 contract) on synthetic arrays and tiny EXRs written here; the browser test is in test_report.py.
 
 Independent truths: the ACES + sRGB closed form written out below, the relMSE formula, NVIDIA's
@@ -18,7 +18,7 @@ import pytest
 from PIL import Image
 
 from mcbench import BenchError
-from mcbench.analysis import viewer
+from mcbench.analysis import viewer_images as viewer
 from mcbench.pipeline import viewer as viewer_step
 from mcbench.io.exr import write_layers
 

@@ -120,7 +120,7 @@ def test_a_folder_with_every_layer_takes_every_method(folder_scenes):
 def test_imported_case_is_denoised_and_scored_like_a_render(folder_scenes, tmp_path):
     from mcbench.pipeline.methods import run_methods
     from mcbench.pipeline.metrics import compute_case_metrics
-    from mcbench.pipeline.render import merge_reference, render_noisy
+    from mcbench.pipeline.rendering import merge_reference, render_noisy
 
     render, reference = tmp_path / "render.exr", tmp_path / "reference.exr"
     render_noisy("kitchen", 16, str(render))

@@ -11,7 +11,7 @@ import pytest
 
 from mcbench import NOISY, BenchError
 
-from mcbench.pipeline import methods, metrics, rankings, render, viewer
+from mcbench.pipeline import methods, metrics, rankings, rendering, viewer
 from mcbench.io.buffers import Denoised, RenderBuffers
 from mcbench.io.exr import read_layers, read_metadata, write_layers
 from mcbench.analysis.metrics import METRICS
@@ -218,7 +218,7 @@ def test_merge_reference_is_the_spp_weighted_mean(tmp_path):
         chunks.append((spp, layers))
         paths.append(str(path))
     out = tmp_path / "reference.exr"
-    render.merge_reference(paths, str(out))
+    rendering.merge_reference(paths, str(out))
     merged = read_layers(out)
 
     def pooled(name):

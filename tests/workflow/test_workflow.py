@@ -67,7 +67,7 @@ EXTRAS = ["jbf", "ensemble", "ensemble_exact", "onehot_sbf", "onehot_nfor", "one
           "ensemble_unconstrained", "pd_oidn"]
 METRICS = ("relmse", "relmse_corrected", "smape", "dssim", "flip")
 SCORE_TOL = 5e-5              # scores and score means are written with 4 decimals
-DPI = 110                     # mcbench.analysis.figures.save_figure: PNGs of figsize x 110 pixels, no cropping
+DPI = 110                     # mcbench.analysis.error_speed_figures.save_figure: PNGs of figsize x 110 pixels, no cropping
 
 
 def _wide(metrics: pd.DataFrame, metric: str) -> pd.DataFrame:

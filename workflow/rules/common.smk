@@ -15,9 +15,9 @@ sys.path.insert(0, str(Path(workflow.basedir)))  # methods/, scenes/, mcbench/ f
 from mcbench import NOISY, BenchError  # noqa: E402
 from mcbench.pipeline.config import config_digest, resolve_config  # noqa: E402
 from mcbench.pipeline.plan import plan_study  # noqa: E402
-from mcbench.pipeline.render import folder_case_files, folder_reference_files  # noqa: E402
+from mcbench.pipeline.rendering import folder_case_files, folder_reference_files  # noqa: E402
 from mcbench.analysis.metrics import ALL_METRICS  # noqa: E402
-from mcbench.analysis.study.figures import STUDY_FIGURES as STUDY_FIGURE_KEYS, curve_candidates, paper_recommended  # noqa: E402
+from mcbench.analysis.study.study_figures import STUDY_FIGURES as STUDY_FIGURE_KEYS, curve_candidates, paper_recommended  # noqa: E402
 from mcbench.pipeline.resources import StudyRequests, load_job_costs  # noqa: E402
 from mcbench.io.method_spec import method_spec  # noqa: E402
 from mcbench.io.weights import COMMITTED_WEIGHTS, check_trained_features, file_sha256, is_learned_method  # noqa: E402
@@ -74,17 +74,17 @@ wildcard_constraints:
     metric="|".join(ALL_METRICS),
 
 
-# The case jobs (run_case) run in warm worker processes (mcbench.pipeline.pool): their
+# The case jobs (run_case) run in warm worker processes (mcbench.pipeline.worker_pool): their
 # rule's `run:` block calls run_in_pool in Snakemake's own process, which needs Snakemake's
 # threads for `run:` jobs (force-use-threads, set by the workflow profile profiles/default;
 # without it each such job would start a whole Snakemake process: the same results, far slower).
 
 
 def run_in_pool(step, *args, log, **kwargs):
-    """Run ``step`` ("module:function") of a ``run:`` rule in a warm worker (mcbench.pipeline.pool),
+    """Run ``step`` ("module:function") of a ``run:`` rule in a warm worker (mcbench.pipeline.worker_pool),
     with as many workers as the cores Snakemake was given, the job's weights folder and this
     checkout on the workers' paths."""
-    from mcbench.pipeline.pool import run_step
+    from mcbench.pipeline.worker_pool import run_step
 
     run_step(step, *args, log_path=log, workers=max(1, int(workflow.cores or 1)),
              environment={"MCBENCH_WEIGHTS_DIR": str(Path(WEIGHTS_DIR).resolve())},

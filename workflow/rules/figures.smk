@@ -1,4 +1,4 @@
-# Figures of the report (mcbench.analysis.figures): error against spp per scene for each metric, and
+# Figures of the report (mcbench.analysis.error_speed_figures): error against spp per scene for each metric, and
 # each method's speed against its error.
 
 # the speed-against-error figure's metric: relMSE (the paper's), or the first metric configured

@@ -15,9 +15,9 @@ module per concern:
   against each member;
 * :mod:`~mcbench.analysis.study.findings` -- the observations of Sec. 5.3.4 with a verdict each;
 * :mod:`~mcbench.analysis.study.reference_noise` -- raw against reference-noise-corrected relMSE;
-* :mod:`~mcbench.analysis.study.tables` -- every table of one metrics table, in memory;
+* :mod:`~mcbench.analysis.study.study_tables` -- every table of one metrics table, in memory;
 * :mod:`~mcbench.analysis.study.markdown` -- the tables as Markdown and sentences, ``summary.md``;
 * :mod:`~mcbench.analysis.study.writers` -- the files under ``results/tables/study/``;
 * :mod:`~mcbench.analysis.study.scores_and_costs`, :mod:`~mcbench.analysis.study.equal_time` and
-  :mod:`~mcbench.analysis.study.figures` -- the study's figures: their data and their plots.
+  :mod:`~mcbench.analysis.study.study_figures` -- the study's figures: their data and their plots.
 """

@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from mcbench.analysis.figures import input_closure
+from mcbench.analysis.error_speed_figures import input_closure
 from mcbench.analysis.study.scores_and_costs import select_rows
 
 __all__ = ["read_render_seconds", "loglog_interp", "equal_time_table", "equal_time_curves"]

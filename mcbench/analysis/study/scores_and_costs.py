@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from mcbench.analysis.figures import combined_seconds, input_closure
+from mcbench.analysis.error_speed_figures import combined_seconds, input_closure
 
 __all__ = ["select_rows", "score_curves", "average_scores", "candidate_sizes", "score_size_points",
            "score_size_summary", "closure_seconds", "own_seconds", "pareto_front", "speed_score_points"]
@@ -110,7 +110,7 @@ def score_size_summary(points: pd.DataFrame) -> pd.DataFrame:
 def closure_seconds(own: dict[str, float], inputs: dict[str, list[str]], *,
                     names: list[str] | None = None) -> dict[str, float]:
     """Total cost of each method (seconds per case) of ``names`` (default: all of ``own``):
-    :func:`mcbench.analysis.figures.combined_seconds`, the sum of ``own`` seconds over its input closure,
+    :func:`mcbench.analysis.error_speed_figures.combined_seconds`, the sum of ``own`` seconds over its input closure,
     each method counted once. Raises ``ValueError`` naming a method without a timing."""
     chosen = names if names is not None else list(own)
     needed = {m for name in chosen for m in input_closure(name, inputs)}

@@ -1,5 +1,5 @@
 """The study's files: :func:`write_study_tables` computes every table of a metrics CSV
-(:func:`mcbench.analysis.study.tables.study_tables`) and :func:`write_study_files` writes them,
+(:func:`mcbench.analysis.study.study_tables.study_tables`) and :func:`write_study_files` writes them,
 CSV and Markdown, atomically (:mod:`mcbench.io.tables`), with ``summary.md``."""
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ from mcbench.analysis.study.markdown import (NO_RELMSE_MARKDOWN, findings_markdo
                                              paper_comparison_markdown, recommendations_both_markdown,
                                              recommendations_markdown, reference_noise_markdown, summary_markdown)
 from mcbench.analysis.study.statistics import SCORE_CI_COLUMNS
-from mcbench.analysis.study.tables import StudyTables, study_tables
+from mcbench.analysis.study.study_tables import StudyTables, study_tables
 from mcbench.io.tables import read_table, write_csv, write_text
 
 __all__ = ["STUDY_FILES", "study_outputs", "write_study_files", "write_study_tables"]

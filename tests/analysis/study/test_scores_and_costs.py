@@ -9,7 +9,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from mcbench.analysis.figures import input_closure
+from mcbench.analysis.error_speed_figures import input_closure
 from mcbench.analysis.ranking import case_scores
 from mcbench.analysis.study.scores_and_costs import (average_scores, closure_seconds, own_seconds, pareto_front,
                                                      score_curves, score_size_points, score_size_summary,

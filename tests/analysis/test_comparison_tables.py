@@ -1,4 +1,4 @@
-"""Comparison tables (mcbench.analysis.comparisons): roles of methods, Tables 1-2, the ablation table and
+"""Comparison tables (mcbench.analysis.comparison_tables): roles of methods, Tables 1-2, the ablation table and
 the comparison ranking against tables computed by hand on a small synthetic study (2 scenes x
 2 spp, full ensembles of sizes 2 and 3), the incomplete-variant and missing-case paths, and the
 rule script run without Snakemake."""
@@ -13,7 +13,7 @@ import pandas as pd
 import pytest
 
 from mcbench import BenchError
-from mcbench.analysis.comparisons import (ablation_cases, ablation_table, beats_cases, beats_table, comparison_ranking,
+from mcbench.analysis.comparison_tables import (ablation_cases, ablation_table, beats_cases, beats_table, comparison_ranking,
                                  comparison_role, find_comparisons, write_ablation_table, write_comparison_ranking,
                                  write_onehot_tables)
 
@@ -289,10 +289,10 @@ def test_ensemble_defaults_are_the_ensembles_own():
     the ensemble plugin's combine() takes them as its defaults."""
     import inspect
 
-    from mcbench.analysis import comparisons
+    from mcbench.analysis import comparison_tables
     from mcbench.combine.ensemble_weights import ENSEMBLE_DEFAULTS
     from methods import load_method
 
-    assert comparisons.ENSEMBLE_DEFAULTS is ENSEMBLE_DEFAULTS
+    assert comparison_tables.ENSEMBLE_DEFAULTS is ENSEMBLE_DEFAULTS
     signature = inspect.signature(load_method("ensemble").combine)
     assert {key: signature.parameters[key].default for key in ENSEMBLE_DEFAULTS} == ENSEMBLE_DEFAULTS

@@ -1,11 +1,11 @@
 """Figures of the 39-candidate study (Zheng et al. 2021, Sec. 5.3), PNGs written with
-matplotlib's Agg backend through :func:`mcbench.analysis.figures.save_figure`; their data come
+matplotlib's Agg backend through :func:`mcbench.analysis.error_speed_figures.save_figure`; their data come
 from :mod:`mcbench.analysis.study.scores_and_costs` and :mod:`mcbench.analysis.study.equal_time`.
 
 Figures (:func:`write_study_figures`, files named by :func:`study_figure_paths`):
 
 1. ``error_curves_<metric>.png``: error against spp per scene and the mean over scenes for the
-   bases and the recommended ensembles (Fig. 13), drawn by :mod:`mcbench.analysis.figures`;
+   bases and the recommended ensembles (Fig. 13), drawn by :mod:`mcbench.analysis.error_speed_figures`;
 2. ``score_curves_<metric>.png``: mean score over scenes against spp for those candidates, and
    every candidate's overall score ``Avg.`` (Fig. 14 c, d);
 3. ``score_size_<metric>.png``: each candidate's ``Avg.`` against its ensemble size (bases at 1),
@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from mcbench.analysis.figures import candidate_styles, error_curves, error_curves_figure, pyplot_agg, save_figure
+from mcbench.analysis.error_speed_figures import candidate_styles, error_curves, error_curves_figure, pyplot_agg, save_figure
 from mcbench.analysis.study.equal_time import equal_time_curves, equal_time_table, read_render_seconds
 from mcbench.analysis.study.scores_and_costs import (average_scores, score_curves, score_size_points,
                                                      score_size_summary, speed_score_points)
@@ -88,7 +88,7 @@ def study_error_curves_figure(metrics: pd.DataFrame, path: str | Path, *, metric
                               labels: dict[str, str] | None = None, noisy: str = "noisy") -> None:
     """Fig. 13: error against spp per scene and the mean over scenes for ``candidates`` (the
     bases and the recommended ensembles) and the noisy input, by
-    :func:`mcbench.analysis.figures.error_curves_figure`."""
+    :func:`mcbench.analysis.error_speed_figures.error_curves_figure`."""
     wanted = [noisy] + [c for c in candidates if c != noisy]
     rows = metrics[metrics["candidate"].isin(wanted)]
     labels = {name: _label(name, labels) for name in wanted}

@@ -1,4 +1,4 @@
-"""mcbench.analysis.figures: the report's error curves and speed-against-error figure, checked against
+"""mcbench.analysis.error_speed_figures: the report's error curves and speed-against-error figure, checked against
 means computed by hand on synthetic tables, and the PNGs they write."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from mcbench.analysis.figures import (MEAN_PANEL, combined_seconds, error_curves, error_curves_figure, speed_error_figure,
+from mcbench.analysis.error_speed_figures import (MEAN_PANEL, combined_seconds, error_curves, error_curves_figure, speed_error_figure,
                              speed_error_points)
 
 SCENES = ["box", "glass"]
