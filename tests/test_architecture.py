@@ -200,6 +200,26 @@ def test_the_documentation_lists_every_pipeline_module():
     assert sorted(listed) == modules, f"{DOC}: pipeline modules listed {sorted(listed)}, in the package {modules}"
 
 
+#: Names two modules of mcbench still share: pipeline.metrics (the case evaluations and the gathered
+#: tables) and analysis.metrics (the metric functions).
+SHARED_MODULE_NAMES = {"metrics"}
+
+
+def test_no_two_modules_share_a_name():
+    """No two modules or packages of ``mcbench`` have the same name, whatever their layers (one
+    name per concept, ``docs/architecture.md``), but those of :data:`SHARED_MODULE_NAMES`."""
+    found: dict[str, list[str]] = {}
+    for path in sorted((ROOT / "mcbench").rglob("*.py")):
+        if "__pycache__" in path.parts:
+            continue
+        name = path.parent.name if path.stem == "__init__" else path.stem
+        if path.stem == "__init__" and path.parent == ROOT / "mcbench":
+            continue
+        found.setdefault(name, []).append(relative(path, ROOT))
+    shared = {name: paths for name, paths in found.items() if len(paths) > 1 and name not in SHARED_MODULE_NAMES}
+    assert not shared, f"modules of the same name: {shared}"
+
+
 # ---------------------------------------------------------------------------------------------
 # Rule 4 through a package's __init__, and rules 6-9: reading the tree with ast
 

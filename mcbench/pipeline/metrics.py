@@ -11,7 +11,7 @@ import time
 from pathlib import Path
 
 
-from mcbench import NOISY, BenchError
+from mcbench import METRICS_COLUMNS, NOISY, BenchError
 from mcbench.io.buffers import Denoised, RenderBuffers
 from mcbench.io.exr import check_finite, check_resolution, read_layers, write_layers
 from mcbench.io.tables import read_json, read_table, write_csv
@@ -26,7 +26,7 @@ def compute_case_metrics(scene: str, spp: int, reference_path: str, render_path:
                          flip_maps_path: str | None = None) -> pd.DataFrame:
     """Errors of the noisy input and every candidate against the reference for one test case.
 
-    Writes a tidy CSV with columns scene, spp, candidate, metric, value; with ``flip_maps_path``
+    Writes a tidy CSV with columns scene, spp, entry, metric, value; with ``flip_maps_path``
     also every entry's per-pixel HDR-FLIP map (one (H, W) layer per entry, named like it), from
     the same evaluation as the ``flip`` metric, so the viewer does not evaluate FLIP again.
     """
@@ -60,7 +60,7 @@ def compute_case_metrics(scene: str, spp: int, reference_path: str, render_path:
                 value = REFERENCE_METRICS[metric](image, reference, reference_variance)
             else:
                 value = METRICS[metric](image, reference)
-            rows.append({"scene": scene, "spp": spp, "candidate": candidate, "metric": metric, "value": value})
+            rows.append({"scene": scene, "spp": spp, "entry": candidate, "metric": metric, "value": value})
     frame = pd.DataFrame(rows)
     if flip_maps_path is not None:
         # seconds: this step's reading and computing (benchmarks/dag_overhead.py's metric compute)
@@ -70,21 +70,21 @@ def compute_case_metrics(scene: str, spp: int, reference_path: str, render_path:
     return frame
 
 
-def read_case_metrics(path: str, *, candidates: list[str], metric_names: list[str],
+def read_case_metrics(path: str, *, entries: list[str], metric_names: list[str],
                       case: tuple[str, int] | None = None) -> pd.DataFrame:
-    """One per-case metrics CSV, refused (naming the file) unless it is whole: every candidate
+    """One per-case metrics CSV, refused (naming the file) unless it is whole: every entry
     and metric once with a finite value, and only the case ``(scene, spp)`` when given."""
     from mcbench.analysis.ranking import check_complete
 
-    frame = read_table(path, columns=("scene", "spp", "candidate", "metric", "value"))
-    check_complete(frame, candidates=candidates, metric_names=metric_names,
+    frame = read_table(path, columns=METRICS_COLUMNS)
+    check_complete(frame, entries=entries, metric_names=metric_names,
                    cases=None if case is None else [case], source=path)
     if case is not None and len(frame.groupby(["scene", "spp"])) != 1:
         raise BenchError(f"{path}: holds more cases than ({case[0]}, {case[1]})")
     return frame
 
 
-def gather_tables(paths: list[str], output_path: str, *, candidates: list[str], metric_names: list[str],
+def gather_tables(paths: list[str], output_path: str, *, entries: list[str], metric_names: list[str],
                   cases: list[tuple[str, int]]) -> pd.DataFrame:
     """Concatenate the per-case CSVs (``paths[i]`` holds ``cases[i]``) into one tidy table, after
     checking each is complete (:func:`read_case_metrics`): no table is ranked over lost rows."""
@@ -92,7 +92,7 @@ def gather_tables(paths: list[str], output_path: str, *, candidates: list[str], 
 
     if len(paths) != len(cases):
         raise BenchError(f"{output_path}: {len(paths)} case files for {len(cases)} cases")
-    frames = [read_case_metrics(path, candidates=candidates, metric_names=metric_names, case=case)
+    frames = [read_case_metrics(path, entries=entries, metric_names=metric_names, case=case)
               for path, case in zip(paths, cases)]
     frame = pd.concat(frames, ignore_index=True)
     write_csv(output_path, frame)
@@ -145,14 +145,14 @@ def evaluate_entry(scene: str, spp: int, entry: str, image_path: str, reference_
                    metrics: list[str], *, metrics_path: str | None = None, viewer_dir: str | None = None,
                    weight_inputs: list[str] = (), values_path: str | None = None) -> pd.DataFrame:
     """Errors of one entry of a test case against the reference as a tidy table (columns scene,
-    spp, candidate, metric, value: one row per metric of ``metrics``, in that order), written to
+    spp, entry, metric, value: one row per metric of ``metrics``, in that order), written to
     ``metrics_path`` when given; the values and images of :func:`evaluate_entry_values`."""
     import pandas as pd
 
     values, _ = evaluate_entry_values(scene, spp, entry, image_path, reference_path, metrics, viewer_dir=viewer_dir,
                                       weight_inputs=weight_inputs, values_path=values_path)
-    frame = pd.DataFrame([{"scene": scene, "spp": int(spp), "candidate": entry, "metric": metric, "value": value}
-                          for metric, value in values.items()], columns=["scene", "spp", "candidate", "metric", "value"])
+    frame = pd.DataFrame([{"scene": scene, "spp": int(spp), "entry": entry, "metric": metric, "value": value}
+                          for metric, value in values.items()], columns=list(METRICS_COLUMNS))
     if metrics_path is not None:
         write_csv(metrics_path, frame)
     return frame

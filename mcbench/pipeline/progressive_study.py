@@ -52,7 +52,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from mcbench import NOISY, BenchError
+from mcbench import METRICS_COLUMNS, NOISY, BenchError
 from mcbench.io.buffers import RenderBuffers
 from mcbench.io.exr import ExrError, check_finite, read_layers
 from mcbench.io.method_spec import method_spec
@@ -388,7 +388,7 @@ def write_progressive_tables(metrics_csv: str, timings_csv: str, out_dir: str, *
                                             consistency_table, per_spp_markdown, per_spp_table, table_entries)
 
     out = Path(out_dir)
-    table = read_table(metrics_csv, columns=("scene", "spp", "candidate", "metric", "value"))
+    table = read_table(metrics_csv, columns=METRICS_COLUMNS)
     timings = read_table(timings_csv, columns=("scene", "spp", "method", "seconds"))
     consistency = consistency_table(table, dict(pairs), metric="relmse", noisy=NOISY)
     summary = consistency_summary(consistency)

@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Mapping
 
-from mcbench import NOISY
+from mcbench import METRICS_COLUMNS, NOISY
 
 __all__ = ["frozen_mapping", "MethodPlan", "CasePlan", "RankingPlan", "TrainingPlan", "SideStudyPlan", "StudyPaths", "StudyPlan"]
 
@@ -168,11 +168,13 @@ class StudyPlan:
         """What a case's job depends on besides its files (the same for every case; rule
         run_case's params): the methods in dependency order with their settings and, for a
         learned method, its weights' SHA-256 (``weights_sha256``: module -> digest), the
-        entries, the metrics."""
+        entries, the metrics and the columns of the case's metrics table (a table written with
+        other columns is remade)."""
         return {"methods": [{"name": m.name, "module": m.module, "params": dict(m.params), "inputs": list(m.inputs),
                              **({"weights_sha256": weights_sha256[m.module]} if m.learned else {})}
                             for m in self.methods.values()],
-                "entries": self.ranking.entries, "metrics": list(self.ranking.metrics)}
+                "entries": self.ranking.entries, "metrics": list(self.ranking.metrics),
+                "table_columns": list(METRICS_COLUMNS)}
 
     def case_job(self, scene: str, spp: int, *, weights_dir: str, outputs: Mapping) -> dict:
         """The description of one case's job (:func:`mcbench.pipeline.cases.run_case`): its

@@ -7,7 +7,7 @@ import os
 from pathlib import Path
 
 
-from mcbench import NOISY, BenchError
+from mcbench import METRICS_COLUMNS, NOISY, BenchError
 from mcbench.io.checksums import crc32_hex
 from mcbench.io.exr import check_finite, check_resolution, read_layers
 from mcbench.io.tables import read_json, read_table, write_json
@@ -119,7 +119,7 @@ def write_viewer(metrics_csv: str, case_dirs: list[str], output_dir: str, *, cas
 
     if len(case_dirs) != len(cases):
         raise BenchError(f"{output_dir}: {len(case_dirs)} case folders for {len(cases)} cases")
-    metrics = read_table(metrics_csv, columns=("scene", "spp", "candidate", "metric", "value"))
+    metrics = read_table(metrics_csv, columns=METRICS_COLUMNS)
     entries = [NOISY] + list(candidates)
     fragments, numbers = {}, {}
     for (scene, spp), case_dir in zip(cases, case_dirs):

@@ -68,7 +68,7 @@ def metrics_frame(relmse=RELMSE, *, dssim=True) -> pd.DataFrame:
     rows = [(s, n, name, "relmse", values[i]) for name, values in relmse.items() for i, (s, n) in enumerate(CASES)]
     if dssim:
         rows += [(s, n, c, "dssim", v / 10) for s, n, c, _, v in list(rows)]
-    return pd.DataFrame(rows, columns=["scene", "spp", "candidate", "metric", "value"])
+    return pd.DataFrame(rows, columns=["scene", "spp", "entry", "metric", "value"])
 
 
 def timings_frame() -> pd.DataFrame:
@@ -146,16 +146,16 @@ def test_table2_leaves_out_ensembles_without_the_post_variant_and_guards_empty_c
 
 def test_a_missing_case_of_a_listed_method_stops_with_method_and_case_named():
     metrics = metrics_frame()
-    lost = (metrics["candidate"] == "oh2_nfor") & (metrics["scene"] == "s2") & (metrics["spp"] == 8)
+    lost = (metrics["entry"] == "oh2_nfor") & (metrics["scene"] == "s2") & (metrics["spp"] == 8)
     with pytest.raises(BenchError, match=r"m.csv: no relmse value for method 'oh2_nfor' in case scene s2, spp 8"):
         beats_cases(metrics[~lost], find_comparisons(METHODS), variants=("sbf", "nfor"), source="m.csv")
     # a method no table lists may be missing (the base denoiser c)
-    beats_cases(metrics[metrics["candidate"] != "c"], find_comparisons(METHODS), variants=("sbf", "nfor"))
+    beats_cases(metrics[metrics["entry"] != "c"], find_comparisons(METHODS), variants=("sbf", "nfor"))
     # a listed method that is missing everywhere, or a non-finite value, is refused as well
     with pytest.raises(BenchError, match="'oh2_post'"):
-        beats_cases(metrics[metrics["candidate"] != "oh2_post"], find_comparisons(METHODS), variants=("post",))
+        beats_cases(metrics[metrics["entry"] != "oh2_post"], find_comparisons(METHODS), variants=("post",))
     broken = metrics.copy()
-    broken.loc[(broken["candidate"] == "e2") & (broken["metric"] == "relmse"), "value"] = float("nan")
+    broken.loc[(broken["entry"] == "e2") & (broken["metric"] == "relmse"), "value"] = float("nan")
     with pytest.raises(BenchError, match="method 'e2'.*not finite"):
         beats_cases(broken, find_comparisons(METHODS), variants=("post",))
 

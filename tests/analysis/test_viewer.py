@@ -242,7 +242,7 @@ def test_case_images_refuse_bad_input(tmp_path, monkeypatch):
 
 def metrics_frame(cases, entries, metric_names):
     """A tidy metrics table with distinct planted values: 1000 * case + 10 * entry + metric."""
-    rows = [{"scene": scene, "spp": spp, "candidate": entry, "metric": metric,
+    rows = [{"scene": scene, "spp": spp, "entry": entry, "metric": metric,
              "value": 1000.0 * c + 10.0 * e + m}
             for c, (scene, spp) in enumerate(cases) for e, entry in enumerate(entries)
             for m, metric in enumerate(metric_names)]

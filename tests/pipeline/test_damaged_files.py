@@ -87,7 +87,7 @@ def build_case(tree: Path) -> None:
     candidates = {name: str(tree / "methods" / f"{name}.exr") for name in CANDIDATES}
     compute_case_metrics(SCENE, SPP, str(tree / "reference.exr"), str(tree / "render.exr"), candidates,
                          METRICS, str(tree / "case.csv"))
-    gather_tables([str(tree / "case.csv")], str(tree / "metrics.csv"), candidates=ENTRIES,
+    gather_tables([str(tree / "case.csv")], str(tree / "metrics.csv"), entries=ENTRIES,
                   metric_names=METRICS, cases=[(SCENE, SPP)])
     _benchmark_record(tree / "benchmarks" / f"{SCENE}_spp{SPP}.tsv", 2.5)
     _benchmark_record(tree / "benchmarks" / f"{SCENE}_chunk0.tsv", 40.0)
@@ -136,7 +136,7 @@ def _run_case_metrics(tree: Path, out: Path) -> None:
 def _run_gather(tree: Path, out: Path) -> None:
     from mcbench.pipeline.metrics import gather_tables
 
-    gather_tables([str(tree / "case.csv")], str(out / "metrics.csv"), candidates=ENTRIES,
+    gather_tables([str(tree / "case.csv")], str(out / "metrics.csv"), entries=ENTRIES,
                   metric_names=METRICS, cases=[(SCENE, SPP)])
 
 
@@ -150,7 +150,7 @@ def _run_rankings(tree: Path, out: Path) -> None:
     from mcbench.pipeline.rankings import write_rankings
 
     write_rankings(str(tree / "metrics.csv"), "relmse", str(out / "ranking.csv"), str(out / "ranking.md"),
-                   candidates=ENTRIES, labels=LABELS)
+                   entries=ENTRIES, labels=LABELS)
 
 
 def _run_scene_table(tree: Path, out: Path) -> None:

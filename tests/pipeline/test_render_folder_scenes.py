@@ -137,7 +137,7 @@ def test_imported_case_is_denoised_and_scored_like_a_render(folder_scenes, tmp_p
     assert output.a is None and output.b is None and output.full.shape == (H, W, 3)
     table = compute_case_metrics("kitchen", 16, str(reference), str(render), {"oidn": str(tmp_path / "oidn.exr")},
                                  ["relmse"], str(tmp_path / "metrics.csv"))
-    values = table.set_index("candidate")["value"]
+    values = table.set_index("entry")["value"]
     from mcbench.io.render_folders import read_image_any
     truth = read_image_any(folder_scenes / "oidn" / "kitchen_ref.hdr.exr")
     noisy = read_image_any(folder_scenes / "oidn" / "kitchen_0016.hdr.exr")
@@ -185,7 +185,7 @@ def test_a_study_ranks_renders_from_another_renderer_end_to_end(tmp_path):
                             cwd=copy, env=env, capture_output=True, text=True, timeout=1500)
     assert result.returncode == 0, result.stderr[-4000:]
     metrics = pd.read_csv(copy / "results" / "metrics.csv")
-    relmse_rows = metrics[metrics["metric"] == "relmse"].set_index(["scene", "spp", "candidate"])["value"]
+    relmse_rows = metrics[metrics["metric"] == "relmse"].set_index(["scene", "spp", "entry"])["value"]
     truth = read_image_any(tmp_path / "oidn" / "kitchen_ref.hdr.exr")
     noisy = read_image_any(tmp_path / "oidn" / "kitchen_0004.hdr.exr")
     assert relmse_rows[("kitchen", 4, "noisy")] == pytest.approx(relmse(noisy, truth), rel=1e-9)

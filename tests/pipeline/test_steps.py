@@ -129,9 +129,9 @@ def test_compute_case_metrics_equals_the_metrics_recomputed(case_files, tmp_path
     assert len(frame) == len(images) * len(METRICS)
     for row in frame.itertuples():
         assert (row.scene, row.spp) == (SCENE, SPP)
-        assert row.value == METRICS[row.metric](images[row.candidate], truth)
-    assert frame.set_index(["candidate", "metric"]).loc[("jbf", "relmse"), "value"] < \
-        frame.set_index(["candidate", "metric"]).loc[(NOISY, "relmse"), "value"]
+        assert row.value == METRICS[row.metric](images[row.entry], truth)
+    assert frame.set_index(["entry", "metric"]).loc[("jbf", "relmse"), "value"] < \
+        frame.set_index(["entry", "metric"]).loc[(NOISY, "relmse"), "value"]
     pd.testing.assert_frame_equal(pd.read_csv(csv), frame)
 
 
@@ -150,7 +150,7 @@ def test_case_metrics_write_the_flip_maps_the_viewer_uses(case_files, tmp_path):
     truth = read_layers(reference, ["color"])["color"]
     assert set(maps) == {NOISY, "jbf"}
     np.testing.assert_allclose(maps["jbf"], flip_map(Denoised.load(output).full, truth), rtol=1e-6, atol=1e-7)
-    flip_values = frame[frame.metric == "flip"].set_index("candidate")["value"]
+    flip_values = frame[frame.metric == "flip"].set_index("entry")["value"]
     assert flip_values["jbf"] == METRICS["flip"](Denoised.load(output).full, truth)
     with_maps, without = tmp_path / "with", tmp_path / "without"
     for folder, path in ((with_maps, str(maps_path)), (without, None)):
@@ -164,7 +164,7 @@ def test_gather_tables_concatenates_the_cases(case_files, tmp_path):
     first, csv_a, _ = case_metrics(render, reference, tmp_path, scene="box", spp=8)
     second, csv_b, _ = case_metrics(render, reference, tmp_path, scene="room", spp=16)
     out = tmp_path / "metrics.csv"
-    frame = metrics.gather_tables([str(csv_a), str(csv_b)], str(out), candidates=[NOISY, "jbf"],
+    frame = metrics.gather_tables([str(csv_a), str(csv_b)], str(out), entries=[NOISY, "jbf"],
                                 metric_names=list(METRICS), cases=[("box", 8), ("room", 16)])
     expected = pd.concat([first, second], ignore_index=True)
     pd.testing.assert_frame_equal(frame.reset_index(drop=True), expected)
@@ -175,7 +175,7 @@ def test_write_rankings_scores_the_lower_error_higher(case_files, tmp_path):
     render, reference = case_files
     frame, csv, _ = case_metrics(render, reference, tmp_path)
     table = rankings.write_rankings(str(csv), "relmse", str(tmp_path / "r.csv"), str(tmp_path / "r.md"),
-                                 candidates=[NOISY, "jbf"], labels={"jbf": "JBF"})
+                                 entries=[NOISY, "jbf"], labels={"jbf": "JBF"})
     # two entries: the lower relMSE scores 2, the other 1 (Sec. 5.3.3)
     assert table.loc["jbf", "Avg."] == 2.0 and table.loc[NOISY, "Avg."] == 1.0
     assert "JBF" in (tmp_path / "r.md").read_text()

@@ -23,7 +23,7 @@ rule error_curves:
         ),
     params:
         labels=LABELS,
-        candidates=[NOISY] + CURVES,
+        entries=[NOISY] + CURVES,
     threads: 1
     resources:
         **job_resources("error_curves"),

@@ -17,7 +17,7 @@ rule ranking_table:
         md=f"{RESULTS}/tables/ranking_{{metric}}.md",
         tex=f"{RESULTS}/tables/ranking_{{metric}}.tex",
     params:
-        candidates=[NOISY] + RANKED,
+        entries=[NOISY] + RANKED,
         labels=LABELS,
         order=RANKED + [NOISY] if POOL_STUDY else None,
         note=POOL_NOTE,

@@ -76,7 +76,7 @@ rule study_tables:
     params:
         metrics=METRIC_NAMES,
         labels=LABELS,
-        candidates=[NOISY] + RANKED,
+        entries=[NOISY] + RANKED,
         n_resamples=config["study"]["bootstrap"],
         seed=config["study"]["seed"],
     threads: 1
@@ -110,7 +110,7 @@ rule study_figures:
             for key in STUDY_FIGURE_KEYS
         },
     params:
-        candidates=[NOISY] + RANKED,
+        entries=[NOISY] + RANKED,
         labels=LABELS,
         inputs={name: list(spec.inputs) for name, spec in METHODS.items()},
     threads: 1

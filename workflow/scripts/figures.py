@@ -13,4 +13,4 @@ if snakemake.rule == "speed_error":
                inputs={name: list(names) for name, names in dict(snakemake.params.inputs).items()})
 else:
     run_logged(snakemake.log[0], write_error_curves, snakemake.input.metrics, snakemake.wildcards.metric,
-               snakemake.output[0], labels=labels, candidates=list(snakemake.params.candidates))
+               snakemake.output[0], labels=labels, entries=list(snakemake.params.entries))

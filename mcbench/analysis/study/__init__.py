@@ -1,6 +1,6 @@
 """The 39-candidate study of Zheng et al. 2021, Sec. 5.3, checked with numbers.
 
-Pure functions over the tidy metrics table (columns scene, spp, candidate, metric, value), one
+Pure functions over the tidy metrics table (columns scene, spp, entry, metric, value), one
 module per concern:
 
 * :mod:`~mcbench.analysis.study.data` -- one metric's values and per-case scores on a full grid

@@ -2,7 +2,7 @@
 render given the same total time (render + method), per test case (:func:`equal_time_table`)
 and as the geometric mean over scenes (:func:`equal_time_curves`).
 
-Inputs: ``metrics`` (columns ``scene, spp, candidate, metric, value``; ``results/metrics.csv``),
+Inputs: ``metrics`` (columns ``scene, spp, entry, metric, value``; ``results/metrics.csv``),
 ``timings`` (columns ``scene, spp, method, seconds``; compute seconds of one method run, I/O
 excluded) and render times (columns ``scene, spp, seconds``, :func:`read_render_seconds`).
 
@@ -142,7 +142,7 @@ def equal_time_table(metrics: pd.DataFrame, timings: pd.DataFrame, render_second
     rows = metrics[metrics["metric"] == metric]
     if rows.empty:
         raise ValueError(f"no '{metric}' values in the metrics table")
-    names = [c for c in dict.fromkeys(rows["candidate"]) if c != noisy] if candidates is None else \
+    names = [c for c in dict.fromkeys(rows["entry"]) if c != noisy] if candidates is None else \
         [c for c in candidates if c != noisy]
     per_case = timings.groupby(["scene", "spp", "method"])["seconds"].mean()
     out = []
@@ -154,12 +154,12 @@ def equal_time_table(metrics: pd.DataFrame, timings: pd.DataFrame, render_second
             raise ValueError(f"render times of scene '{scene}' must be positive numbers")
         m_spp, m_sec = _monotone_times(renders["spp"].to_numpy(np.float64), renders["seconds"].to_numpy(np.float64))
         r_spp, r_sec = _invertible(m_spp, m_sec)
-        noisy_rows = scene_rows[scene_rows["candidate"] == noisy].groupby("spp")["value"].mean().sort_index()
+        noisy_rows = scene_rows[scene_rows["entry"] == noisy].groupby("spp")["value"].mean().sort_index()
         if noisy_rows.empty:
             raise ValueError(f"no '{metric}' of the noisy input '{noisy}' in scene '{scene}'")
         n_spp = noisy_rows.index.to_numpy(np.float64)
         n_err = np.maximum(noisy_rows.to_numpy(np.float64), tiny)
-        values = scene_rows.groupby(["spp", "candidate"])["value"].mean()
+        values = scene_rows.groupby(["spp", "entry"])["value"].mean()
         for spp in sorted(set(int(s) for s in scene_rows["spp"])):
             if not np.any(m_spp == spp):
                 raise ValueError(f"no render time for scene '{scene}' at {spp} spp")

@@ -3,7 +3,7 @@ spp and overall, by ensemble size, and each candidate's total compute cost with 
 
 Inputs are the workflow's tidy tables:
 
-* ``scores``: :func:`mcbench.analysis.ranking.case_scores` output, columns ``scene, spp, candidate,
+* ``scores``: :func:`mcbench.analysis.ranking.case_scores` output, columns ``scene, spp, entry,
   score`` (score K for the best of K entries of a case, 1 for the worst; higher is better);
 * ``timings``: columns ``scene, spp, method, seconds`` (``results/timings.csv``; compute seconds
   of one method run, I/O excluded).
@@ -37,11 +37,11 @@ def score_curves(scores: pd.DataFrame, *, candidates: list[str] | None = None) -
     """Mean score over scenes per spp (Fig. 14 c): index spp (ascending int), one column per
     candidate (``candidates`` in their order, or all in order of first appearance). Scores are
     unitless (K for the best of K entries of a case)."""
-    rows = select_rows(scores, "candidate", candidates)
+    rows = select_rows(scores, "entry", candidates)
     if rows.empty:
         raise ValueError("no scores to average")
-    order = list(candidates) if candidates is not None else list(dict.fromkeys(rows["candidate"]))
-    table = rows.groupby(["spp", "candidate"])["score"].mean().unstack("candidate")
+    order = list(candidates) if candidates is not None else list(dict.fromkeys(rows["entry"]))
+    table = rows.groupby(["spp", "entry"])["score"].mean().unstack("entry")
     if table.isna().to_numpy().any():
         lacking = table.columns[table.isna().any()].tolist()
         raise ValueError(f"candidate(s) {lacking} lack scores at some spp")

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from mcbench import NOISY
+from mcbench import METRICS_COLUMNS, NOISY
 from mcbench.analysis.study.data import CONFIDENCE, N_RESAMPLES, SEED, Resampling
 from mcbench.analysis.study.markdown import (NO_RELMSE_MARKDOWN, findings_markdown, pair_members_markdown,
                                              paper_comparison_markdown, recommendations_both_markdown,
@@ -93,7 +93,7 @@ def write_study_tables(metrics_csv, out_dir, *, metrics=("relmse", "dssim"), lab
     naming it. ``candidates`` (default: the pool candidates present) and ``noisy`` are the
     scored entries. Returns the tables by file stem.
     """
-    table = read_table(metrics_csv, columns=("scene", "spp", "candidate", "metric", "value"))
+    table = read_table(metrics_csv, columns=METRICS_COLUMNS)
     resampling = Resampling(n_resamples=n_resamples, seed=seed, confidence=confidence)
     tables = study_tables(table, metrics=metrics, labels=labels, candidates=candidates, noisy=noisy,
                           resampling=resampling, source=str(metrics_csv))
