@@ -78,7 +78,7 @@ effects against Tungsten in ``docs/fidelity_nfor.md``):
   not a regressor of pure noise (with Tungsten's rank rule it is redundant).
 * ``feature_variance = "halves"``: the per-pixel (f_A - f_B)^2 / 2, attributed to the paper but
   with no source we could check; a 1-degree-of-freedom estimate, the largest departure from
-  Tungsten (relMSE 8e-3 at 8 spp), so no longer a default.
+  Tungsten (relMSE 8e-3 at 8 spp), so not the default.
 * ``color_variance = "halves"``: each half's own ``variance_a`` / ``variance_b``.
 * ``regression_channels = filter_channels = "mean"``: distances averaged over colour channels
   (Rousselle et al. 2012 Eq. 5, as :mod:`mcbench.filters.nlmeans`); ``patch_borders =

@@ -50,7 +50,7 @@ __all__ = ["WEIGHTS", "CHANNELS", "GUIDE_VARIANCE_BLURS", "OUTLIER_PASSES", "FIL
 WEIGHTS = ("simplex", "unconstrained")
 CHANNELS = ("rgb", "single")
 GUIDE_VARIANCE_BLURS = ("none", "gaussian9")   # the weight filter's guide-variance blur
-#: the weight filter's outlier pass: none, ours (a value -> its neighbours' mean), the public code's
+#: the weight filter's outlier pass: none, a value -> its neighbours' mean (mcbench's), the public code's
 OUTLIER_PASSES = ("none", "neighbour_mean", "public_code")
 #: the weight filter's window at the image borders: clipped, or reflected as the public code does
 FILTER_BORDERS = ("clip", "reflect101")

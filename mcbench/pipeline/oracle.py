@@ -31,7 +31,7 @@ from mcbench.io.exr import check_finite, read_layers
 from mcbench.io.tables import write_csv, write_text
 from mcbench.analysis.oracle_tables import error_table, table_markdown, weight_maps_figure
 from mcbench.combine.oracle_weights import (MseMatrixAccumulator, block_average, one_hot_weights, simplex_weights,
-                                    unconstrained_weights)
+                                            unconstrained_weights)
 from mcbench.progress import eta_seconds, progress_line
 from mcbench.render.seeds import oracle_render_seed
 from mcbench.combine.selection import blend

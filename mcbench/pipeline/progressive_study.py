@@ -385,7 +385,7 @@ def write_progressive_tables(metrics_csv: str, timings_csv: str, out_dir: str, *
     import pandas as pd
 
     from mcbench.analysis.progressive_tables import (added_seconds, consistency_markdown, consistency_summary,
-                                            consistency_table, per_spp_markdown, per_spp_table, table_entries)
+                                                     consistency_table, per_spp_markdown, per_spp_table, table_entries)
 
     out = Path(out_dir)
     table = read_table(metrics_csv, columns=METRICS_COLUMNS)

@@ -27,7 +27,7 @@ import numpy as np
 
 from mcbench import BenchError
 from mcbench.render.geometry import (gradient_sky, lathe, mesh_from_arrays, perspective_sensor, quad,
-                              thinlens_sensor, torus)
+                                     thinlens_sensor, torus)
 from mcbench.render.seeds import MAX_TRAINING_SEED, is_fibre_seed
 from mcbench.training_data.fibres import FIBRE_SALT, add_fibre_clumps
 from mcbench.training_data.materials import (color_or_texture, light_color, random_material,
@@ -36,7 +36,7 @@ from mcbench.render.variants import pick_variant
 
 __all__ = ["SCENE_SALT", "random_scene"]
 
-SCENE_SALT = 0x7A1D5CE7         # mixed into the scene RNG so scene streams are ours alone
+SCENE_SALT = 0x7A1D5CE7         # mixed into the scene RNG so scene streams are their own
 
 
 def _rotation(rng: np.random.Generator):

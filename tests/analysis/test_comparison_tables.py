@@ -13,9 +13,9 @@ import pandas as pd
 import pytest
 
 from mcbench import BenchError
-from mcbench.analysis.comparison_tables import (ablation_cases, ablation_table, beats_cases, beats_table, comparison_ranking,
-                                 comparison_role, find_comparisons, write_ablation_table, write_comparison_ranking,
-                                 write_onehot_tables)
+from mcbench.analysis.comparison_tables import (ablation_cases, ablation_table, beats_cases, beats_table,
+                                                comparison_ranking, comparison_role, find_comparisons,
+                                                write_ablation_table, write_comparison_ranking, write_onehot_tables)
 
 ROOT = Path(__file__).resolve().parents[2]
 SCENES, SPPS = ("s1", "s2"), (4, 8)

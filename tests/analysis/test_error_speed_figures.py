@@ -9,8 +9,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from mcbench.analysis.error_speed_figures import (MEAN_PANEL, combined_seconds, error_curves, error_curves_figure, speed_error_figure,
-                             speed_error_points)
+from mcbench.analysis.error_speed_figures import (MEAN_PANEL, combined_seconds, error_curves, error_curves_figure,
+                                                  speed_error_figure, speed_error_points)
 
 SCENES = ["box", "glass"]
 SPPS = [4, 16, 64]

@@ -11,8 +11,8 @@ import pandas as pd
 import pytest
 
 from mcbench.combine.oracle_weights import (MseMatrixAccumulator, block_average, one_hot_weights, quadratic_objective,
-                            simplex_problem_weights, simplex_weights, unconstrained_problem_weights,
-                            unconstrained_weights)
+                                            simplex_problem_weights, simplex_weights, unconstrained_problem_weights,
+                                            unconstrained_weights)
 
 # --------------------------------------------------------------------------- accumulator
 

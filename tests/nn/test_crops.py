@@ -14,7 +14,7 @@ import torch
 from mcbench import BenchError
 from mcbench.io.exr import write_layers
 from mcbench.nn.crops import (BUFFER_KEYS, CropSet, PlaneStore, dihedral, is_validation_seed, load_combiner_crops,
-                             load_crops, sample_batch, validation_batches)
+                              load_crops, sample_batch, validation_batches)
 
 LEVELS = (4, 16)
 SIZE = 12

@@ -1,7 +1,7 @@
 """The best ensemble per scope, derived from the data, beside the paper's (Zheng et al. 2021
 Sec. 5.3.5-5.3.6): :func:`recommendations` per metric, among all 31 pool ensembles and among
 only the 12 the paper names; :func:`recommendations_both` relMSE's and DSSIM's picks side by
-side and one combined pick by a rule of ours (:data:`COMBINED_RULE`)."""
+side and one combined pick by mcbench's own rule (:data:`COMBINED_RULE`)."""
 
 from __future__ import annotations
 
@@ -20,7 +20,7 @@ REC_COLUMNS = ["metric", "scope", "key", "spp", "candidates", "ours", "ours_id",
                "named_ci_low", "named_ci_high", "named_fraction", "paper", "paper_id", "paper_score", "paper_ci_low",
                "paper_ci_high", "paper_fraction", "difference", "difference_ci_low", "difference_ci_high",
                "real_difference", "agrees", "named_agrees", "note"]
-# The rule of ours that weighs relMSE and DSSIM together (Sec. 5.3.6 does so for #27 without a formula).
+# mcbench's own rule that weighs relMSE and DSSIM together (Sec. 5.3.6 does so for #27 without a formula).
 COMBINED_RULE = ("ours, not the paper's: the highest mean of the relMSE and DSSIM ranking scores (each the paper's "
                  "per-case score over the same entries, averaged over the scope's spp and the scenes)")
 BOTH_METRICS = ("relmse", "dssim")

@@ -24,7 +24,8 @@ import numpy as np
 import pandas as pd
 
 from mcbench import METRICS_COLUMNS
-from mcbench.analysis.error_speed_figures import entry_styles, error_curves, error_curves_figure, pyplot_agg, save_figure
+from mcbench.analysis.error_speed_figures import (entry_styles, error_curves, error_curves_figure, pyplot_agg,
+                                                  save_figure)
 from mcbench.analysis.study.equal_time import equal_time_curves, equal_time_table, read_render_seconds
 from mcbench.analysis.study.scores_and_costs import (average_scores, score_curves, score_size_points,
                                                      score_size_summary, speed_score_points)

@@ -8,8 +8,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from mcbench.analysis.study.study_figures import (STUDY_FIGURES, curve_candidates, paper_recommended, study_figure_paths,
-                                            write_study_figures)
+from mcbench.analysis.study.study_figures import (STUDY_FIGURES, curve_candidates, paper_recommended,
+                                                  study_figure_paths, write_study_figures)
 from tests.analysis.study.synthetic_timings import SCENES, SPPS, METHODS, INPUTS, synthetic_study, write_records
 
 
