@@ -200,6 +200,42 @@ def test_the_documentation_lists_every_pipeline_module():
     assert sorted(listed) == modules, f"{DOC}: pipeline modules listed {sorted(listed)}, in the package {modules}"
 
 
+#: Functions that hold class definitions made on first use (so that importing the module imports
+#: no torch or Mitsuba): their length is their classes'.
+CLASS_FACTORIES = {"methods/wskpn.py:network_classes", "methods/mcgan.py:network_classes",
+                   "mcbench/render/path_features.py:_integrator_class"}
+MAX_FUNCTION_LINES = 60
+
+
+def long_functions(root: Path = ROOT) -> list[str]:
+    """Functions of ``mcbench``, ``methods`` and ``scenes`` with more than
+    :data:`MAX_FUNCTION_LINES` lines besides their docstring, numba kernels (a decorator naming
+    ``jit``) and Dr.Jit-traced functions (``dr.syntax``) aside."""
+    found = []
+    for package in ("mcbench", "methods", "scenes"):
+        for path in sorted((root / package).rglob("*.py")):
+            for node in ast.walk(ast.parse(path.read_text())):
+                if not isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                    continue
+                if any("jit" in ast.unparse(d) or "dr.syntax" in ast.unparse(d) for d in node.decorator_list):
+                    continue
+                body = node.body
+                docstring = (body[0].end_lineno - body[0].lineno + 1 if body and isinstance(body[0], ast.Expr)
+                             and isinstance(body[0].value, ast.Constant) and isinstance(body[0].value.value, str)
+                             else 0)
+                lines = node.end_lineno - node.lineno + 1 - docstring
+                name = f"{relative(path, root)}:{node.name}"
+                if lines > MAX_FUNCTION_LINES and name not in CLASS_FACTORIES:
+                    found.append(f"{name}: {lines} lines besides its docstring")
+    return found
+
+
+def test_no_function_is_over_sixty_lines():
+    """Small functions: none over :data:`MAX_FUNCTION_LINES` lines of code, but numba kernels and
+    the class factories of :data:`CLASS_FACTORIES`."""
+    assert long_functions() == []
+
+
 #: Names two modules of mcbench still share: pipeline.metrics (the case evaluations and the gathered
 #: tables) and analysis.metrics (the metric functions).
 SHARED_MODULE_NAMES = {"metrics"}
