@@ -273,7 +273,7 @@ def filter_against_numpy(size: int = 256, n: int = 4, repeats: int = 2):
     return t_numba, t_numpy, relmse
 
 
-def main(argv=None):
+def _arguments(argv) -> argparse.Namespace:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--quick", action="store_true", help="small sizes (a smoke run of the script)")
     ap.add_argument("--keep", type=Path, help="folder for the synthetic EXRs (kept between runs)")
@@ -284,39 +284,12 @@ def main(argv=None):
                     help="the authors' built EnsembleDenoising (tests/data/golden/ensemble_cpp/README.md): "
                          "run beside each job of 1. on the same case, in the same minute (default "
                          "$MCBENCH_ENSEMBLE_CPP; without it the C++ figures are CPP_REFERENCE's)")
-    args = ap.parse_args(argv)
-    sys.path.insert(0, str(HERE))
-    main_size = 256 if args.quick else 1024
-    sizes = [128, 256] if args.quick else [256, 512, 1024, 2048]
-    ns = [2, 4, 8]
-    n_sweep = [2, 3, 4, 6, 8]
-    load_before = os.getloadavg()
-    folder_ctx = tempfile.TemporaryDirectory(prefix="bench_ensemble_") if args.keep is None else None
-    root = Path(folder_ctx.name) if folder_ctx else args.keep
-    print(f"machine: {os.cpu_count()} CPUs, load average {load_before[0]:.2f} {load_before[1]:.2f} "
-          f"{load_before[2]:.2f}; numba threads {os.environ.get('NUMBA_NUM_THREADS', 'default')}",
-          flush=True)
+    return ap.parse_args(argv)
 
-    def case(size, n):
-        return write_case(root / f"s{size}_n{n}", size, n)
 
-    base_script = None if args.no_baseline else baseline_tree(args.baseline, root)
-    # warm the numba caches once (compilation is not part of a job's cost)
-    render, inputs = case(64, 2)
-    for solver in ("iterative", "exact"):
-        run_job(render, inputs, root / "warm.exr", solver=solver)
-        if base_script:
-            run_job(render, inputs, root / "warm.exr", script=base_script, solver=solver)
-
-    results = {}
-
-    def job(size, n, solver):
-        key = (size, n, solver)
-        if key not in results:
-            render, inputs = case(size, n)
-            results[key] = run_job(render, inputs, root / "out.exr", solver=solver)
-        return results[key]
-
+def _whole_process(args, root: Path, main_size: int, ns: list[int], case, job, base_script) -> None:
+    """Section 1: each job as a whole process at ``main_size``^2 (beside the baseline's, the
+    eager job's and the C++ program's when given)."""
     cpp_source = (f"measured beside each job: {args.cpp}, solver brute" if args.cpp
                   else "CPP_REFERENCE: 1024^2, an idle 2-core machine, not this run")
     print(f"\n1. whole process at {main_size}^2 (C++ {cpp_source}; target "
@@ -359,6 +332,10 @@ def main(argv=None):
         print(f"   largest relMSE of any output layer (blends, raw and filtered weight maps) of the "
               f"rows job against the baseline {args.baseline}: {worst:.1e}")
 
+
+def _scaling(job, sizes: list[int], main_size: int, n_sweep: list[int]) -> None:
+    """Section 2: the combine phase's time against the pixels and against N, with the fitted
+    exponents."""
     print("\n2. scaling of the combine phase (after the numba cache is loaded; fitted exponent b of "
           "time ~ x^b)")
     for solver in ("iterative", "exact"):
@@ -370,6 +347,41 @@ def main(argv=None):
         print(f"   {solver:>9} vs N {n_sweep} at {main_size}^2: {' '.join(f'{t:.2f}s' for t in times)} "
               f"-> b = {fitted_exponent(n_sweep, times):.2f}", flush=True)
 
+
+def main(argv=None):
+    args = _arguments(argv)
+    sys.path.insert(0, str(HERE))
+    main_size = 256 if args.quick else 1024
+    sizes = [128, 256] if args.quick else [256, 512, 1024, 2048]
+    load_before = os.getloadavg()
+    folder_ctx = tempfile.TemporaryDirectory(prefix="bench_ensemble_") if args.keep is None else None
+    root = Path(folder_ctx.name) if folder_ctx else args.keep
+    print(f"machine: {os.cpu_count()} CPUs, load average {load_before[0]:.2f} {load_before[1]:.2f} "
+          f"{load_before[2]:.2f}; numba threads {os.environ.get('NUMBA_NUM_THREADS', 'default')}",
+          flush=True)
+
+    def case(size, n):
+        return write_case(root / f"s{size}_n{n}", size, n)
+
+    base_script = None if args.no_baseline else baseline_tree(args.baseline, root)
+    # warm the numba caches once (compilation is not part of a job's cost)
+    render, inputs = case(64, 2)
+    for solver in ("iterative", "exact"):
+        run_job(render, inputs, root / "warm.exr", solver=solver)
+        if base_script:
+            run_job(render, inputs, root / "warm.exr", script=base_script, solver=solver)
+
+    results = {}
+
+    def job(size, n, solver):
+        key = (size, n, solver)
+        if key not in results:
+            render, inputs = case(size, n)
+            results[key] = run_job(render, inputs, root / "out.exr", solver=solver)
+        return results[key]
+
+    _whole_process(args, root, main_size, [2, 4, 8], case, job, base_script)
+    _scaling(job, sizes, main_size, [2, 3, 4, 6, 8])
     t_numba, t_numpy, relmse = filter_against_numpy(128 if args.quick else 256)
     print(f"\n3. weight filter, numba {t_numba:.3f} s vs NumPy baseline {t_numpy:.3f} s "
           f"({t_numpy / t_numba:.1f}x faster); blend relMSE between them {relmse:.1e}")

@@ -76,7 +76,7 @@ def job_counts(text: str) -> dict[str, int]:
     return {m.group(1): int(m.group(2)) for m in re.finditer(r"^(\w+)\s+(\d+)$", table, re.MULTILINE)}
 
 
-def main(argv=None) -> None:
+def _arguments(argv) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--workdir", type=Path, default=Path.cwd())
     parser.add_argument("--configfile", type=Path, help="the study's config (default: WORKDIR/config.yaml, "
@@ -86,7 +86,60 @@ def main(argv=None) -> None:
     parser.add_argument("--bundle", action="store_true", help="also export, import and dry-run a clone")
     parser.add_argument("--metric", help="also add this metric to the study's list, then remove it")
     parser.add_argument("--out", type=Path)
-    args = parser.parse_args(argv)
+    return parser.parse_args(argv)
+
+
+def _add_methods(workdir: Path, configfile: Path, base: dict, cores: int, row) -> None:
+    """Each method of :data:`ADDITIONS` added to the finished study, then removed again."""
+    for what, entry in ADDITIONS.items():
+        config = dict(base, add_denoisers=list(base.get("add_denoisers") or []) + [entry])
+        edited = workdir / f".incremental_{entry['name']}.yaml"
+        edited.write_text(yaml.safe_dump(config))
+        _, _, plan = timed(snakemake(workdir, edited, "-n"), cwd=workdir)
+        counts = job_counts(plan)
+        jobs = ", ".join(f"{rule} {n}" for rule, n in counts.items() if rule == "run_case")
+        wall, cpu, _ = timed(snakemake(workdir, edited, "--cores", str(cores)), cwd=workdir)
+        row(f"add {what}", wall, cpu, f"{sum(counts.values())} ({jobs})")
+        wall, cpu, _ = timed(snakemake(workdir, configfile, "--cores", str(cores)), cwd=workdir)
+        row(f"remove it again (tables only)", wall, cpu)
+        edited.unlink()
+
+
+def _add_metric(workdir: Path, configfile: Path, base: dict, metric: str, cores: int, row) -> None:
+    """``metric`` added to the finished study's metrics, then removed again."""
+    metrics = list(base.get("metrics") or [])
+    if metric in metrics:
+        raise SystemExit(f"--metric {metric}: the study already has it ({metrics})")
+    edited = workdir / ".incremental_metric.yaml"
+    edited.write_text(yaml.safe_dump(dict(base, metrics=metrics + [metric])))
+    _, _, plan = timed(snakemake(workdir, edited, "-n"), cwd=workdir)
+    wall, cpu, _ = timed(snakemake(workdir, edited, "--cores", str(cores)), cwd=workdir)
+    row(f"add the metric {metric}", wall, cpu, str(sum(job_counts(plan).values())))
+    wall, cpu, _ = timed(snakemake(workdir, configfile, "--cores", str(cores)), cwd=workdir)
+    row("remove it again (values kept: no metric computed)", wall, cpu)
+    edited.unlink()
+
+
+def _bundle_round_trip(workdir: Path, configfile: Path, row) -> None:
+    """The study exported, imported into a fresh clone, and dry-run there."""
+    archive = workdir / "results/bundle/study.tar"
+    wall, cpu, _ = timed(snakemake(workdir, configfile, "--cores", "1", "export_study", "-f"), cwd=workdir)
+    row("export_study", wall, cpu, extra=f"{archive.stat().st_size / 2**20:.1f} MiB")
+    with tempfile.TemporaryDirectory(dir=workdir.parent) as tmp:
+        clone = Path(tmp) / "clone"
+        subprocess.run(["git", "clone", "-q", str(REPO), str(clone)], check=True)
+        shutil.copyfile(configfile, clone / "study_config.yaml")
+        env_command = [sys.executable, "-m", "mcbench.pipeline.bundle", "import", str(archive),
+                       "--configfile", "study_config.yaml"]
+        wall, cpu, _ = timed(env_command, cwd=clone)
+        row("import into a fresh clone", wall, cpu)
+        _, _, text = timed(snakemake(clone, clone / "study_config.yaml", "-n", checkout=clone), cwd=clone)
+        row("snakemake -n in the clone", 0.0, 0.0, extra="nothing to be done" if "Nothing to be done" in text
+            else "PLANS JOBS")
+
+
+def main(argv=None) -> None:
+    args = _arguments(argv)
     workdir = args.workdir.resolve()
     configfile = (args.configfile or (workdir / "config.yaml" if (workdir / "config.yaml").exists()
                                       else REPO / "config.yaml")).resolve()
@@ -100,45 +153,11 @@ def main(argv=None) -> None:
         fraction = f"{100 * cpu / args.scratch_cpu:.2f} %" if args.scratch_cpu else "n/a"
         rows.append(f"| {what} | {wall:.1f} | {cpu:.1f} | {fraction} | {jobs} | {extra} | {os.getloadavg()[0]:.2f} |")
 
-    for what, entry in ADDITIONS.items():
-        config = dict(base, add_denoisers=list(base.get("add_denoisers") or []) + [entry])
-        edited = workdir / f".incremental_{entry['name']}.yaml"
-        edited.write_text(yaml.safe_dump(config))
-        _, _, plan = timed(snakemake(workdir, edited, "-n"), cwd=workdir)
-        counts = job_counts(plan)
-        jobs = ", ".join(f"{rule} {n}" for rule, n in counts.items() if rule == "run_case")
-        wall, cpu, _ = timed(snakemake(workdir, edited, "--cores", str(args.cores)), cwd=workdir)
-        row(f"add {what}", wall, cpu, f"{sum(counts.values())} ({jobs})")
-        wall, cpu, _ = timed(snakemake(workdir, configfile, "--cores", str(args.cores)), cwd=workdir)
-        row(f"remove it again (tables only)", wall, cpu)
-        edited.unlink()
+    _add_methods(workdir, configfile, base, args.cores, row)
     if args.metric:
-        metrics = list(base.get("metrics") or [])
-        if args.metric in metrics:
-            raise SystemExit(f"--metric {args.metric}: the study already has it ({metrics})")
-        edited = workdir / ".incremental_metric.yaml"
-        edited.write_text(yaml.safe_dump(dict(base, metrics=metrics + [args.metric])))
-        _, _, plan = timed(snakemake(workdir, edited, "-n"), cwd=workdir)
-        wall, cpu, _ = timed(snakemake(workdir, edited, "--cores", str(args.cores)), cwd=workdir)
-        row(f"add the metric {args.metric}", wall, cpu, str(sum(job_counts(plan).values())))
-        wall, cpu, _ = timed(snakemake(workdir, configfile, "--cores", str(args.cores)), cwd=workdir)
-        row("remove it again (values kept: no metric computed)", wall, cpu)
-        edited.unlink()
+        _add_metric(workdir, configfile, base, args.metric, args.cores, row)
     if args.bundle:
-        archive = workdir / "results/bundle/study.tar"
-        wall, cpu, _ = timed(snakemake(workdir, configfile, "--cores", "1", "export_study", "-f"), cwd=workdir)
-        row("export_study", wall, cpu, extra=f"{archive.stat().st_size / 2**20:.1f} MiB")
-        with tempfile.TemporaryDirectory(dir=workdir.parent) as tmp:
-            clone = Path(tmp) / "clone"
-            subprocess.run(["git", "clone", "-q", str(REPO), str(clone)], check=True)
-            shutil.copyfile(configfile, clone / "study_config.yaml")
-            env_command = [sys.executable, "-m", "mcbench.pipeline.bundle", "import", str(archive),
-                           "--configfile", "study_config.yaml"]
-            wall, cpu, _ = timed(env_command, cwd=clone)
-            row("import into a fresh clone", wall, cpu)
-            _, _, text = timed(snakemake(clone, clone / "study_config.yaml", "-n", checkout=clone), cwd=clone)
-            row("snakemake -n in the clone", 0.0, 0.0, extra="nothing to be done" if "Nothing to be done" in text
-                else "PLANS JOBS")
+        _bundle_round_trip(workdir, configfile, row)
     header = ["| step | wall s | CPU s | CPU / from-scratch CPU | jobs planned | | load (1 min) |",
               "|---|---:|---:|---:|---|---|---:|"]
     table = "\n".join(header + rows) + "\n"

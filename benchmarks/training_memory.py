@@ -48,7 +48,7 @@ def child(args: argparse.Namespace) -> None:
     """Train one network as the job does; print one JSON line (items, seconds, files read)."""
     sys.path.insert(0, str(Path(args.code).resolve()))
     from mcbench.contracts.method import method_spec
-    from mcbench.nn.data import crop_paths
+    from mcbench.nn.crops import crop_paths
     from mcbench.nn.train import correlated_paths
     from mcbench.pipeline.training import learned_method, train_learned_method
 

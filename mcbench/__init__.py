@@ -20,20 +20,23 @@ higher one. The declaration is the import-linter contracts of ``pyproject.toml``
 * :mod:`mcbench.analysis` -- tables in, tables and figures out: metrics, ranking, the pool, the
   study, comparisons, figures, the viewer, the scene summary;
 * :mod:`mcbench.pipeline` -- the work behind each Snakemake rule (one module per
-  ``workflow/rules/X.smk``), the config and its plan, cluster resources, thread limits and logs.
-  Only this layer resolves method and scene names (through the registries ``methods`` and
-  ``scenes``).
+  ``workflow/rules/X.smk``, named for it unless a lower layer has a module of that name), the
+  config and its plan, cluster resources, thread limits and logs. Only this layer resolves
+  method and scene names (through the registries ``methods`` and ``scenes``).
 
 The plugins (``methods/``, ``scenes/``) import the layers the graph declares for them, never
 ``pipeline``.
 """
 
-__all__ = ["BenchError", "NOISY", "NOISY_LABEL"]
+__all__ = ["BenchError", "NOISY", "NOISY_LABEL", "METRICS_COLUMNS"]
 
 #: The noisy input's row in every table (metrics, rankings, timings); no method may take the name.
 NOISY = "noisy"
 #: ... and its label in tables and figures.
 NOISY_LABEL = "Noisy input"
+#: The columns of a metrics table (a case's ``results/metrics/<scene>/spp<N>.csv`` and the gathered
+#: ``results/metrics.csv``): one row per entry (the noisy input or a candidate) and metric.
+METRICS_COLUMNS = ("scene", "spp", "entry", "metric", "value")
 
 
 class BenchError(RuntimeError):

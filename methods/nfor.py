@@ -78,7 +78,7 @@ effects against Tungsten in ``docs/fidelity_nfor.md``):
   not a regressor of pure noise (with Tungsten's rank rule it is redundant).
 * ``feature_variance = "halves"``: the per-pixel (f_A - f_B)^2 / 2, attributed to the paper but
   with no source we could check; a 1-degree-of-freedom estimate, the largest departure from
-  Tungsten (relMSE 8e-3 at 8 spp), so no longer a default.
+  Tungsten (relMSE 8e-3 at 8 spp), so not the default.
 * ``color_variance = "halves"``: each half's own ``variance_a`` / ``variance_b``.
 * ``regression_channels = filter_channels = "mean"``: distances averaged over colour channels
   (Rousselle et al. 2012 Eq. 5, as :mod:`mcbench.filters.nlmeans`); ``patch_borders =
@@ -436,6 +436,51 @@ def mse_estimate(filtered_a, filtered_b, color_a, color_b, variance_a, variance_
     return 0.5 * (mse_a + mse_b) - 0.25 * (filtered_a - filtered_b) ** 2
 
 
+def _first_pass(halves, color, variance, regression: dict, filters: dict, filter_channels: str, stage_done):
+    """Steps 2-3 of :func:`denoise`: each half's cross-filtered regression per bandwidth (Sec.
+    5.2), their MSE estimates filtered and the bandwidth selection (Sec. 5.3): ``(selection,
+    result A, result B, the intermediates by name)``."""
+    color_a, color_b, var_a, var_b, feat_a, feat_b = halves
+    cand_a, cand_b, mses, stages = [], [], [], {}
+    for k in BANDWIDTHS:
+        fa = collaborative_regression(color_a, color_b, var_b, feat_b, k=k, **regression)
+        fb = collaborative_regression(color_b, color_a, var_a, feat_a, k=k, **regression)
+        mses.append(mse_estimate(fa, fb, color_a, color_b, var_a, var_b))
+        cand_a.append(fa)
+        cand_b.append(fb)
+        stages[f"filtered_a_k{k:.1f}"], stages[f"filtered_b_k{k:.1f}"] = fa, fb
+        stage_done(f"regression of A and B at k = {k} (Sec. 5.2)")
+    filtered_mse = nl_means_filter(np.concatenate(mses, axis=2), color, variance, channels=filter_channels,
+                                   **filters, **MSE_FILTER)
+    stages.update({f"mse_k{k:.1f}": filtered_mse[..., 3 * i:3 * i + 3] for i, k in enumerate(BANDWIDTHS)})
+    raw_selection = (filtered_mse[..., 3:] <= filtered_mse[..., :3]).astype(np.float64)
+    selection = nl_means_filter(raw_selection, color, variance, channels=filter_channels, **filters, **MSE_FILTER)
+    selection = np.clip(selection, 0.0, 1.0)
+    result_a = (1.0 - selection) * cand_a[0] + selection * cand_a[1]
+    result_b = (1.0 - selection) * cand_b[0] + selection * cand_b[1]
+    stage_done("MSE filtering and bandwidth selection (Sec. 5.3)")
+    return selection, result_a, result_b, stages
+
+
+def _second_pass(feat_a, feat_b, result_a, result_b, variance_scale: float, regression: dict, filters: dict,
+                 stage_done) -> np.ndarray:
+    """Step 4 of :func:`denoise` (Sec. 5.4): the halves' features and results combined, the
+    features filtered, one regression of the combined result."""
+    combined_features = 0.5 * (feat_a + feat_b)
+    combined_feature_var = 0.25 * (feat_a - feat_b) ** 2
+    final_features = np.empty_like(combined_features)
+    for j in range(combined_features.shape[2]):
+        final_features[..., j] = nl_means_filter(combined_features[..., j], combined_features[..., j],
+                                                 combined_feature_var[..., j], **filters, **SECOND_PASS_FEATURES)
+    combined = 0.5 * (result_a + result_b)
+    combined_var = variance_scale * 0.25 * (result_a - result_b) ** 2
+    stage_done("second-pass features (Sec. 5.4)")
+    full = collaborative_regression(combined, combined, combined_var, final_features,
+                                    **dict(regression, k=SECOND_PASS_K))
+    stage_done("second-pass regression (Sec. 5.4)")
+    return full
+
+
 def denoise(buffers: RenderBuffers, *, second_pass_variance_scale: float = 2.0, regression_channels: str = "min",
             filter_channels: str = "independent", nlm_epsilon: float = 1e-7, feature_variance: str = "buffer",
             color_variance: str = "buffer", patch_borders: str = "truncate", filter_clamp: bool = True,
@@ -514,39 +559,11 @@ def denoise(buffers: RenderBuffers, *, second_pass_variance_scale: float = 2.0, 
                                         epsilon=nlm_epsilon, borders=patch_borders, clamp=clamp)
     stage_done("feature prefiltering (Sec. 5.1)")
 
-    # 2. cross-filtered regression for each bandwidth (Sec. 5.2) and 3. MSE estimates (Sec. 5.3)
-    cand_a, cand_b, mses, stages = [], [], [], {}
-    for k in BANDWIDTHS:
-        fa = collaborative_regression(color_a, color_b, var_b, feat_b, k=k, **regression)
-        fb = collaborative_regression(color_b, color_a, var_a, feat_a, k=k, **regression)
-        mses.append(mse_estimate(fa, fb, color_a, color_b, var_a, var_b))
-        cand_a.append(fa)
-        cand_b.append(fb)
-        stages[f"filtered_a_k{k:.1f}"], stages[f"filtered_b_k{k:.1f}"] = fa, fb
-        stage_done(f"regression of A and B at k = {k} (Sec. 5.2)")
-    filtered_mse = nl_means_filter(np.concatenate(mses, axis=2), color, variance, channels=filter_channels,
-                                   **filters, **MSE_FILTER)
-    stages.update({f"mse_k{k:.1f}": filtered_mse[..., 3 * i:3 * i + 3] for i, k in enumerate(BANDWIDTHS)})
-    raw_selection = (filtered_mse[..., 3:] <= filtered_mse[..., :3]).astype(np.float64)
-    selection = nl_means_filter(raw_selection, color, variance, channels=filter_channels, **filters, **MSE_FILTER)
-    selection = np.clip(selection, 0.0, 1.0)
-    result_a = (1.0 - selection) * cand_a[0] + selection * cand_a[1]
-    result_b = (1.0 - selection) * cand_b[0] + selection * cand_b[1]
-    stage_done("MSE filtering and bandwidth selection (Sec. 5.3)")
-
-    # 4. second pass (Sec. 5.4)
-    combined_features = 0.5 * (feat_a + feat_b)
-    combined_feature_var = 0.25 * (feat_a - feat_b) ** 2
-    final_features = np.empty_like(combined_features)
-    for j in range(combined_features.shape[2]):
-        final_features[..., j] = nl_means_filter(combined_features[..., j], combined_features[..., j],
-                                                 combined_feature_var[..., j], **filters, **SECOND_PASS_FEATURES)
-    combined = 0.5 * (result_a + result_b)
-    combined_var = second_pass_variance_scale * 0.25 * (result_a - result_b) ** 2
-    stage_done("second-pass features (Sec. 5.4)")
-    full = collaborative_regression(combined, combined, combined_var, final_features,
-                                    **dict(regression, k=SECOND_PASS_K))
-    stage_done("second-pass regression (Sec. 5.4)")
+    halves = (color_a, color_b, var_a, var_b, feat_a, feat_b)
+    selection, result_a, result_b, stages = _first_pass(halves, color, variance, regression, filters, filter_channels,
+                                                        stage_done)
+    full = _second_pass(feat_a, feat_b, result_a, result_b, second_pass_variance_scale, regression, filters,
+                        stage_done)
 
     def f32(x):
         return np.ascontiguousarray(x, dtype=np.float32)

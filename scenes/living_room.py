@@ -26,19 +26,11 @@ def planks(size: int = 256, rows: int = 8, seed: int = 31) -> np.ndarray:
     return (value[..., None] * np.array([0.42, 0.26, 0.13])).astype(np.float32)
 
 
-def build(width: int, height: int) -> dict:
-    """Mitsuba scene dict at ``width`` x ``height``; path tracer with ``max_depth`` 7."""
-    import mitsuba as mi
-
-    T = mi.ScalarTransform4f
+def _room(T, width: int, height: int) -> dict:
+    """The integrator, the camera, the room's floor, ceiling and walls and the ceiling light."""
     hx, hy, hz = ROOM
     wall = {"type": "twosided", "bsdf": diffuse([0.72, 0.68, 0.6])}
-    fabric = diffuse([0.3, 0.38, 0.5])
-    wood = diffuse([0.4, 0.25, 0.12])
-    rng = np.random.default_rng(32)
-    shade_v, shade_f, shade_n, shade_uv = lathe([0.25, 0.15], [0.0, 0.3], segments=24,
-                                                cap_bottom=False)
-    scene = {
+    return {
         "type": "scene",
         "integrator": {"type": "path", "max_depth": 7},
         "sensor": perspective_sensor(width, height, origin=(1.9, 1.6, 2.2),
@@ -56,6 +48,14 @@ def build(width: int, height: int) -> dict:
         "ceiling_light": quad((0.3, hy - 0.01, 0.0), (0.4, 0, 0), (0, 0, 0.4),
                               emitter={"type": "area", "radiance": {"type": "rgb",
                                                                     "value": [9, 9, 9.5]}}),
+    }
+
+
+def _furniture(T, rng) -> dict:
+    """The sofa, the coffee table on its rug, the shelf and the framed picture (its pixels
+    drawn from ``rng``)."""
+    fabric = diffuse([0.3, 0.38, 0.5])
+    return {
         # Sofa against the back wall.
         "sofa_seat": box((-0.6, 0.22, -1.9), (1.0, 0.22, 0.4), fabric),
         "sofa_back": box((-0.6, 0.55, -2.25), (1.0, 0.4, 0.12), fabric),
@@ -74,13 +74,20 @@ def build(width: int, height: int) -> dict:
         "mug": {"type": "cylinder", "p0": [-0.3, 0.445, -0.5], "p1": [-0.3, 0.56, -0.5],
                 "radius": 0.045, "bsdf": diffuse(0.85)},
         # Shelf with books on the left wall.
-        "shelf": box((-2.3, 0.9, 0.3), (0.2, 0.9, 0.6), wood),
+        "shelf": box((-2.3, 0.9, 0.3), (0.2, 0.9, 0.6), diffuse([0.4, 0.25, 0.12])),
         # Framed picture on the back wall.
         "frame": box((0.9, 1.6, -2.49), (0.45, 0.32, 0.01), diffuse(0.1)),
         "picture": quad((0.9, 1.6, -2.475), (0.4, 0, 0), (0, 0.27, 0),
                         diffuse(bitmap_texture(rng.random((6, 8, 3)).astype(np.float32) * 0.8,
                                                filter_type="nearest"))),
-        # Floor lamp: pole, base and an emissive-inside shade with a warm bulb.
+    }
+
+
+def _floor_lamp(T) -> dict:
+    """Floor lamp: pole, base and an emissive-inside shade with a warm bulb."""
+    shade_v, shade_f, shade_n, shade_uv = lathe([0.25, 0.15], [0.0, 0.3], segments=24,
+                                                cap_bottom=False)
+    return {
         "lamp_base": {"type": "cylinder", "p0": [1.5, 0, -1.8], "p1": [1.5, 0.03, -1.8],
                       "radius": 0.18, "bsdf": diffuse(0.15)},
         "lamp_pole": {"type": "cylinder", "p0": [1.5, 0, -1.8], "p1": [1.5, 1.4, -1.8],
@@ -92,6 +99,15 @@ def build(width: int, height: int) -> dict:
                       "emitter": {"type": "area", "radiance": {"type": "rgb",
                                                                "value": [120, 80, 35]}}},
     }
+
+
+def build(width: int, height: int) -> dict:
+    """Mitsuba scene dict at ``width`` x ``height``; path tracer with ``max_depth`` 7."""
+    import mitsuba as mi
+
+    T = mi.ScalarTransform4f
+    rng = np.random.default_rng(32)
+    scene = {**_room(T, width, height), **_furniture(T, rng), **_floor_lamp(T)}
     for k in range(7):
         scene[f"shelf_book{k}"] = box((-2.08, 1.28, 0.75 - 0.12 * k), (0.03, 0.12 + 0.02 * (k % 3), 0.05),
                                       diffuse(rng.uniform(0.1, 0.7, 3)))

@@ -103,7 +103,7 @@ def lint(root: Path) -> tuple[set[str], str]:
 
 def unit_of(module: str) -> str:
     """The package of the declared graph that ``module`` belongs to: its layer for a module of a
-    layer (``mcbench.nn.data`` -> ``nn``), its plugin package (``methods.kpcn`` -> ``methods``),
+    layer (``mcbench.nn.crops`` -> ``nn``), its plugin package (``methods.kpcn`` -> ``methods``),
     ``mcbench`` for the package's top-level modules, else its top-level name (a third party)."""
     parts = module.split(".")
     if parts[0] == PACKAGE and len(parts) > 1 and (ROOT / PACKAGE / parts[1] / "__init__.py").is_file():
@@ -200,6 +200,62 @@ def test_the_documentation_lists_every_pipeline_module():
     listed = re.findall(r"^- `(\w+)` — ", (ROOT / DOC).read_text(), re.MULTILINE)
     modules = sorted(p.stem for p in (ROOT / PIPELINE.replace(".", "/")).glob("*.py") if p.stem != "__init__")
     assert sorted(listed) == modules, f"{DOC}: pipeline modules listed {sorted(listed)}, in the package {modules}"
+
+
+#: Functions that hold class definitions made on first use (so that importing the module imports
+#: no torch or Mitsuba): their length is their classes'.
+CLASS_FACTORIES = {"methods/wskpn.py:network_classes", "methods/mcgan.py:network_classes",
+                   "mcbench/render/path_features.py:_integrator_class"}
+MAX_FUNCTION_LINES = 60
+
+
+def long_functions(root: Path = ROOT) -> list[str]:
+    """Functions of ``mcbench``, ``methods`` and ``scenes`` with more than
+    :data:`MAX_FUNCTION_LINES` lines besides their docstring, numba kernels (a decorator naming
+    ``jit``) and Dr.Jit-traced functions (``dr.syntax``) aside."""
+    found = []
+    for package in ("mcbench", "methods", "scenes"):
+        for path in sorted((root / package).rglob("*.py")):
+            for node in ast.walk(ast.parse(path.read_text())):
+                if not isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                    continue
+                if any("jit" in ast.unparse(d) or "dr.syntax" in ast.unparse(d) for d in node.decorator_list):
+                    continue
+                body = node.body
+                docstring = (body[0].end_lineno - body[0].lineno + 1 if body and isinstance(body[0], ast.Expr)
+                             and isinstance(body[0].value, ast.Constant) and isinstance(body[0].value.value, str)
+                             else 0)
+                lines = node.end_lineno - node.lineno + 1 - docstring
+                name = f"{relative(path, root)}:{node.name}"
+                if lines > MAX_FUNCTION_LINES and name not in CLASS_FACTORIES:
+                    found.append(f"{name}: {lines} lines besides its docstring")
+    return found
+
+
+def test_no_function_is_over_sixty_lines():
+    """Small functions: none over :data:`MAX_FUNCTION_LINES` lines of code, but numba kernels and
+    the class factories of :data:`CLASS_FACTORIES`."""
+    assert long_functions() == []
+
+
+#: Names two modules of mcbench still share: pipeline.metrics (the case evaluations and the gathered
+#: tables) and analysis.metrics (the metric functions).
+SHARED_MODULE_NAMES = {"metrics"}
+
+
+def test_no_two_modules_share_a_name():
+    """No two modules or packages of ``mcbench`` have the same name, whatever their layers (one
+    name per concept, ``docs/architecture.md``), but those of :data:`SHARED_MODULE_NAMES`."""
+    found: dict[str, list[str]] = {}
+    for path in sorted((ROOT / "mcbench").rglob("*.py")):
+        if "__pycache__" in path.parts:
+            continue
+        name = path.parent.name if path.stem == "__init__" else path.stem
+        if path.stem == "__init__" and path.parent == ROOT / "mcbench":
+            continue
+        found.setdefault(name, []).append(relative(path, ROOT))
+    shared = {name: paths for name, paths in found.items() if len(paths) > 1 and name not in SHARED_MODULE_NAMES}
+    assert not shared, f"modules of the same name: {shared}"
 
 
 # ---------------------------------------------------------------------------------------------
@@ -510,7 +566,7 @@ def test_checkers_on_a_minimal_synthetic_tree(tmp_path):
     write(tmp_path / "scenes/s.py", "import importlib\nimportlib.import_module('mcbench.pipeline.x')\n"
                                     "__import__('numpy')\n")
     write(tmp_path / "workflow/scripts/run.py", "from mcbench import BenchError\nfrom mcbench.low.a import f\n"
-                                                "from mcbench.pipeline import render\n")
+                                                "from mcbench.pipeline import rendering\n")
 
     assert package_cycles(tmp_path) == [
         "cycle through package mcbench.pipeline: mcbench.pipeline -> mcbench.pipeline.step -> mcbench.pipeline"]
@@ -574,8 +630,8 @@ BREAKAGES = {
     "new top-level module": (
         {"mcbench/helpers.py": None}, "1-layers", ["not listed as layers", "mcbench.helpers"]),
     "import between the independent layers of one level": (
-        {"mcbench/analysis/figures.py": PROBE.format("from mcbench.training_data import fingerprints")},
-        "1-layers", ["mcbench.analysis.figures -> mcbench.training_data.fingerprints"]),
+        {"mcbench/analysis/error_speed_figures.py": PROBE.format("from mcbench.training_data import fingerprints")},
+        "1-layers", ["mcbench.analysis.error_speed_figures -> mcbench.training_data.fingerprints"]),
     "a lower layer the layer does not use (analysis -> nn)": (
         {"mcbench/analysis/metrics.py": PROBE.format("from mcbench.nn import losses")},
         "2-nn", ["mcbench.analysis.metrics -> mcbench.nn.losses"]),
@@ -644,8 +700,8 @@ BREAKAGES = {
         {"methods/jbf.py": PROBE.format("from mcbench.io.exr import _private_helper")},
         8, ["methods/jbf.py", "imports mcbench.io.exr._private_helper"]),
     "script importing below the pipeline": (
-        {"workflow/scripts/error_curves.py": "from mcbench.analysis.figures import error_curves\n"},
-        9, ["workflow/scripts/error_curves.py", "imports mcbench.analysis.figures"]),
+        {"workflow/scripts/error_curves.py": "from mcbench.analysis.error_speed_figures import error_curves\n"},
+        9, ["workflow/scripts/error_curves.py", "imports mcbench.analysis.error_speed_figures"]),
     "script importing a plugin": (
         {"workflow/scripts/gather_timings.py": "import methods\n"},
         9, ["workflow/scripts/gather_timings.py", "imports methods"]),

@@ -26,8 +26,8 @@ def _tau_lines(results: Path) -> list[str]:
 
 def _mean_relmse(results: Path, names: list[str]) -> pd.DataFrame:
     metrics = pd.read_csv(results / "metrics.csv")
-    rows = metrics[(metrics["metric"] == "relmse") & metrics["candidate"].isin(names)]
-    return rows.groupby(["candidate", "spp"])["value"].mean().unstack("spp")
+    rows = metrics[(metrics["metric"] == "relmse") & metrics["entry"].isin(names)]
+    return rows.groupby(["entry", "spp"])["value"].mean().unstack("spp")
 
 
 def main(argv: list[str] | None = None) -> int:

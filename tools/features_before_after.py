@@ -45,7 +45,7 @@ def scenes_with_delta_lobes(scenes: list[str]) -> set[str]:
 def mean_errors(metrics: pd.DataFrame, metric: str, scenes) -> pd.DataFrame:
     """Mean of ``metric`` over ``scenes`` per entry (rows) and spp (columns)."""
     rows = metrics[(metrics["metric"] == metric) & metrics["scene"].isin(scenes)]
-    return rows.groupby(["candidate", "spp"])["value"].mean().unstack("spp")
+    return rows.groupby(["entry", "spp"])["value"].mean().unstack("spp")
 
 
 def side_by_side(first: pd.DataFrame, tungsten: pd.DataFrame) -> pd.DataFrame:
@@ -81,11 +81,11 @@ def main() -> None:
                            mean_errors(tungsten, args.metric, members)).to_markdown(floatfmt=".4g"))
         print()
     print(f"### {args.metric} per scene (tungsten / first-hit)\n")
-    keys = ["scene", "spp", "candidate"]
+    keys = ["scene", "spp", "entry"]
     merged = first[first["metric"] == args.metric].merge(tungsten[tungsten["metric"] == args.metric], on=keys,
                                                          suffixes=("_first_hit", "_tungsten"))
     merged["ratio"] = merged["value_tungsten"] / merged["value_first_hit"].where(merged["value_first_hit"] > 0)
-    print(merged.pivot_table(index=["scene", "spp"], columns="candidate", values="ratio").to_markdown(floatfmt=".3f"))
+    print(merged.pivot_table(index=["scene", "spp"], columns="entry", values="ratio").to_markdown(floatfmt=".3f"))
 
 
 if __name__ == "__main__":

@@ -21,7 +21,7 @@ emulation on one machine of an AVX2-only CPU beside an AVX-512 one, not a second
 
 ``WORKDIR/<run>`` holds ``config.yaml``, ``results/``, ``cache/`` and ``snakemake.log``.
 Snakemake runs with ``--cores 1``; its jobs (scripts and the warm workers of
-:mod:`mcbench.pipeline.pool`, started by ``forkserver`` from the Snakemake process) inherit its
+:mod:`mcbench.pipeline.worker_pool`, started by ``forkserver`` from the Snakemake process) inherit its
 environment. ``ONEDNN_VERBOSE=1`` is set in every run (it prints, does not change results) so
 that the logs show which ISA oneDNN used inside the jobs; the numba cache index of each run names
 the CPU numba compiled for; the shim prints its target into the render jobs' logs. OIDN and
@@ -237,22 +237,22 @@ def per_method(found: list, results_a: Path, results_b: Path) -> pd.DataFrame:
 
 
 def metrics_differences(results_a: Path, results_b: Path) -> pd.DataFrame:
-    """``metrics.csv`` of two runs per (candidate, metric): values compared, values not identical,
+    """``metrics.csv`` of two runs per (entry, metric): values compared, values not identical,
     largest relative difference ``|a - b| / max(|a|, |b|)``. Rows must align on (scene, spp,
-    candidate, metric); ValueError where they do not."""
-    keys = ["scene", "spp", "candidate", "metric"]
+    entry, metric); ValueError where they do not."""
+    keys = ["scene", "spp", "entry", "metric"]
     a = pd.read_csv(Path(results_a) / "metrics.csv").set_index(keys)["value"]
     b = pd.read_csv(Path(results_b) / "metrics.csv").set_index(keys)["value"]
     if not a.index.sort_values().equals(b.index.sort_values()):
-        raise ValueError("metrics.csv: the two runs do not hold the same (scene, spp, candidate, metric) rows")
+        raise ValueError("metrics.csv: the two runs do not hold the same (scene, spp, entry, metric) rows")
     b = b.reindex(a.index)
     x, y = a.to_numpy(np.float64), b.to_numpy(np.float64)
     scale = np.maximum(np.abs(x), np.abs(y))
     rel = np.divide(np.abs(x - y), scale, out=np.zeros_like(x), where=scale > 0)
-    frame = pd.DataFrame({"candidate": a.index.get_level_values("candidate"),
+    frame = pd.DataFrame({"entry": a.index.get_level_values("entry"),
                           "metric": a.index.get_level_values("metric"),
                           "differs": ~((x == y) | (np.isnan(x) & np.isnan(y))), "max_rel": rel})
-    return (frame.groupby(["candidate", "metric"]).agg(values=("differs", "size"), differing=("differs", "sum"),
+    return (frame.groupby(["entry", "metric"]).agg(values=("differs", "size"), differing=("differs", "sum"),
                                                        max_rel=("max_rel", "max")).reset_index())
 
 
@@ -327,7 +327,7 @@ def report(workdir: Path, probes: dict[str, list[str]]) -> str:
 
 def comparison(a: Path, b: Path, title: str) -> str:
     """Two runs' results compared stage by stage (Markdown): renders, references, method outputs
-    (per method), metrics.csv (per candidate and metric), tables, ranking and interval moves."""
+    (per method), metrics.csv (per entry and metric), tables, ranking and interval moves."""
     out = [f"# {title}", "", "## Stages", "", "| stage | files | differ | max abs | max rel |",
            "| --- | ---: | ---: | ---: | ---: |"]
     found_outputs = []
@@ -341,8 +341,8 @@ def comparison(a: Path, b: Path, title: str) -> str:
                                      "max_abs": d.max_abs, "max_rel": d.max_rel} for d in tables]))]
     out += ["", "## Method outputs that differ, per method", "", _markdown(per_method(found_outputs, a, b))]
     metrics = metrics_differences(a, b)
-    out += ["", "## metrics.csv per (candidate, metric) that differs", "",
-            f"{int((metrics['differing'] > 0).sum())} of {len(metrics)} (candidate, metric) pairs differ.", "",
+    out += ["", "## metrics.csv per (entry, metric) that differs", "",
+            f"{int((metrics['differing'] > 0).sum())} of {len(metrics)} (entry, metric) pairs differ.", "",
             _markdown(metrics[metrics["differing"] > 0])]
     out += ["", "## Ranking tables: changed cells and places", "", _markdown(ranking_moves(a, b))]
     out += ["", "## Study scores (scores_ci_*.csv) that moved, against the first run's bootstrap interval", "",

@@ -65,7 +65,7 @@ def rescored(results: Path, metrics: pd.DataFrame, pool: list[str], against: dic
                     images[name] = Denoised.load(results / "outputs" / scene / f"spp{spp}" / f"{name}.exr").full
             for metric, function in METRICS.items():
                 for name, image in images.items():
-                    row = ((out["scene"] == scene) & (out["spp"] == spp) & (out["candidate"] == name)
+                    row = ((out["scene"] == scene) & (out["spp"] == spp) & (out["entry"] == name)
                            & (out["metric"] == metric))
                     if row.sum() != 1:
                         raise SystemExit(f"{results}/metrics.csv: no single row for {scene} {spp} {name} {metric}")
@@ -82,7 +82,7 @@ def main(argv: list[str] | None = None) -> int:
     against = {item.split("=", 1)[0]: Path(item.split("=", 1)[1]) for item in args.against}
     pool = pd.read_csv(args.results / "tables" / "ranking_relmse.csv")["candidate"].astype(str).tolist()
     metrics = pd.read_csv(args.results / "metrics.csv")
-    metrics = metrics[metrics["candidate"].isin(pool) & metrics["metric"].isin(list(METRICS))]
+    metrics = metrics[metrics["entry"].isin(pool) & metrics["metric"].isin(list(METRICS))]
     other = rescored(args.results, metrics, pool, against, args.spp)
 
     print("| scene | reference | floor (relMSE) | floor ratio per spp |")
@@ -95,7 +95,7 @@ def main(argv: list[str] | None = None) -> int:
             ratios = []
             for spp in args.spp:
                 rows = table[(table["scene"] == scene) & (table["spp"] == spp) & (table["metric"] == "relmse")
-                             & (table["candidate"] != "noisy")]
+                             & (table["entry"] != "noisy")]
                 ratios.append(f"{spp}: {rows['value'].min() / floor:.1f}")
             print(f"| {scene} | {label} (`{ref_path}`) | {floor:.3g} | {', '.join(ratios)} |")
     print()
@@ -105,10 +105,10 @@ def main(argv: list[str] | None = None) -> int:
         own, changed = case_scores(metrics, metric), case_scores(other, metric)
         for spp in args.spp:
             for scene in against:
-                pick = lambda s: s[(s["scene"] == scene) & (s["spp"] == spp)].set_index("candidate")["score"]
+                pick = lambda s: s[(s["scene"] == scene) & (s["spp"] == spp)].set_index("entry")["score"]
                 moved, largest, tau, score = _moves(pick(own), pick(changed))
                 print(f"| {metric} | {spp} | {scene} (case) | {moved} | {largest:g} | {tau:.3f} | {score:g} |")
-            column = lambda s: s[s["spp"] == spp].groupby("candidate")["score"].mean()
+            column = lambda s: s[s["spp"] == spp].groupby("entry")["score"].mean()
             moved, largest, tau, score = _moves(column(own), column(changed))
             print(f"| {metric} | {spp} | table column | {moved} | {largest:g} | {tau:.3f} | {score:.3f} |")
     return 0

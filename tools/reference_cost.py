@@ -19,7 +19,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from mcbench.pipeline.render import render_reference_chunk  # noqa: E402
+from mcbench.pipeline.rendering import render_reference_chunk  # noqa: E402
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -1,6 +1,6 @@
 """Tables and the weight-map figure of the oracle study (Zheng et al. 2021 Sec. 5.2.7, Fig. 11):
 relMSE and DSSIM of each weighting against the reference, as a DataFrame and a Markdown table,
-and a PNG of the weight maps (weights from :mod:`mcbench.combine.oracle`)."""
+and a PNG of the weight maps (weights from :mod:`mcbench.combine.oracle_weights`)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import numpy as np
 import pandas as pd
 
 from mcbench.analysis.metrics import dssim, relmse
-from mcbench.combine.oracle import UNCONSTRAINED_RANGE
+from mcbench.combine.oracle_weights import UNCONSTRAINED_RANGE
 
 __all__ = ["error_table", "table_markdown", "weight_maps_figure"]
 
@@ -51,7 +51,7 @@ def weight_maps_figure(maps: dict[str, np.ndarray], path, *, denoisers: list[str
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from mcbench.analysis.figures import save_figure
+    from mcbench.analysis.error_speed_figures import save_figure
 
     averaged = {name: np.asarray(w, np.float64).mean(axis=-1) for name, w in maps.items()}
     bounded = {name: bool(a.min() >= -1e-9 and a.max() <= 1.0 + 1e-9) for name, a in averaged.items()}

@@ -36,11 +36,11 @@ CONSISTENCY_COLUMNS = ["entry", "input", "spp", "cases", "noisy", "value", "inpu
 
 
 def _pivot(metrics: pd.DataFrame, metric: str) -> pd.DataFrame:
-    """(scene, spp) x candidate table of one metric (BenchError when it is missing)."""
+    """(scene, spp) x entry table of one metric (BenchError when it is missing)."""
     rows = metrics[metrics["metric"] == metric]
     if rows.empty:
         raise BenchError(f"metrics table has no '{metric}' rows")
-    return rows.pivot_table(index=["scene", "spp"], columns="candidate", values="value", aggfunc="first")
+    return rows.pivot_table(index=["scene", "spp"], columns="entry", values="value", aggfunc="first")
 
 
 def _need(table: pd.DataFrame, names, what: str) -> None:
@@ -62,9 +62,9 @@ def geometric_ratio(values: np.ndarray, reference: np.ndarray) -> float:
 def consistency_table(metrics: pd.DataFrame, pairs: dict[str, str], *, metric: str = "relmse",
                       noisy: str = NOISY) -> pd.DataFrame:
     """One row per (progressive entry, spp) with the columns of :data:`CONSISTENCY_COLUMNS`
-    (module docstring), from the long metrics table (scene, spp, candidate, metric, value)."""
+    (module docstring), from the long metrics table (scene, spp, entry, metric, value)."""
     table = _pivot(metrics, metric)
-    _need(table, [noisy, *pairs, *pairs.values()], "candidates")
+    _need(table, [noisy, *pairs, *pairs.values()], "entries")
     rows = []
     for entry, source in pairs.items():
         for spp, group in table.groupby(level="spp", sort=True):
@@ -98,7 +98,7 @@ def per_spp_table(metrics: pd.DataFrame, entries: list[str], *, metric: str) -> 
     """Mean ``metric`` over scenes, one row per entry (``entries`` order), one column per spp
     and ``avg`` (the mean over spp of the per-spp means)."""
     table = _pivot(metrics, metric)
-    _need(table, entries, "candidates")
+    _need(table, entries, "entries")
     means = table[entries].groupby(level="spp").mean().T
     means.columns = [str(int(c)) for c in means.columns]
     means["avg"] = means.mean(axis=1)

@@ -15,23 +15,23 @@ import numpy as np
 import pandas as pd
 from scipy.stats import rankdata
 
-from mcbench import BenchError
+from mcbench import METRICS_COLUMNS, BenchError
 
 __all__ = ["IncompleteMetricsError", "check_complete", "case_scores", "score_table", "ranking_table", "extras_table",
            "format_markdown",
            "format_latex", "latex_escape"]
 
-COLUMNS = ["scene", "spp", "candidate", "metric", "value"]
+COLUMNS = list(METRICS_COLUMNS)
 
 
 class IncompleteMetricsError(BenchError):
-    """A metrics table that would rank cases over different candidate sets or with lost values."""
+    """A metrics table that would rank cases over different sets of entries or with lost values."""
 
 
-def check_complete(metrics: pd.DataFrame, *, candidates: list[str], metric_names: list[str],
+def check_complete(metrics: pd.DataFrame, *, entries: list[str], metric_names: list[str],
                    cases: list[tuple[str, int]] | None = None, source: str = "metrics") -> None:
-    """Refuse a tidy metrics table unless every case holds every candidate and every metric
-    exactly once, with a finite value (a truncated CSV, a dropped row or a missing candidate
+    """Refuse a tidy metrics table unless every case holds every entry of ``entries`` and every
+    metric exactly once, with a finite value (a truncated CSV, a dropped row or a missing entry
     would otherwise move scores silently: a case with fewer entries is scored on another scale).
 
     ``cases`` (scene, spp) pins the expected cases too. Errors name ``source`` and the case.
@@ -44,12 +44,12 @@ def check_complete(metrics: pd.DataFrame, *, candidates: list[str], metric_names
     if bad.any():
         row = metrics[bad].iloc[0]
         raise IncompleteMetricsError(f"{source}: {int(bad.sum())} value(s) missing or not finite, first at "
-                                     f"scene {row['scene']}, spp {row['spp']}, {row['candidate']}, {row['metric']}")
-    expected = {(c, m) for c in candidates for m in metric_names}
+                                     f"scene {row['scene']}, spp {row['spp']}, {row['entry']}, {row['metric']}")
+    expected = {(e, m) for e in entries for m in metric_names}
     found_cases = set()
     for (scene, spp), case in metrics.groupby(["scene", "spp"], sort=True):
         found_cases.add((str(scene), int(spp)))
-        pairs = list(zip(case["candidate"], case["metric"]))
+        pairs = list(zip(case["entry"], case["metric"]))
         duplicated = sorted({p for p in pairs if pairs.count(p) > 1})
         lacking = sorted(expected - set(pairs))
         unexpected = sorted(set(pairs) - expected)
@@ -65,29 +65,29 @@ def check_complete(metrics: pd.DataFrame, *, candidates: list[str], metric_names
 
 
 def case_scores(metrics: pd.DataFrame, metric: str) -> pd.DataFrame:
-    """Per-case scores from a tidy table with columns scene, spp, candidate, metric, value.
+    """Per-case scores from a tidy table with columns scene, spp, entry, metric, value.
 
-    Returns columns scene, spp, candidate, score. Lower error => higher score. Every case must
-    have the same candidates (checked: a case scored over fewer entries would be on another scale).
+    Returns columns scene, spp, entry, score. Lower error => higher score. Every case must
+    have the same entries (checked: a case scored over fewer entries would be on another scale).
     """
     rows = metrics[metrics["metric"] == metric]
     if rows.empty:
         raise ValueError(f"no values for metric '{metric}'")
-    candidates = sorted(set(rows["candidate"]))
-    check_complete(rows, candidates=candidates, metric_names=[metric])
+    check_complete(rows, entries=sorted(set(rows["entry"])), metric_names=[metric])
     out = []
     for (scene, spp), case in rows.groupby(["scene", "spp"], sort=True):
         scores = rankdata(-case["value"].to_numpy(dtype=np.float64), method="average")
         out.append(pd.DataFrame({"scene": scene, "spp": spp,
-                                 "candidate": case["candidate"].to_numpy(), "score": scores}))
+                                 "entry": case["entry"].to_numpy(), "score": scores}))
     return pd.concat(out, ignore_index=True)
 
 
 def score_table(scores: pd.DataFrame) -> pd.DataFrame:
-    """Per-case scores (:func:`case_scores`) reduced as Table 3: rows candidates, columns spp (mean
-    score over scenes, as strings) and ``Avg.`` (mean over spp), in the order the candidates
-    first appear."""
-    per_spp = scores.groupby(["candidate", "spp"], sort=False)["score"].mean().unstack("spp")
+    """Per-case scores (:func:`case_scores`) reduced as Table 3: rows the entries scored (their
+    header ``candidate``, as the paper's Table 3, the noisy input among them), columns spp (mean
+    score over scenes, as strings) and ``Avg.`` (mean over spp), in the order the entries first
+    appear."""
+    per_spp = scores.groupby(["entry", "spp"], sort=False)["score"].mean().unstack("spp")
     per_spp = per_spp.reindex(columns=sorted(per_spp.columns))
     per_spp.columns = [str(c) for c in per_spp.columns]
     per_spp["Avg."] = per_spp.mean(axis=1)
@@ -117,15 +117,15 @@ def extras_table(metrics: pd.DataFrame, metric: str, *, pool: list[str], extras:
     as :func:`ranking_table`. Every case must hold every pool member and extra (checked).
     """
     rows = metrics[metrics["metric"] == metric]
-    check_complete(rows[rows["candidate"].isin(pool + extras)], candidates=list(pool) + list(extras),
+    check_complete(rows[rows["entry"].isin(pool + extras)], entries=list(pool) + list(extras),
                    metric_names=[metric])
     out = []
     for (scene, spp), case in rows.groupby(["scene", "spp"], sort=True):
-        values = dict(zip(case["candidate"], case["value"].to_numpy(dtype=np.float64)))
+        values = dict(zip(case["entry"], case["value"].to_numpy(dtype=np.float64)))
         pool_values = np.array([values[name] for name in pool], dtype=np.float64)
         for name in extras:
             scores = rankdata(-np.append(pool_values, values[name]), method="average")
-            out.append({"scene": scene, "spp": spp, "candidate": name, "score": float(scores[-1])})
+            out.append({"scene": scene, "spp": spp, "entry": name, "score": float(scores[-1])})
     if not out:
         return pd.DataFrame(columns=["Avg."])
     return score_table(pd.DataFrame(out)).loc[list(extras)]

@@ -49,7 +49,7 @@ def scene_rows(metrics: pd.DataFrame, floors: dict[str, float], scenes_info: dic
     for scene, info in scenes_info.items():
         cases = relmse[relmse["scene"] == scene]
         top_spp = int(cases["spp"].max())
-        top = cases[cases["spp"] == top_spp].set_index("candidate")["value"]
+        top = cases[cases["spp"] == top_spp].set_index("entry")["value"]
         candidates = top.drop(index=noisy, errors="ignore")
         best = candidates.idxmin()
         floor = floors[scene]
@@ -82,19 +82,19 @@ def column_floor_ratios(metrics: pd.DataFrame, floors: dict[str, float | None], 
     floor (:func:`reference_relmse_floor`), the ratio :func:`scene_rows` gives for the highest spp
     only.
 
-    ``metrics``: tidy table (scene, spp, candidate, metric, value); only ``relmse`` rows of
+    ``metrics``: tidy table (scene, spp, entry, metric, value); only ``relmse`` rows of
     ``candidates`` are read (pass the ranking pool without the noisy input). ``floors`` maps each
     scene to its floor, None where unknown (a reference imported without variance). Returns columns
     scene, spp, best_candidate, best_relmse, reference_relmse, floor_ratio (NaN where the floor is
     unknown, inf where it is 0), sorted by scene and spp. A scene of ``metrics`` without a floor
     raises ``ValueError`` naming it.
     """
-    relmse = metrics[(metrics["metric"] == "relmse") & metrics["candidate"].isin(list(candidates))]
+    relmse = metrics[(metrics["metric"] == "relmse") & metrics["entry"].isin(list(candidates))]
     rows = []
     for (scene, spp), case in relmse.groupby(["scene", "spp"], sort=True):
         if scene not in floors:
             raise ValueError(f"no reference floor for scene '{scene}': pass every scene of the metrics in floors")
-        values = case.set_index("candidate")["value"].astype(np.float64)
+        values = case.set_index("entry")["value"].astype(np.float64)
         floor = floors[scene]
         best = float(values.min())
         if floor is None:
@@ -189,7 +189,7 @@ def gallery_figure(references: dict[str, np.ndarray], path: str | Path, columns:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from mcbench.analysis.figures import save_figure
+    from mcbench.analysis.error_speed_figures import save_figure
 
     names = list(references)
     columns = max(1, min(columns, len(names)))

@@ -11,5 +11,5 @@
   (solve, filter, blend), the driver of the ``ensemble`` combiner;
 * :mod:`mcbench.combine.selection` -- dual-buffer MSE estimates, their prefilters and one-hot
   selection (Sec. 5.2.6);
-* :mod:`mcbench.combine.oracle` -- weights from ground-truth statistics (Sec. 5.2.7).
+* :mod:`mcbench.combine.oracle_weights` -- weights from ground-truth statistics (Sec. 5.2.7).
 """

@@ -94,6 +94,51 @@ class _BlockSolver:
         self.blocks = [b for b in self.blocks if b[0] + b[1].shape[1] > row]
 
 
+def _checked_shape(buffers, inputs, *, away_steps, variance_sum_floor: float, **choices) -> tuple[int, ...]:
+    """The render's (H, W, C), refused (ValueError) without inputs, with an option not one of its
+    ``choices``, or with an input image of another shape."""
+    if not inputs:
+        raise ValueError("the ensemble needs at least one input")
+    check_choices(**choices)
+    check_away_steps(away_steps)
+    if not (np.isfinite(variance_sum_floor) and variance_sum_floor >= 0):
+        raise ValueError(f"ensemble variance_sum_floor must be finite and >= 0, got {variance_sum_floor!r}")
+    xa, xb = buffers.color_a, buffers.color_b
+    shape = tuple(np.shape(xa))
+    for i, d in enumerate(inputs):
+        for which in ("full", "a", "b"):
+            if tuple(np.shape(d.image(which))) != shape:
+                raise ValueError(f"ensemble input {i} ({d.source}) image {which} has shape "
+                                 f"{np.shape(d.image(which))}, the render's is {shape}")
+    check_shapes(np.empty(shape, np.uint8), np.empty(np.shape(xb), np.uint8),
+                 np.empty((1,) + shape, np.uint8), np.empty((1,) + shape, np.uint8))
+    return shape
+
+
+def _solve_filter_blend_bands(solve, buffers, inputs, raw, filt, images, *, passes: dict | None,
+                              options: dict) -> None:
+    """One pass down the image in bands (:func:`ensemble_in_bands`): each band's rows solved as
+    far as its halo needs, the band filtered (``passes``: the weight filter's passes, ``None``
+    without the filter) into ``filt`` and blended into ``images``."""
+    h, wd = raw.shape[1:3]
+    step = max(1, weight_filter.FILTER_BLOCK_PIXELS // max(wd, 1))
+    for y0 in range(0, h, step):
+        y1 = min(h, y0 + step)
+        if passes is not None:
+            v0, v1 = tile_rows(y0, y1, h, **passes)[2]
+            solve.until(v1)
+            z, var = solve.guide_rows(v0, v1)
+            filt[:, y0:y1] = filter_band(raw, y0, y1, z, var, v0, buffers.albedo, buffers.normal,
+                                         **options)
+            del z, var
+            solve.drop_before(tile_rows(y1, y1 + 1, h, **passes)[2][0])
+        else:
+            solve.until(y1)
+        for key, rows in blend_band(filt, inputs, slice(y0, y1)).items():
+            images[key][y0:y1] = rows
+    solve.until(h)      # (h == 0)
+
+
 def ensemble_in_bands(buffers, inputs, *, block_pixels: int, solver: str, seed: int, max_iterations: int,
                       tolerance: float, filter: bool, weights: str, channels: str, radius: int,
                       sigma_spatial: float, sigma_color: float, sigma_albedo: float, sigma_normal: float,
@@ -127,24 +172,11 @@ def ensemble_in_bands(buffers, inputs, *, block_pixels: int, solver: str, seed: 
     image differs in shape from the render, an input holds NaN/Inf, or a combined image is not
     finite in float32.
     """
-    if not inputs:
-        raise ValueError("the ensemble needs at least one input")
-    check_choices(solver=solver, weights=weights, channels=channels, start=start,
-                  guide_variance_blur=guide_variance_blur, colour_distance=colour_distance,
-                  outlier_removal=outlier_removal, filter_border=filter_border,
-                  normal_features=normal_features)
-    check_away_steps(away_steps)
-    if not (np.isfinite(variance_sum_floor) and variance_sum_floor >= 0):
-        raise ValueError(f"ensemble variance_sum_floor must be finite and >= 0, got {variance_sum_floor!r}")
-    xa, xb = buffers.color_a, buffers.color_b
-    shape = tuple(np.shape(xa))
-    for i, d in enumerate(inputs):
-        for which in ("full", "a", "b"):
-            if tuple(np.shape(d.image(which))) != shape:
-                raise ValueError(f"ensemble input {i} ({d.source}) image {which} has shape "
-                                 f"{np.shape(d.image(which))}, the render's is {shape}")
-    check_shapes(np.empty(shape, np.uint8), np.empty(np.shape(xb), np.uint8),
-                 np.empty((1,) + shape, np.uint8), np.empty((1,) + shape, np.uint8))
+    shape = _checked_shape(buffers, inputs, away_steps=away_steps, variance_sum_floor=variance_sum_floor,
+                           solver=solver, weights=weights, channels=channels, start=start,
+                           guide_variance_blur=guide_variance_blur, colour_distance=colour_distance,
+                           outlier_removal=outlier_removal, filter_border=filter_border,
+                           normal_features=normal_features)
     n = len(inputs)
     h, wd, c = shape
     raw = np.empty((n, h, wd, c), np.float32)
@@ -163,22 +195,8 @@ def ensemble_in_bands(buffers, inputs, *, block_pixels: int, solver: str, seed: 
                    outlier_removal=outlier_removal, colour_distance=colour_distance,
                    filter_border=filter_border, normal_statistics=statistics,
                    variance_sum_floor=variance_sum_floor, dtype=np.float32)
-    step = max(1, weight_filter.FILTER_BLOCK_PIXELS // max(wd, 1))
-    for y0 in range(0, h, step):
-        y1 = min(h, y0 + step)
-        if filter:
-            v0, v1 = tile_rows(y0, y1, h, **passes)[2]
-            solve.until(v1)
-            z, var = solve.guide_rows(v0, v1)
-            filt[:, y0:y1] = filter_band(raw, y0, y1, z, var, v0, buffers.albedo, buffers.normal,
-                                         **options)
-            del z, var
-            solve.drop_before(tile_rows(y1, y1 + 1, h, **passes)[2][0])
-        else:
-            solve.until(y1)
-        for key, rows in blend_band(filt, inputs, slice(y0, y1)).items():
-            images[key][y0:y1] = rows
-    solve.until(h)      # (h == 0)
+    _solve_filter_blend_bands(solve, buffers, inputs, raw, filt, images, passes=passes if filter else None,
+                              options=options)
     extras = {}
     for i in range(n):
         extras[f"weights_raw_{i}"] = raw[i]

@@ -50,7 +50,7 @@ __all__ = ["WEIGHTS", "CHANNELS", "GUIDE_VARIANCE_BLURS", "OUTLIER_PASSES", "FIL
 WEIGHTS = ("simplex", "unconstrained")
 CHANNELS = ("rgb", "single")
 GUIDE_VARIANCE_BLURS = ("none", "gaussian9")   # the weight filter's guide-variance blur
-#: the weight filter's outlier pass: none, ours (a value -> its neighbours' mean), the public code's
+#: the weight filter's outlier pass: none, a value -> its neighbours' mean (mcbench's), the public code's
 OUTLIER_PASSES = ("none", "neighbour_mean", "public_code")
 #: the weight filter's window at the image borders: clipped, or reflected as the public code does
 FILTER_BORDERS = ("clip", "reflect101")
@@ -73,7 +73,7 @@ CHOICES = {"solver": SOLVERS, "weights": WEIGHTS, "channels": CHANNELS,
 #: src/main.cpp:34-43), the guide variance is blurred (9 x 9), the filtered maps pass the code's
 #: outlier pass (``remove_outliers<3>``, whole pixel -> 7 x 7 blur), windows reflect at the
 #: borders and Eq. 33's denominator is floored at 1e-6. docs/fidelity_ensemble.md measures each.
-#: ``mcbench.analysis.comparisons`` reads them to tell an ablation or a variant from the full
+#: ``mcbench.analysis.comparison_tables`` reads them to tell an ablation or a variant from the full
 #: method.
 ENSEMBLE_DEFAULTS = {"weights": "simplex", "channels": "rgb", "solver": "iterative", "filter": True,
                      "guide_variance_blur": "gaussian9", "outlier_removal": "public_code",

@@ -248,7 +248,7 @@ def filter_weights(weights, denoised_full, denoised_a, denoised_b, albedo, norma
     :data:`PUBLIC_CODE_FILTER` sets them all): ``guide_variance_blur="gaussian9"`` blurs Var[z]
     with :func:`mcbench.filters.blur_and_outliers.gaussian_blur` (9 x 9) first; ``outlier_removal``
     ``"public_code"`` (:func:`mcbench.filters.blur_and_outliers.remove_outlier_pixels`) or
-    ``"neighbour_mean"`` (ours, :func:`mcbench.filters.blur_and_outliers.remove_outliers`) cleans the
+    ``"neighbour_mean"`` (mcbench's, :func:`mcbench.filters.blur_and_outliers.remove_outliers`) cleans the
     filtered maps, which are then re-projected; ``colour_distance="mean"`` averages Eq. 33 over
     the channels instead; ``filter_border="reflect101"`` reflects the windows at the borders;
     ``normal_features="standardised"`` standardises the normal (:func:`standardised_normal`);

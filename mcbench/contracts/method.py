@@ -33,7 +33,7 @@ WEIGHTS_ARGUMENT = "weights_file"
 #: The annotation of a config parameter naming a single-image denoiser (:attr:`MethodSpec.single_image`);
 #: the registry checks a config's value against the methods that declare themselves so.
 SingleImageDenoiser = NewType("SingleImageDenoiser", str)
-#: What a combiner is in the comparison tables of Zheng et al. Sec. 5.2 (``mcbench.analysis.comparisons``).
+#: What a combiner is in the comparison tables of Zheng et al. Sec. 5.2 (``mcbench.analysis.comparison_tables``).
 COMPARISON_ROLES = ("ensemble", "one-hot selection", "naive average")
 
 
@@ -52,7 +52,7 @@ class LearnedSpec:
     * ``correlated_bases`` -- a learned combiner's base denoisers, whose results on the training
       crops it is trained on.
     * ``training_keys`` -- a learned combiner's extra network inputs ``{key: channels}``
-      (``mcbench.nn.data``).
+      (``mcbench.nn.crops``).
     * ``weights_read`` -- ``f(params) -> tuple[str, ...]``: the weights files (names in the
       weights folder, without ``.pt``) the method reads with these params, when that is not just
       its own (a variant's network, a learned base it re-runs); the case's key covers each.

@@ -1,6 +1,6 @@
 """The passes the authors' public code of Zheng et al. 2021 puts around the cross-bilateral filter
 (:mod:`mcbench.filters.bilateral`): a Gaussian blur of the guide variance (:func:`gaussian_blur`,
-OpenCV's kernel :func:`gaussian_kernel`), outlier removal (:func:`remove_outliers` (ours),
+OpenCV's kernel :func:`gaussian_kernel`), outlier removal (:func:`remove_outliers` (mcbench's),
 :func:`remove_outlier_pixels` (as the code is written)) and :func:`reflect101_tile` for its
 reflected borders.
 """

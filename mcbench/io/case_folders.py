@@ -35,7 +35,7 @@ __all__ = ["RENDER_FILES", "EXTRA_RENDER_FILES", "RESULT_PATTERN", "write_image"
 #: Files of the render that the authors' program reads (file name -> our render layer).
 RENDER_FILES = {"colorA.exr": "color_a", "colorB.exr": "color_b", "albedo.exr": "albedo",
                 "normal.exr": "normal"}
-#: Files of the render that it does not read, written for other programs (ours).
+#: Files of the render that it does not read, written for other programs (mcbench's names).
 EXTRA_RENDER_FILES = {"color.exr": "color", "variance.exr": "variance", "depth.exr": "depth"}
 #: A denoiser's files in its folder ``<d>/``: file name pattern -> our output image.
 DENOISER_FILES = {"{name}.exr": "full", "{name}A.exr": "a", "{name}B.exr": "b"}

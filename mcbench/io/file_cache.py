@@ -1,4 +1,4 @@
-"""A per-process cache of decoded input files, for the warm workers of :mod:`mcbench.pipeline.pool`.
+"""A per-process cache of decoded input files, for the warm workers of :mod:`mcbench.pipeline.worker_pool`.
 
 A worker runs many small jobs of the same cases: every method of a case reads its render, every
 entry of a case its reference, the ensembles the same base outputs. :func:`cached_read` keeps

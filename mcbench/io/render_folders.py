@@ -17,8 +17,8 @@ Y; normals may be X, Y, Z), float32 or half pixels (converted exactly to float32
   (``snakemake export_cases``)::
 
       <renders>/spp<N>/colorA.exr colorB.exr albedo.exr normal.exr      the program's inputs
-                       color.exr variance.exr depth.exr                 optional (ours)
-                       varianceA.exr varianceB.exr                      optional (ours)
+                       color.exr variance.exr depth.exr                 optional (mcbench's)
+                       varianceA.exr varianceB.exr                      optional (mcbench's)
       <renders>/reference.exr [reference_variance.exr]
 
   The half buffers hold N/2 disjoint samples each; without ``color.exr`` the full image is their

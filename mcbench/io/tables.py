@@ -146,7 +146,11 @@ def read_table(path, *, columns=(), sep: str = ",") -> pd.DataFrame:
         raise BenchError(f"{path}: cannot read table ({exc})") from exc
     missing = [column for column in columns if column not in frame.columns]
     if missing:
-        raise BenchError(f"{path}: missing column(s) {', '.join(missing)}")
+        renamed = [f"'{RENAMED_COLUMNS[c]}' (now '{c}')" for c in missing
+                   if RENAMED_COLUMNS.get(c) in frame.columns]
+        raise BenchError(f"{path}: missing column(s) {', '.join(missing)}" + (
+            f"; it has {', '.join(renamed)}: a table of an earlier mcbench, remade by rerunning the job that "
+            f"writes it (snakemake -f {path})" if renamed else ""))
     for column in columns:
         kind = TYPED_COLUMNS.get(column)
         if kind is None or not len(frame):
@@ -161,6 +165,10 @@ def read_table(path, *, columns=(), sep: str = ",") -> pd.DataFrame:
                              f"expected {'a whole number' if kind == 'integer' else 'a finite number'}")
     return frame
 
+
+#: Columns of the tables the workflow writes -> the name an earlier mcbench gave them: a table
+#: with the earlier name is refused by :func:`read_table`, saying so, never read as another column.
+RENAMED_COLUMNS = {"entry": "candidate"}
 
 #: Columns whose values :func:`read_table` checks when a caller asks for them: ``spp`` (and image
 #: sizes) whole numbers; times and ``value`` (an error metric) finite numbers.

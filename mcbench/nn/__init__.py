@@ -5,7 +5,7 @@
 * :mod:`mcbench.nn.kernels` -- applying per-pixel kernels (KPCN) and weight-shared kernels
   (Fan et al. 2021);
 * :mod:`mcbench.nn.losses` -- the training losses (L1 in log space, SMAPE, gradient L1);
-* :mod:`mcbench.nn.data` -- training crops from :mod:`mcbench.training_data` as tensors, the
+* :mod:`mcbench.nn.crops` -- training crops from :mod:`mcbench.training_data` as tensors, the
   train/validation split, seeded augmented batches;
 * :mod:`mcbench.nn.train` -- the seeded, resumable training loop with checkpoints, the optional
   adversarial critic, validation, and the weights + record it writes;
@@ -19,7 +19,7 @@ A learned method is one module in ``methods/`` whose declaration
 (:class:`mcbench.contracts.method.MethodSpec`) sets ``learned`` (a
 :class:`mcbench.contracts.method.LearnedSpec`: ``network`` hyperparameters, ``training`` settings,
 ``build_network(**network)``); the network's ``forward`` takes a dict of raw buffers (see
-:data:`mcbench.nn.data.BUFFER_KEYS`) and returns linear HDR radiance (N, 3, H, W). Its weights
+:data:`mcbench.nn.crops.BUFFER_KEYS`) and returns linear HDR radiance (N, 3, H, W). Its weights
 live in the weights folder (config key ``weights_dir``, default ``methods/weights``) as
 ``<name>.pt`` with a record ``<name>.json``. The functions here take the method's module or its
 declaration and the weights file (core never imports ``methods``; callers resolve names with

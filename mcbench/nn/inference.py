@@ -59,7 +59,7 @@ def _cached_network(spec: MethodSpec, path: str, mtime_ns: int) -> torch.nn.Modu
 
 
 def image_tensors(image: ImageBuffers) -> dict[str, torch.Tensor]:
-    """One image's buffers as (1, C, H, W) float32 tensors keyed like :data:`mcbench.nn.data.BUFFER_KEYS`."""
+    """One image's buffers as (1, C, H, W) float32 tensors keyed like :data:`mcbench.nn.crops.BUFFER_KEYS`."""
     return {"color": array_tensor(image.color), "variance": array_tensor(image.variance),
             "albedo": array_tensor(image.albedo), "normal": array_tensor(image.normal),
             "depth": array_tensor(image.depth)}

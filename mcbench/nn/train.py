@@ -2,7 +2,7 @@
 
 ``train_network(module, crop_files, weights_path, record_path, checkpoint_path)`` trains the
 network of a learned method module (``methods/<name>.py``, resolved from its name by the caller:
-core code never imports ``methods``) on training crops (:mod:`mcbench.nn.data`) and writes
+core code never imports ``methods``) on training crops (:mod:`mcbench.nn.crops`) and writes
 
 * ``weights_path`` -- ``{"arch": network, "state_dict": ...}`` (``network`` of its declaration) (format and location:
   :mod:`mcbench.io.weights`), loadable with ``torch.load(..., weights_only=True)``;
@@ -55,6 +55,7 @@ import platform
 import sys
 import tempfile
 import time
+from dataclasses import dataclass, field
 from pathlib import Path
 from types import ModuleType
 from typing import Callable
@@ -63,9 +64,9 @@ import numpy as np
 import torch
 
 from mcbench import BenchError
-from mcbench.contracts.method import method_spec
+from mcbench.contracts.method import LearnedSpec, method_spec
 from mcbench.io.tables import read_json, write_json
-from mcbench.nn.data import CropSet, crop_paths, load_crops, sample_batch, validation_batches
+from mcbench.nn.crops import CropSet, crop_paths, load_crops, sample_batch, validation_batches
 from mcbench.nn.losses import LOSSES
 from mcbench.progress import eta_seconds, progress_line
 from mcbench.io.weights import (CHECKPOINT_KEYS, WEIGHTS_DIGEST_KEY, check_learned_method, file_sha256, load_weights,
@@ -203,18 +204,43 @@ def _gradient_penalty(critic, real, fake, buffers, generator: torch.Generator) -
     return ((gradient.flatten(1).norm(dim=1) - 1.0) ** 2).mean()
 
 
-def train_network(module: ModuleType, data: list[str | Path] | CropSet, weights_out: str | Path,
-                  record_out: str | Path, checkpoint: str | Path, overrides: dict | None = None,
-                  log=print, *, provenance: dict | None = None) -> dict:
-    """Train the network of learned method ``module`` (resuming from ``checkpoint`` if present)
-    on ``data``: training crop files, or a :class:`CropSet` already loaded (a combiner's, from
-    :func:`mcbench.nn.data.load_combiner_crops`); returns the record (``provenance``, e.g. the
-    CPU, is added to it as given)."""
-    name = method_name(check_learned_method(module))
-    spec = method_spec(module).learned
-    settings = training_settings(module, overrides)
-    torch.set_num_threads(int(settings["threads"]))
-    checkpoint = Path(checkpoint)
+@dataclass
+class _Run:
+    """One training run's state: the network and its optimiser, the critic and its optimiser
+    (adversarial training only, else None), the validation history, the step and seconds the run
+    starts from (a resumed run's), and the weights of the best round so far (``rounds`` > 1)."""
+
+    name: str
+    label: str
+    spec: LearnedSpec
+    settings: dict
+    network: torch.nn.Module
+    optimizer: torch.optim.Optimizer
+    critic: torch.nn.Module | None = None
+    critic_optimizer: torch.optim.Optimizer | None = None
+    history: list = field(default_factory=list)
+    start_step: int = 0
+    elapsed: float = 0.0
+    best_state: dict | None = None
+
+    @property
+    def adversarial(self) -> bool:
+        return self.critic is not None
+
+    @property
+    def steps(self) -> int:
+        """The steps of one round."""
+        return int(self.settings["steps"])
+
+    @property
+    def total_steps(self) -> int:
+        """The steps of every round."""
+        return self.steps * int(self.settings["rounds"])
+
+
+def _split_crops(name: str, data, settings: dict, log) -> tuple[CropSet, str, CropSet, CropSet]:
+    """``(crops, folder, training set, validation set)`` of ``data`` (crop files or a
+    :class:`CropSet`), refused unless both sets hold crops."""
     crops = data if isinstance(data, CropSet) else load_crops(list(data))
     folder = crops.info.get("folder") or (str(Path(list(data)[0]).parent) if not isinstance(data, CropSet) else "")
     train_set, validation_set = crops.split()
@@ -223,134 +249,176 @@ def train_network(module: ModuleType, data: list[str | Path] | CropSet, weights_
                          f"crops; need both (validation scenes: seed % 8 == 7)")
     log(f"{name}: {len(train_set)} training crops, {len(validation_set)} validation crops, "
         f"levels {crops.spp[:, 0].astype(int).tolist()}, settings {settings}")
+    return crops, folder, train_set, validation_set
 
+
+def _new_run(name: str, label: str, spec: LearnedSpec, settings: dict) -> _Run:
+    """The network initialised from ``torch.manual_seed(seed)``, its Adam optimiser and, for
+    adversarial training, the critic and its optimiser (drawn after the network, in this order)."""
     torch.manual_seed(int(settings["seed"]))
     network = spec.build_network(**spec.network)
-    optimizer = torch.optim.Adam(network.parameters(), lr=settings["learning_rate"])
-    adversarial = settings["adversarial_weight"] > 0
-    critic = critic_optimizer = None
-    if adversarial:
+    run = _Run(name, label, spec, settings, network, torch.optim.Adam(network.parameters(), lr=settings["learning_rate"]))
+    if settings["adversarial_weight"] > 0:
         if spec.build_critic is None:
             raise BenchError(f"methods/{name}.py sets adversarial_weight but its LearnedSpec declares no build_critic")
-        critic = spec.build_critic(**spec.critic)
-        critic_optimizer = torch.optim.Adam(critic.parameters(), lr=settings["critic_learning_rate"],
-                                            betas=(0.5, 0.9))
-    loss_fn = LOSSES[settings["loss"]]
-    steps, total_steps = int(settings["steps"]), int(settings["steps"]) * int(settings["rounds"])
-    history, start_step, elapsed, best_state = [], 0, 0.0, None
-    if checkpoint.exists():
-        required = CHECKPOINT_KEYS + (("critic", "critic_optimizer") if adversarial else ())
-        state = load_weights(checkpoint, required=required, what="checkpoint")
-        fixed = {k: v for k, v in settings.items() if k not in RESUMABLE_CHANGES}
-        if state["arch"] != spec.network or {k: v for k, v in state["settings"].items()
-                                               if k not in RESUMABLE_CHANGES} != fixed:
-            raise BenchError(f"{checkpoint}: checkpoint of other architecture or settings; delete it to "
-                             f"train from scratch")
-        network.load_state_dict(state["network"])
-        optimizer.load_state_dict(state["optimizer"])
-        if adversarial:
-            critic.load_state_dict(state["critic"])
-            critic_optimizer.load_state_dict(state["critic_optimizer"])
-        history, start_step, elapsed = list(state["history"]), int(state["step"]), float(state["seconds"])
-        best_state = state.get("best_network")
-        log(f"{name}: resuming from {checkpoint} at step {start_step}")
+        run.critic = spec.build_critic(**spec.critic)
+        run.critic_optimizer = torch.optim.Adam(run.critic.parameters(), lr=settings["critic_learning_rate"],
+                                                betas=(0.5, 0.9))
+    return run
 
-    def save_checkpoint(step: int, seconds: float) -> None:
-        state = {"arch": spec.network, "settings": settings, "step": step, "seconds": seconds,
-                 "network": network.state_dict(), "optimizer": optimizer.state_dict(), "history": history}
-        if best_state is not None:
-            state["best_network"] = best_state
-        if adversarial:
-            state.update(critic=critic.state_dict(), critic_optimizer=critic_optimizer.state_dict())
-        _save_atomic(state, checkpoint)
 
-    augment = spec.augment_batch
-    network.train()
-    started = time.perf_counter() - elapsed
-    session_started = interval_started = time.perf_counter()
+def _resume(run: _Run, checkpoint: Path, log) -> None:
+    """Load ``checkpoint`` into ``run`` (states, history, step, seconds, best round); refused,
+    naming the file, when it is of another architecture or of settings outside
+    :data:`RESUMABLE_CHANGES`."""
+    required = CHECKPOINT_KEYS + (("critic", "critic_optimizer") if run.adversarial else ())
+    state = load_weights(checkpoint, required=required, what="checkpoint")
+    fixed = {k: v for k, v in run.settings.items() if k not in RESUMABLE_CHANGES}
+    if state["arch"] != run.spec.network or {k: v for k, v in state["settings"].items()
+                                             if k not in RESUMABLE_CHANGES} != fixed:
+        raise BenchError(f"{checkpoint}: checkpoint of other architecture or settings; delete it to "
+                         f"train from scratch")
+    run.network.load_state_dict(state["network"])
+    run.optimizer.load_state_dict(state["optimizer"])
+    if run.adversarial:
+        run.critic.load_state_dict(state["critic"])
+        run.critic_optimizer.load_state_dict(state["critic_optimizer"])
+    run.history, run.start_step, run.elapsed = list(state["history"]), int(state["step"]), float(state["seconds"])
+    run.best_state = state.get("best_network")
+    log(f"{run.name}: resuming from {checkpoint} at step {run.start_step}")
+
+
+def _save_checkpoint(run: _Run, checkpoint: Path, step: int, seconds: float) -> None:
+    """The run's states and history at ``step`` into ``checkpoint``, atomically."""
+    state = {"arch": run.spec.network, "settings": run.settings, "step": step, "seconds": seconds,
+             "network": run.network.state_dict(), "optimizer": run.optimizer.state_dict(), "history": run.history}
+    if run.best_state is not None:
+        state["best_network"] = run.best_state
+    if run.adversarial:
+        state.update(critic=run.critic.state_dict(), critic_optimizer=run.critic_optimizer.state_dict())
+    _save_atomic(state, checkpoint)
+
+
+def _critic_step(run: _Run, buffers: dict, targets: torch.Tensor, step: int) -> None:
+    """One WGAN-GP step of the critic on the network's output for ``buffers`` (its mixing drawn
+    from a torch generator seeded by the seed and ``step``)."""
+    settings = run.settings
+    for group in run.critic_optimizer.param_groups:
+        group["lr"] = learning_rate(settings, step, "critic_learning_rate")
+    with torch.no_grad():
+        fake = run.network(buffers)
+    generator = torch.Generator().manual_seed(int(settings["seed"]) * 1_000_003 + step)
+    critic_loss = (run.critic(fake, buffers).mean() - run.critic(targets, buffers).mean()
+                   + settings["gradient_penalty"] * _gradient_penalty(run.critic, targets, fake, buffers, generator))
+    run.critic_optimizer.zero_grad()
+    critic_loss.backward()
+    run.critic_optimizer.step()
+
+
+def _training_step(run: _Run, train_set: CropSet, step: int) -> float:
+    """One optimiser step on batch ``step`` (after the critic's, in adversarial training); its
+    training loss, refused when not finite."""
+    settings = run.settings
+    for group in run.optimizer.param_groups:
+        group["lr"] = learning_rate(settings, step)
+    buffers, targets = sample_batch(train_set, settings["seed"], step, settings["batch_size"], settings["patch"])
+    if run.spec.augment_batch is not None:   # a method's own augmentation (progressive: the swap), seeded per step
+        buffers = run.spec.augment_batch(buffers, np.random.default_rng([int(settings["seed"]), step, 1]))
+    if run.adversarial:
+        _critic_step(run, buffers, targets, step)
+    prediction = run.network(buffers)
+    loss = LOSSES[settings["loss"]](prediction, targets)
+    total = loss
+    if run.adversarial:
+        for p in run.critic.parameters():
+            p.requires_grad_(False)
+        total = loss - settings["adversarial_weight"] * run.critic(prediction, buffers).mean()
+        for p in run.critic.parameters():
+            p.requires_grad_(True)
+    run.optimizer.zero_grad()
+    total.backward()
+    if settings["grad_clip"]:
+        torch.nn.utils.clip_grad_norm_(run.network.parameters(), settings["grad_clip"])
+    run.optimizer.step()
+    loss_value = loss.item()
+    if not math.isfinite(loss_value):
+        raise BenchError(f"{run.name}: training loss became {loss_value} at step {step}; lower learning_rate")
+    return loss_value
+
+
+def _validate(run: _Run, validation_set: CropSet, running: list[float], done: int, started: float, log) -> bool:
+    """Validate after ``done`` steps: one entry of the history, the best round's weights kept at
+    a round's end; whether the stopping rule ends training here."""
+    settings, steps = run.settings, run.steps
+    validation_started = time.perf_counter()
+    result = evaluate(run.network, validation_set, settings["loss"])
+    run.history.append({"step": done, "round": (done - 1) // steps + 1,
+                        "train_loss": float(np.mean(running[-settings["validate_every"]:])),
+                        "validation_loss": result["loss"], "validation_relmse": result["relmse"],
+                        "seconds": time.perf_counter() - started})
+    if settings["rounds"] > 1 and done % steps == 0 and result["loss"] <= min(
+            entry["validation_loss"] for entry in round_ends(run.history, steps)):
+        run.best_state = {key: value.detach().clone() for key, value in run.network.state_dict().items()}
+    stopped = done % steps == 0 and plateau_reached(run.history, steps, settings["plateau"])
+    log(f"{run.name}: step {done} validation {settings['loss']} {result['loss']:.5f} "
+        f"relMSE {result['relmse']:.5f} ({time.perf_counter() - validation_started:.1f} s, "
+        f"elapsed {time.perf_counter() - started:.1f} s)")
+    return stopped
+
+
+def _progress(run: _Run, step: int, running: list[float], clock: dict) -> tuple[str, float]:
+    """The progress line after ``step`` (the mean training loss over the last interval, its
+    seconds and the run's ETA; ``clock``: ``started``, ``session``, ``interval`` start times) and
+    the time it was taken at."""
+    done, now = step + 1, time.perf_counter()
+    steps_in_interval = min(len(running), done % LOG_EVERY or LOG_EVERY)
+    eta = eta_seconds(now - clock["session"], done - run.start_step, run.total_steps - run.start_step)
+    line = progress_line(run.name, f"step {done}/{run.total_steps} loss {np.mean(running[-steps_in_interval:]):.5f} "
+                                   f"lr {learning_rate(run.settings, step):.2e}, {now - clock['interval']:.1f} s for "
+                                   f"{steps_in_interval} steps "
+                                   f"({(now - clock['interval']) / steps_in_interval:.3f} s/step)",
+                         now - clock["started"], eta)
+    return line, now
+
+
+def _train_rounds(run: _Run, train_set: CropSet, validation_set: CropSet, checkpoint: Path, log) -> float:
+    """Train from the run's step until its last round ends or the stopping rule stops it,
+    validating and checkpointing on the way; the run's seconds (a resumed run's included)."""
+    settings, steps = run.settings, run.steps
+    run.network.train()
+    now = time.perf_counter()
+    clock = {"started": now - run.elapsed, "session": now, "interval": now}
     running = []
-    stopped = start_step % steps == 0 and plateau_reached(history, steps, settings["plateau"])
-    for step in range(start_step, start_step if stopped else total_steps):
-        for group in optimizer.param_groups:
-            group["lr"] = learning_rate(settings, step)
-        buffers, targets = sample_batch(train_set, settings["seed"], step, settings["batch_size"],
-                                        settings["patch"])
-        if augment is not None:   # a method's own augmentation (progressive: the swap), seeded per step
-            buffers = augment(buffers, np.random.default_rng([int(settings["seed"]), step, 1]))
-        if adversarial:
-            for group in critic_optimizer.param_groups:
-                group["lr"] = learning_rate(settings, step, "critic_learning_rate")
-            with torch.no_grad():
-                fake = network(buffers)
-            generator = torch.Generator().manual_seed(int(settings["seed"]) * 1_000_003 + step)
-            critic_loss = (critic(fake, buffers).mean() - critic(targets, buffers).mean()
-                           + settings["gradient_penalty"] * _gradient_penalty(critic, targets, fake, buffers,
-                                                                              generator))
-            critic_optimizer.zero_grad()
-            critic_loss.backward()
-            critic_optimizer.step()
-        prediction = network(buffers)
-        loss = loss_fn(prediction, targets)
-        total = loss
-        if adversarial:
-            for p in critic.parameters():
-                p.requires_grad_(False)
-            total = loss - settings["adversarial_weight"] * critic(prediction, buffers).mean()
-            for p in critic.parameters():
-                p.requires_grad_(True)
-        optimizer.zero_grad()
-        total.backward()
-        if settings["grad_clip"]:
-            torch.nn.utils.clip_grad_norm_(network.parameters(), settings["grad_clip"])
-        optimizer.step()
-        loss_value = loss.item()
-        if not math.isfinite(loss_value):
-            raise BenchError(f"{name}: training loss became {loss_value} at step {step}; lower learning_rate")
-        running.append(loss_value)
+    stopped = run.start_step % steps == 0 and plateau_reached(run.history, steps, settings["plateau"])
+    for step in range(run.start_step, run.start_step if stopped else run.total_steps):
+        running.append(_training_step(run, train_set, step))
         done = step + 1
         if done % LOG_EVERY == 0 or done % steps == 0:
-            now = time.perf_counter()
-            steps_in_interval = min(len(running), done % LOG_EVERY or LOG_EVERY)
-            eta = eta_seconds(now - session_started, done - start_step, total_steps - start_step)
-            log(progress_line(name, f"step {done}/{total_steps} loss {np.mean(running[-steps_in_interval:]):.5f} "
-                                    f"lr {learning_rate(settings, step):.2e}, {now - interval_started:.1f} s for "
-                                    f"{steps_in_interval} steps "
-                                    f"({(now - interval_started) / steps_in_interval:.3f} s/step)",
-                              now - started, eta))
-            interval_started = now
+            line, clock["interval"] = _progress(run, step, running, clock)
+            log(line)
         if done % settings["validate_every"] == 0 or done % steps == 0:
             validation_started = time.perf_counter()
-            result = evaluate(network, validation_set, settings["loss"])
-            history.append({"step": done, "round": (done - 1) // steps + 1,
-                            "train_loss": float(np.mean(running[-settings["validate_every"]:])),
-                            "validation_loss": result["loss"], "validation_relmse": result["relmse"],
-                            "seconds": time.perf_counter() - started})
-            if settings["rounds"] > 1 and done % steps == 0 and result["loss"] <= min(
-                    entry["validation_loss"] for entry in round_ends(history, steps)):
-                best_state = {key: value.detach().clone() for key, value in network.state_dict().items()}
-            stopped = done % steps == 0 and plateau_reached(history, steps, settings["plateau"])
-            log(f"{name}: step {done} validation {settings['loss']} {result['loss']:.5f} "
-                f"relMSE {result['relmse']:.5f} ({time.perf_counter() - validation_started:.1f} s, "
-                f"elapsed {time.perf_counter() - started:.1f} s)")
-            interval_started += time.perf_counter() - validation_started
+            stopped = _validate(run, validation_set, running, done, clock["started"], log)
+            clock["interval"] += time.perf_counter() - validation_started
         if done % settings["checkpoint_every"] == 0 or done % steps == 0:
-            save_checkpoint(done, time.perf_counter() - started)
+            _save_checkpoint(run, checkpoint, done, time.perf_counter() - clock["started"])
         if stopped:
-            log(f"{name}: round {done // steps} improved the validation loss by less than "
+            log(f"{run.name}: round {done // steps} improved the validation loss by less than "
                 f"{settings['plateau']:.0%}: stopped at step {done}")
             break
-    seconds = time.perf_counter() - started
-    steps_run = history[-1]["step"] if history else start_step
-    if best_state is not None:          # the round with the lowest validation loss
-        network.load_state_dict(best_state)
+    return time.perf_counter() - clock["started"]
 
-    network.eval()
-    final = evaluate(network, validation_set, settings["loss"])
-    record = {
-        "network": name,
-        "label": method_spec(module).label,
-        "arch": spec.network,
-        "parameters": count_parameters(network),
+
+def _training_record(run: _Run, crops: CropSet, folder: str, train_set: CropSet, validation_set: CropSet,
+                     final: dict, seconds: float) -> dict:
+    """The training record (module docstring) of a finished run whose final validation is ``final``."""
+    settings, steps = run.settings, run.steps
+    steps_run = run.history[-1]["step"] if run.history else run.start_step
+    return {
+        "network": run.name,
+        "label": run.label,
+        "arch": run.spec.network,
+        "parameters": count_parameters(run.network),
         "settings": settings,
         "data": {
             **crops.info,
@@ -366,18 +434,41 @@ def train_network(module: ModuleType, data: list[str | Path] | CropSet, weights_
                   / math.prod(train_set.shape[:3] + train_set.shape[4:]),
         "steps_run": steps_run,
         "rounds_run": math.ceil(steps_run / steps),
-        "stopped_by": "plateau" if plateau_reached(history, steps, settings["plateau"]) else "rounds",
+        "stopped_by": "plateau" if plateau_reached(run.history, steps, settings["plateau"]) else "rounds",
         "validation": final,
-        "history": history,
+        "history": run.history,
         "seconds": seconds,
         "machine": f"{platform.node()} {platform.machine()} {platform.processor() or ''}".strip(),
         "cpu_count": os.cpu_count(),
         "threads": int(settings["threads"]),
         "torch": torch.__version__,
         "finished": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
-        **(provenance or {}),
     }
-    _save_atomic({"arch": spec.network, "state_dict": network.state_dict()}, Path(weights_out))
+
+
+def train_network(module: ModuleType, data: list[str | Path] | CropSet, weights_out: str | Path,
+                  record_out: str | Path, checkpoint: str | Path, overrides: dict | None = None,
+                  log=print, *, provenance: dict | None = None) -> dict:
+    """Train the network of learned method ``module`` (resuming from ``checkpoint`` if present)
+    on ``data``: training crop files, or a :class:`CropSet` already loaded (a combiner's, from
+    :func:`mcbench.nn.crops.load_combiner_crops`); returns the record (``provenance``, e.g. the
+    CPU, is added to it as given)."""
+    name = method_name(check_learned_method(module))
+    spec = method_spec(module).learned
+    settings = training_settings(module, overrides)
+    torch.set_num_threads(int(settings["threads"]))
+    checkpoint = Path(checkpoint)
+    crops, folder, train_set, validation_set = _split_crops(name, data, settings, log)
+    run = _new_run(name, method_spec(module).label, spec, settings)
+    if checkpoint.exists():
+        _resume(run, checkpoint, log)
+    seconds = _train_rounds(run, train_set, validation_set, checkpoint, log)
+    if run.best_state is not None:          # the round with the lowest validation loss
+        run.network.load_state_dict(run.best_state)
+    run.network.eval()
+    final = evaluate(run.network, validation_set, settings["loss"])
+    record = {**_training_record(run, crops, folder, train_set, validation_set, final, seconds), **(provenance or {})}
+    _save_atomic({"arch": spec.network, "state_dict": run.network.state_dict()}, Path(weights_out))
     record[WEIGHTS_DIGEST_KEY] = file_sha256(weights_out)
     write_json(record_out, record, checksum=False)   # committed beside the weights: a checkout may change it
     log(f"{name}: done in {seconds:.0f} s, validation {settings['loss']} {final['loss']:.5f}")

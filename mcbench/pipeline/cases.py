@@ -35,7 +35,7 @@ import hashlib
 import json
 from pathlib import Path
 
-from mcbench import BenchError
+from mcbench import METRICS_COLUMNS, BenchError
 from mcbench.io.exr import content_checksum
 from mcbench.io.tables import read_json, write_csv, write_json
 
@@ -164,7 +164,7 @@ def _evaluate_case(case: dict) -> dict[str, dict]:
 
 
 def _assemble_case(case: dict, evaluated: dict[str, dict]) -> None:
-    """The case's metrics CSV (rows scene, spp, candidate, metric, value: the entries in the
+    """The case's metrics CSV (rows scene, spp, entry, metric, value: the entries in the
     case's order, each with its metrics in the config's order) and its viewer folder
     (:func:`mcbench.pipeline.viewer.assemble_viewer_case`)."""
     import pandas as pd
@@ -172,9 +172,9 @@ def _assemble_case(case: dict, evaluated: dict[str, dict]) -> None:
     from mcbench.pipeline.viewer import assemble_viewer_case
 
     scene, spp = case["scene"], int(case["spp"])
-    rows = [{"scene": scene, "spp": spp, "candidate": entry, "metric": metric, "value": value}
+    rows = [{"scene": scene, "spp": spp, "entry": entry, "metric": metric, "value": value}
             for entry, made in evaluated.items() for metric, value in made["values"].items()]
-    write_csv(case["outputs"]["metrics"], pd.DataFrame(rows, columns=["scene", "spp", "candidate", "metric", "value"]))
+    write_csv(case["outputs"]["metrics"], pd.DataFrame(rows, columns=list(METRICS_COLUMNS)))
     assemble_viewer_case({item["entry"]: item["viewer"] for item in case["entries"]}, case["outputs"]["viewer"],
                          scene=scene, spp=spp)
 

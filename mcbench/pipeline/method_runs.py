@@ -60,7 +60,7 @@ def run_methods(entries: list[dict], render_path: str, *, scene: str = "", spp: 
     per process, whatever the image size); the first failure stops the call, naming the
     method. Methods are imported once per process (a learned method's torch import is paid once
     per process, not once per method). The render and whole-file inputs are read through
-    :func:`mcbench.io.file_cache.cached_read`, so a warm worker (:mod:`mcbench.pipeline.pool`)
+    :func:`mcbench.io.file_cache.cached_read`, so a warm worker (:mod:`mcbench.pipeline.worker_pool`)
     running the next method of the same case does not decode them again.
     """
     from mcbench.pipeline.registry import load_method, method_parameters
@@ -141,7 +141,7 @@ def _weights_file(entry: dict, method: str) -> str:
     return str(entry["weights"])
 
 
-#: (module, parameters) already warmed up in this process (a batch, or a warm worker of mcbench.pipeline.pool)
+#: (module, parameters) already warmed up in this process (a batch, or a warm worker of mcbench.pipeline.worker_pool)
 _WARMED: set[tuple[str, str]] = set()
 
 WARM_UP_SIZE = 32  # pixels per side of the untimed warm-up crop of run_methods

@@ -9,7 +9,7 @@ import functools
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from mcbench import NOISY, BenchError
+from mcbench import METRICS_COLUMNS, NOISY, BenchError
 from mcbench.io.buffers import Denoised, RenderBuffers
 from mcbench.io.exr import check_finite, check_resolution, read_layers
 from mcbench.io.tables import read_json, read_table, write_csv
@@ -20,21 +20,21 @@ if TYPE_CHECKING:  # pandas is imported inside the steps that build tables
     from mcbench.contracts.metric import MetricSpec
 
 
-def read_case_metrics(path: str, *, candidates: list[str], metric_names: list[str],
+def read_case_metrics(path: str, *, entries: list[str], metric_names: list[str],
                       case: tuple[str, int] | None = None) -> pd.DataFrame:
-    """One per-case metrics CSV, refused (naming the file) unless it is whole: every candidate
+    """One per-case metrics CSV, refused (naming the file) unless it is whole: every entry
     and metric once with a finite value, and only the case ``(scene, spp)`` when given."""
     from mcbench.analysis.ranking import check_complete
 
-    frame = read_table(path, columns=("scene", "spp", "candidate", "metric", "value"))
-    check_complete(frame, candidates=candidates, metric_names=metric_names,
+    frame = read_table(path, columns=METRICS_COLUMNS)
+    check_complete(frame, entries=entries, metric_names=metric_names,
                    cases=None if case is None else [case], source=path)
     if case is not None and len(frame.groupby(["scene", "spp"])) != 1:
         raise BenchError(f"{path}: holds more cases than ({case[0]}, {case[1]})")
     return frame
 
 
-def gather_tables(paths: list[str], output_path: str, *, candidates: list[str], metric_names: list[str],
+def gather_tables(paths: list[str], output_path: str, *, entries: list[str], metric_names: list[str],
                   cases: list[tuple[str, int]]) -> pd.DataFrame:
     """Concatenate the per-case CSVs (``paths[i]`` holds ``cases[i]``) into one tidy table, after
     checking each is complete (:func:`read_case_metrics`): no table is ranked over lost rows."""
@@ -42,7 +42,7 @@ def gather_tables(paths: list[str], output_path: str, *, candidates: list[str], 
 
     if len(paths) != len(cases):
         raise BenchError(f"{output_path}: {len(paths)} case files for {len(cases)} cases")
-    frames = [read_case_metrics(path, candidates=candidates, metric_names=metric_names, case=case)
+    frames = [read_case_metrics(path, entries=entries, metric_names=metric_names, case=case)
               for path, case in zip(paths, cases)]
     frame = pd.concat(frames, ignore_index=True)
     write_csv(output_path, frame)
@@ -95,14 +95,14 @@ def evaluate_entry(scene: str, spp: int, entry: str, image_path: str, reference_
                    metrics: list[str], *, metrics_path: str | None = None, viewer_dir: str | None = None,
                    weight_inputs: list[str] = (), values_path: str | None = None) -> pd.DataFrame:
     """Errors of one entry of a test case against the reference as a tidy table (columns scene,
-    spp, candidate, metric, value: one row per metric of ``metrics``, in that order), written to
+    spp, entry, metric, value: one row per metric of ``metrics``, in that order), written to
     ``metrics_path`` when given; the values and images of :func:`evaluate_entry_values`."""
     import pandas as pd
 
     values, _ = evaluate_entry_values(scene, spp, entry, image_path, reference_path, metrics, viewer_dir=viewer_dir,
                                       weight_inputs=weight_inputs, values_path=values_path)
-    frame = pd.DataFrame([{"scene": scene, "spp": int(spp), "candidate": entry, "metric": metric, "value": value}
-                          for metric, value in values.items()], columns=["scene", "spp", "candidate", "metric", "value"])
+    frame = pd.DataFrame([{"scene": scene, "spp": int(spp), "entry": entry, "metric": metric, "value": value}
+                          for metric, value in values.items()], columns=list(METRICS_COLUMNS))
     if metrics_path is not None:
         write_csv(metrics_path, frame)
     return frame
@@ -125,7 +125,7 @@ def evaluate_entry_values(scene: str, spp: int, entry: str, image_path: str, ref
     already read) and its metric's code digest (:func:`metric_code_digest`) are those it was
     computed from. The image and reference are decoded only when something is computed.
 
-    With ``viewer_dir``: the entry's images (:func:`mcbench.analysis.viewer.write_entry_images`:
+    With ``viewer_dir``: the entry's images (:func:`mcbench.analysis.viewer_images.write_entry_images`:
     tone-mapped at each exposure, the error map of each metric that declares one, and for a
     candidate whose inputs ``weight_inputs`` names and whose EXR holds ``weights_filtered_{i}``,
     its weight maps) with their fragment, CRC-32s and ``viewer_key`` as :data:`ENTRY_RECORD`; the
@@ -219,7 +219,7 @@ def _write_entry_viewer(folder: Path, scene: str, spp: int, entry: str, image, r
                         key: str | None) -> None:
     """An entry's viewer images (``maps``: its error maps, :func:`entry_metrics`) and its record
     (:data:`ENTRY_RECORD`: fragment, CRC-32s, key)."""
-    from mcbench.analysis.viewer import REFERENCE, case_files, merge_fragments, write_entry_images
+    from mcbench.analysis.viewer_images import REFERENCE, case_files, merge_fragments, write_entry_images
     from mcbench.io.checksums import crc32_hex
     from mcbench.io.tables import write_json
 

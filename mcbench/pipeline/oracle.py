@@ -1,12 +1,12 @@
 """The oracle study's step (Zheng et al. 2021 Sec. 5.2.7, Fig. 11): weights from ground-truth
 statistics next to the dual-buffer estimate. Like every pipeline module it resolves scene and
-method names (plugins); the maths is :mod:`mcbench.combine.oracle`.
+method names (plugins); the maths is :mod:`mcbench.combine.oracle_weights`.
 
 One test scene is rendered ``repetitions + 1`` times at ``spp`` with the oracle seeds of
 :func:`mcbench.render.seeds.oracle_render_seed` (repetition r, halves A and B as every render: the
 dual-buffer estimate needs them), at the harness's resolution divided by ``downscale``; the
 ground truth is the harness's reference averaged over ``downscale`` x ``downscale`` blocks
-(:func:`mcbench.combine.oracle.block_average`). The base denoisers run on every repetition; the first
+(:func:`mcbench.combine.oracle_weights.block_average`). The base denoisers run on every repetition; the first
 ``repetitions`` feed the MSE matrices M (full-buffer outputs, Eq. 7) and M^half (half-buffer
 outputs, Eq. 15, two samples per repetition), the last one is held out: the weights solved
 from M and M^half and the three dual-buffer combiners run on it give the nine panels of
@@ -31,8 +31,8 @@ from mcbench.io.buffers import Denoised, RenderBuffers
 from mcbench.io.exr import check_finite, read_layers
 from mcbench.io.tables import write_csv, write_text
 from mcbench.analysis.oracle_tables import error_table, table_markdown, weight_maps_figure
-from mcbench.combine.oracle import (MseMatrixAccumulator, block_average, one_hot_weights, simplex_weights,
-                                    unconstrained_weights)
+from mcbench.combine.oracle_weights import (MseMatrixAccumulator, block_average, one_hot_weights, simplex_weights,
+                                            unconstrained_weights)
 from mcbench.progress import eta_seconds, progress_line
 from mcbench.render.seeds import oracle_render_seed
 from mcbench.combine.selection import blend
@@ -81,6 +81,76 @@ def _combiner_weights(result: Denoised, count: int) -> np.ndarray:
     return np.stack([np.asarray(result.extras[f"weights_filtered_{i}"], np.float64) for i in range(count)])
 
 
+def _oracle_reference(reference_path: str, scene: str, width: int, height: int, downscale: int) -> np.ndarray:
+    """The reference block-averaged to ``width`` x ``height``; refused unless it has the harness's
+    resolution (``downscale`` times that)."""
+    reference = read_layers(reference_path, ["color"])
+    check_finite(reference_path, reference)
+    reference = np.asarray(reference["color"], np.float64)
+    if reference.shape[:2] != (height * downscale, width * downscale):
+        raise BenchError(f"{reference_path}: reference is {reference.shape[1]}x{reference.shape[0]}, the "
+                         f"harness's resolution for '{scene}' is {width * downscale}x{height * downscale}")
+    return block_average(reference, downscale)
+
+
+def _render_repetitions(desc, bases: list, mu: np.ndarray, *, scene: str, spp: int, repetitions: int, seed: int,
+                        variant: str, features: str, label: str, started: float) -> tuple[dict, RenderBuffers, list]:
+    """Render ``repetitions + 1`` times with the oracle seeds and denoise each render with every
+    base (``bases``: each a function of the render): ``(accumulators, held-out render, its outputs)``, the MSE matrices of the full buffers'
+    and the halves' outputs over the first ``repetitions`` renders, the last held out."""
+    from mcbench.render.renderer import render_dict_buffers
+
+    accumulators = {"full": MseMatrixAccumulator(mu, count=len(bases)),
+                    "half": MseMatrixAccumulator(mu, count=len(bases))}
+    for r in range(repetitions + 1):
+        layers, _ = render_dict_buffers(
+            desc, spp, lambda half, j, p, r=r: oracle_render_seed(r, half, bin=j, pass_index=p, base_seed=seed),
+            key=f"oracle:{scene}", variant=variant, features=features)
+        buffers = RenderBuffers(layers=layers, spp=spp, source=f"oracle render {r} of '{scene}'")
+        outputs = [denoise(buffers) for denoise in bases]
+        if r < repetitions:
+            accumulators["full"].add(_stack(outputs, "full"))
+            accumulators["half"].add(_stack(outputs, "a"))
+            accumulators["half"].add(_stack(outputs, "b"))
+        elapsed = time.perf_counter() - started
+        print(progress_line(label, f"render {r + 1}/{repetitions + 1} denoised", elapsed,
+                            eta_seconds(elapsed, r + 1, repetitions + 1)), flush=True)
+    return accumulators, buffers, outputs
+
+
+def _oracle_images(accumulators: dict, held_out: RenderBuffers, held_outputs: list,
+                   denoisers: list[str], *, weights_dir: str | None) -> tuple[dict, dict, dict]:
+    """``(images, weight maps, table rows)`` keyed by entry: the panels a-i (each solve of each
+    ground-truth statistics, then the dual-buffer combiners on the held-out render), the held-out
+    noisy render and each base's output."""
+    from mcbench.pipeline.method_runs import method_function
+    from mcbench.pipeline.registry import load_method
+
+    full = _stack(held_outputs, "full")
+    images, maps, rows = {}, {}, {}
+    panel = iter(PANELS)
+    for statistics, accumulator in accumulators.items():
+        matrix = accumulator.matrix()
+        for solve_name, (solve, weights_label) in SOLVES.items():
+            name = f"gt_{statistics}_{solve_name}"
+            maps[name] = solve(matrix)
+            images[name] = blend(maps[name], full)
+            rows[name] = {"panel": next(panel), "statistics": GROUND_TRUTH[statistics], "weights": weights_label}
+    for name, combiner, params, weights_label in DUAL_BUFFER:
+        result = method_function(load_method(combiner, kind="combiner"), weights_dir=weights_dir)(
+            held_out, held_outputs, **params)
+        maps[name] = _combiner_weights(result, len(held_outputs))
+        images[name] = np.asarray(result.full, np.float64)
+        rows[name] = {"panel": next(panel), "statistics": "<M> (dual buffer, held-out render)",
+                      "weights": weights_label}
+    images[NOISY] = np.asarray(held_out.color, np.float64)
+    rows[NOISY] = {"panel": "-", "statistics": "-", "weights": "noisy input (held-out render)"}
+    for name, output in zip(denoisers, held_outputs):
+        images[name] = np.asarray(output.full, np.float64)
+        rows[name] = {"panel": "-", "statistics": "-", "weights": f"base denoiser {name}"}
+    return images, maps, rows
+
+
 def run_oracle_study(scene: str, reference_path: str, *, table_csv: str, table_md: str, weights_png: str,
                      denoisers: list[str], repetitions: int, spp: int, downscale: int, resolution=None,
                      variant: str = "auto", seed: int = 0, threads: int | None = None,
@@ -97,10 +167,8 @@ def run_oracle_study(scene: str, reference_path: str, *, table_csv: str, table_m
     learned bases' weights folder (config key ``weights_dir``; default the committed one).
     """
     from mcbench.pipeline.method_runs import method_function
-    from mcbench.pipeline.registry import load_method
-    from mcbench.render.renderer import render_dict_buffers
+    from mcbench.pipeline.registry import load_method, load_scene
     from mcbench.render.variants import pick_variant, set_threads
-    from mcbench.pipeline.registry import load_scene
 
     started = time.perf_counter()
     module = load_scene(scene, config_key="oracle.scene")
@@ -113,57 +181,14 @@ def run_oracle_study(scene: str, reference_path: str, *, table_csv: str, table_m
         raise BenchError(f"config key 'oracle.denoisers': need at least 2 base denoisers, got {denoisers}")
     bases = [method_function(load_method(name, kind="denoiser", config_key=f"oracle.denoisers[{i}]"),
                              weights_dir=weights_dir) for i, name in enumerate(denoisers)]
-    reference = read_layers(reference_path, ["color"])
-    check_finite(reference_path, reference)
-    reference = np.asarray(reference["color"], np.float64)
-    if reference.shape[:2] != (height * downscale, width * downscale):
-        raise BenchError(f"{reference_path}: reference is {reference.shape[1]}x{reference.shape[0]}, the "
-                         f"harness's resolution for '{scene}' is {width * downscale}x{height * downscale}")
-    mu = block_average(reference, downscale)
-
+    mu = _oracle_reference(reference_path, scene, width, height, downscale)
     variant = pick_variant(variant)
     set_threads(threads)
     desc = scene_declaration.build(width, height)
-    accumulators = {"full": MseMatrixAccumulator(mu, count=len(bases)),
-                    "half": MseMatrixAccumulator(mu, count=len(bases))}
-    label = f"oracle {scene} ({width}x{height}, {spp} spp, {variant})"
-    for r in range(repetitions + 1):
-        layers, _ = render_dict_buffers(
-            desc, spp, lambda half, j, p, r=r: oracle_render_seed(r, half, bin=j, pass_index=p, base_seed=seed),
-            key=f"oracle:{scene}", variant=variant, features=features)
-        buffers = RenderBuffers(layers=layers, spp=spp, source=f"oracle render {r} of '{scene}'")
-        outputs = [denoise(buffers) for denoise in bases]
-        if r < repetitions:
-            accumulators["full"].add(_stack(outputs, "full"))
-            accumulators["half"].add(_stack(outputs, "a"))
-            accumulators["half"].add(_stack(outputs, "b"))
-        elapsed = time.perf_counter() - started
-        print(progress_line(label, f"render {r + 1}/{repetitions + 1} denoised", elapsed,
-                            eta_seconds(elapsed, r + 1, repetitions + 1)), flush=True)
-    held_out, held_outputs = buffers, outputs
-
-    full = _stack(held_outputs, "full")
-    images, maps, rows = {}, {}, {}
-    panel = iter(PANELS)
-    for statistics, accumulator in accumulators.items():
-        matrix = accumulator.matrix()
-        for solve_name, (solve, weights_label) in SOLVES.items():
-            name = f"gt_{statistics}_{solve_name}"
-            maps[name] = solve(matrix)
-            images[name] = blend(maps[name], full)
-            rows[name] = {"panel": next(panel), "statistics": GROUND_TRUTH[statistics], "weights": weights_label}
-    for name, combiner, params, weights_label in DUAL_BUFFER:
-        result = method_function(load_method(combiner, kind="combiner"), weights_dir=weights_dir)(
-            held_out, held_outputs, **params)
-        maps[name] = _combiner_weights(result, len(bases))
-        images[name] = np.asarray(result.full, np.float64)
-        rows[name] = {"panel": next(panel), "statistics": "<M> (dual buffer, held-out render)",
-                      "weights": weights_label}
-    images[NOISY] = np.asarray(held_out.color, np.float64)
-    rows[NOISY] = {"panel": "-", "statistics": "-", "weights": "noisy input (held-out render)"}
-    for name, output in zip(denoisers, held_outputs):
-        images[name] = np.asarray(output.full, np.float64)
-        rows[name] = {"panel": "-", "statistics": "-", "weights": f"base denoiser {name}"}
+    accumulators, held_out, held_outputs = _render_repetitions(
+        desc, bases, mu, scene=scene, spp=spp, repetitions=repetitions, seed=seed, variant=variant, features=features,
+        label=f"oracle {scene} ({width}x{height}, {spp} spp, {variant})", started=started)
+    images, maps, rows = _oracle_images(accumulators, held_out, held_outputs, denoisers, weights_dir=weights_dir)
     table = error_table(images, mu, rows=rows)
     write_csv(table_csv, table)
     seconds = time.perf_counter() - started

@@ -26,7 +26,7 @@ Checks here beyond the method table's (:func:`methods.method_table`):
   its key and the closest metric) whose values are errors (lower is better: the rankings and the
   study score them so);
 * ``progressive_curve.scene`` names a scene (with the key), the comparison tables' roles are
-  unique (:func:`mcbench.analysis.comparisons.find_comparisons`, which the comparison jobs
+  unique (:func:`mcbench.analysis.comparison_tables.find_comparisons`, which the comparison jobs
   would otherwise raise hours later), ``training.first_seed + training.count`` fits the object
   seeds, ``training.spp`` are powers of two 2..32768 (the training render seeds) and the
   training crops fit ``training.resolution``;
@@ -44,7 +44,7 @@ from __future__ import annotations
 import re
 
 from mcbench import NOISY, NOISY_LABEL, BenchError
-from mcbench.analysis.comparisons import comparison_role, find_comparisons
+from mcbench.analysis.comparison_tables import comparison_role, find_comparisons
 from mcbench.analysis.pool import POOL
 from mcbench.contracts.method import method_spec
 from mcbench.contracts.scene import scene_spec
@@ -88,22 +88,57 @@ def plan_study(config: dict, *, written: dict | None = None, source: str = "conf
 
 
 def _plan(config: dict, is_learned) -> StudyPlan:
+    """The plan of ``config``, its checks in this order: the method table, the scenes and spp,
+    the comparisons, the case files, the render folders, the references, the methods'
+    dependency order, the training, the side studies."""
     methods = config_method_table(config, is_learned=is_learned)
+    scenes, spps = _scenes_and_spps(config)
+    ranking = _ranking_plan(config, methods)
+    _check_comparisons(methods)
+    _check_case_files(methods, scenes, spps)
+    render_folders = _check_render_folders(config, methods, scenes, spps)
+    reference_spp = _reference_spp(config, scenes, render_folders)
+    _check_dependency_order(methods)
+    training = _training_plan(config, methods)
+    side = _side_study_plan(config, methods, scenes, render_folders, reference_spp)
+    return StudyPlan(
+        methods=frozen_mapping({name: MethodPlan(name=name, kind=spec["kind"], module=spec["module"],
+                                                 params=frozen_mapping(spec["params"]), inputs=tuple(spec["inputs"]),
+                                                 label=spec["label"], learned=spec["learned"],
+                                                 config_key=spec.get("config_key", ""),
+                                                 comparison_role=spec.get("comparison_role"),
+                                                 weights=_weights_read(spec))
+                                for name, spec in methods.items()}),
+        cases=CasePlan(scenes=tuple(scenes), spps=tuple(spps), reference_spp=frozen_mapping(reference_spp),
+                       reference_chunks=config["reference"]["chunks"], render_folders=frozen_mapping(render_folders),
+                       resolutions=frozen_mapping({scene: tuple(int(n) for n in (config["resolution"] or
+                                                                                 scene_spec(load_scene(scene)).size))
+                                                   for scene in scenes})),
+        ranking=ranking, training=training, side=side,
+        paths=StudyPaths(weights_dir=config.get("weights_dir") or str(COMMITTED_WEIGHTS)))
+
+
+def _scenes_and_spps(config: dict) -> tuple[list[str], list[int]]:
+    """The config's scenes (each one that loads) and its spp levels, sorted (each one with a
+    render seed code)."""
     for index, scene in enumerate(config["scenes"]):
         load_scene(scene, config_key=f"scenes[{index}]")
-    scenes = list(config["scenes"])
     for index, spp in enumerate(config["spp"]):
         try:
             spp_code(spp)
         except BenchError:
             raise ConfigError(f"spp[{index}]: {spp} spp has no render seed code (mcbench.render.seeds); use an "
                               f"even spp up to 2048 or a multiple of 2048 up to {2048 * 1024}") from None
-    spps = sorted(config["spp"])
+    return list(config["scenes"]), sorted(config["spp"])
+
+
+def _ranking_plan(config: dict, methods: dict) -> RankingPlan:
+    """What the tables rank. With ``study.pool``: exactly the 39 candidates of Zheng et al. Sec.
+    5.3.1 the config runs (:mod:`mcbench.analysis.pool`), in ID order; otherwise every candidate
+    but the comparison methods of Sec. 5.2 (one-hot selection, naive averages, ablations; ranked
+    in comparisons.smk). Every other method is an extra, scored in a pool that adds it alone
+    (rule extras_table)."""
     candidates = list(methods)
-    # The ranking pool. With study.pool: exactly the 39 candidates of Zheng et al. Sec. 5.3.1 the
-    # config runs (mcbench.analysis.pool), in ID order; otherwise every candidate but the comparison
-    # methods of Sec. 5.2 (one-hot selection, naive averages, ablations; ranked in comparisons.smk).
-    # Every other method is an extra, scored in a pool that adds it alone (rule extras_table).
     pool_study = config["study"]["pool"]
     if pool_study:
         ranked = [c.name for c in POOL if c.name in methods]
@@ -116,32 +151,40 @@ def _plan(config: dict, is_learned) -> StudyPlan:
                  "members the paper does not name (mcbench.analysis.pool)." if len(ranked) == len(POOL) else
                  f"Partial pool: {len(ranked)} of the 39 candidates (study.ensembles), {len(ranked) + 1} entries "
                  f"with the noisy input, so the scores are on another scale than the paper's 40-entry Table 3.")
-    _check_comparisons(methods)
-    _check_case_files(methods, scenes, sorted(config["spp"]))
-    render_folders = _check_render_folders(config, methods, scenes, spps)
-    # progressive denoising's entries (combiners of module progressive) -> the method each mixes
-    # with the noisy render (progressive.smk)
-    progressive = {name: spec["inputs"][0] for name, spec in methods.items() if spec["module"] == "progressive"}
     labels = {NOISY: NOISY_LABEL, **{name: spec["label"] for name, spec in methods.items()}}
-    reference_chunks = config["reference"]["chunks"]
-    reference_spp = _reference_spp_table(config, [s for s in scenes if s not in render_folders], reference_chunks)
-    _check_reference_above_spp(config, reference_spp)
-    reference_spp.update({scene: None for scene in render_folders})   # made elsewhere: unknown
+    return RankingPlan(candidates=tuple(candidates), ranked=tuple(ranked), extras=tuple(extras),
+                       pool_study=bool(pool_study), pool_note=pool_note, labels=frozen_mapping(labels),
+                       metrics=tuple(config["metrics"]))
 
-    # the method table's order is a dependency order (checked here): a combiner after its inputs
+
+def _reference_spp(config: dict, scenes: list[str], render_folders: dict) -> dict:
+    """Each scene's reference spp (None for a folder of renders made elsewhere: unknown), each
+    above every spp it judges."""
+    reference_spp = _reference_spp_table(config, [s for s in scenes if s not in render_folders],
+                                         config["reference"]["chunks"])
+    _check_reference_above_spp(config, reference_spp)
+    reference_spp.update({scene: None for scene in render_folders})
+    return reference_spp
+
+
+def _check_dependency_order(methods: dict) -> None:
+    """The method table's order is a dependency order: a combiner after its inputs."""
     position = {name: index for index, name in enumerate(methods)}
     for name, spec in methods.items():
         for input_name in spec["inputs"]:
             if position[input_name] > position[name]:
                 raise BenchError(f"method '{name}' takes '{input_name}', which comes after it in the method table")
 
+
+def _training_plan(config: dict, methods: dict) -> TrainingPlan:
+    """The training crops and settings. The learned combiners' crops are a subset of the
+    training scenes, checked when the config has a learned combiner (a smaller training set for
+    the denoisers alone stays valid); each per-network override names a learned method."""
     training = {key: value for key, value in config["training"].items() if key not in ("networks", "combiners")}
     training_overrides = config["training"]["networks"]
     _check_training(config["training"])
-    training_seeds_ = training_seeds(training)
+    seeds = training_seeds(training)
     networks = sorted({spec["module"] for spec in methods.values() if spec["learned"]})
-    # The crops of the learned combiners: a subset of the training scenes, checked when the config
-    # has a learned combiner (a smaller training set for the denoisers alone stays valid).
     combiner_training = config["training"]["combiners"]
     if any(spec["learned"] and spec["kind"] == "combiner" for spec in methods.values()):
         for key in ("count", "fibre_count", "crops"):
@@ -154,33 +197,24 @@ def _plan(config: dict, is_learned) -> StudyPlan:
         if name not in networks:
             raise BenchError(f"training.networks.{name}: not a learned method of this config; "
                              f"learned: {', '.join(networks) or 'none'}")
+    return TrainingPlan(settings=frozen_mapping(training), seeds=tuple(seeds),
+                        overrides=frozen_mapping(training_overrides), networks=tuple(networks),
+                        combiner_settings=frozen_mapping(combiner_training), combiner_seeds=tuple(combiner_seeds))
 
+
+def _side_study_plan(config: dict, methods: dict, scenes: list[str], render_folders: dict,
+                     reference_spp: dict) -> SideStudyPlan:
+    """The oracle study's and the progressive curve's scenes and downscales, and progressive
+    denoising's entries (combiners of module progressive) with the method each mixes with the
+    noisy render (progressive.smk)."""
+    progressive = {name: spec["inputs"][0] for name, spec in methods.items() if spec["module"] == "progressive"}
     rendered = [scene for scene in scenes if scene not in render_folders]
     oracle_scene, oracle_downscale = _oracle(config, scenes, rendered, reference_spp)
     progressive_scene, progressive_downscale = _progressive_curve(config, scenes, rendered, reference_spp,
                                                                   progressive)
-    return StudyPlan(
-        methods=frozen_mapping({name: MethodPlan(name=name, kind=spec["kind"], module=spec["module"],
-                                          params=frozen_mapping(spec["params"]), inputs=tuple(spec["inputs"]),
-                                          label=spec["label"], learned=spec["learned"],
-                                          config_key=spec.get("config_key", ""),
-                                          comparison_role=spec.get("comparison_role"), weights=_weights_read(spec))
-                         for name, spec in methods.items()}),
-        cases=CasePlan(scenes=tuple(scenes), spps=tuple(spps), reference_spp=frozen_mapping(reference_spp),
-                       reference_chunks=reference_chunks, render_folders=frozen_mapping(render_folders),
-                       resolutions=frozen_mapping({scene: tuple(int(n) for n in (config["resolution"] or
-                                                                                 scene_spec(load_scene(scene)).size))
-                                                   for scene in scenes})),
-        ranking=RankingPlan(candidates=tuple(candidates), ranked=tuple(ranked), extras=tuple(extras),
-                            pool_study=bool(pool_study), pool_note=pool_note, labels=frozen_mapping(labels),
-                            metrics=tuple(config["metrics"])),
-        training=TrainingPlan(settings=frozen_mapping(training), seeds=tuple(training_seeds_),
-                              overrides=frozen_mapping(training_overrides), networks=tuple(networks),
-                              combiner_settings=frozen_mapping(combiner_training), combiner_seeds=tuple(combiner_seeds)),
-        side=SideStudyPlan(oracle_scene=oracle_scene, oracle_downscale=oracle_downscale,
-                           progressive=frozen_mapping(progressive), progressive_scene=progressive_scene,
-                           progressive_downscale=progressive_downscale),
-        paths=StudyPaths(weights_dir=config.get("weights_dir") or str(COMMITTED_WEIGHTS)))
+    return SideStudyPlan(oracle_scene=oracle_scene, oracle_downscale=oracle_downscale,
+                         progressive=frozen_mapping(progressive), progressive_scene=progressive_scene,
+                         progressive_downscale=progressive_downscale)
 
 
 def _check_metrics(names: list[str]) -> None:

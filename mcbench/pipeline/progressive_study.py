@@ -12,7 +12,7 @@ Choices:
   scene's declared ``resolution``) divided by ``downscale`` (config ``progressive_curve.downscale``, 2 by
   default), as the oracle study does: four times fewer pixels make the 8192-spp render affordable.
   The ground truth is the harness's reference averaged over ``downscale`` x ``downscale`` blocks
-  (:func:`mcbench.combine.oracle.block_average`: with the box pixel filter the block mean is the reference
+  (:func:`mcbench.combine.oracle_weights.block_average`: with the box pixel filter the block mean is the reference
   of the same camera at the lower resolution). The reference must be much less noisy than the
   top level, or the top of the curve measures the reference's noise: a reference of R spp
   averaged ``downscale`` x ``downscale`` is worth R x downscale² spp at the curve's resolution
@@ -52,16 +52,16 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from mcbench import NOISY, BenchError
+from mcbench import METRICS_COLUMNS, NOISY, BenchError
+from mcbench.contracts.method import method_spec
 from mcbench.contracts.scene import scene_spec
 from mcbench.io.buffers import RenderBuffers
 from mcbench.io.exr import ExrError, check_finite, read_layers
-from mcbench.contracts.method import method_spec
-from mcbench.analysis.figures import pyplot_agg, save_figure
+from mcbench.analysis.error_speed_figures import pyplot_agg, save_figure
 from mcbench.io.tables import read_table, write_csv, write_text
 from mcbench.analysis.metrics import relmse, relmse_corrected, smape
 from mcbench.analysis.oracle_tables import table_markdown
-from mcbench.combine.oracle import block_average
+from mcbench.combine.oracle_weights import block_average
 from mcbench.progress import eta_seconds, progress_line
 from mcbench.analysis.scene_summary import reference_relmse_floor
 from mcbench.render.seeds import MAX_PROGRESSIVE_CURVE_LEVELS, MAX_PROGRESSIVE_CURVE_PASSES, progressive_curve_seed
@@ -236,6 +236,82 @@ def curve_figure(table: pd.DataFrame, path: str, *, entries: list[str], labels: 
     save_figure(figure, path)
 
 
+def _curve_methods(base: str, divergence: str, *, weights_dir: str | None) -> tuple:
+    """``(base module, the base's run, progressive denoising's run)``, each learned one with its
+    weights from ``weights_dir``; refused (naming the config key) when ``divergence`` is neither
+    ``none`` nor a denoiser that declares a single-image function."""
+    from mcbench.pipeline.method_runs import method_function
+    from mcbench.pipeline.registry import load_method, single_image_methods
+
+    base_module = load_method(base, kind="denoiser", config_key="progressive_curve.base")
+    combiner = load_method("progressive", kind="combiner", config_key="progressive_curve")
+    divergences = ("none", *single_image_methods())     # the denoisers that declare a single-image function
+    if divergence not in divergences:
+        raise BenchError(f"config key 'progressive_curve.divergence': '{divergence}' is not one of "
+                         f"{', '.join(divergences)} (none, or a denoiser with a single-image function)")
+    return (base_module, method_function(base_module, weights_dir=weights_dir),
+            method_function(combiner, weights_dir=weights_dir))
+
+
+def _curve_scene(module, width: int, height: int, top: int, variant: str, key: str):
+    """The scene's description at ``width`` x ``height``, loaded into Mitsuba under ``key`` (the
+    load is no level's time); refused when ``top`` spp needs more passes per bin than the seed
+    layout has."""
+    from mcbench.render.renderer import load_scene_dict, passes_for
+
+    passes = len(passes_for(top // 4 if top % 4 == 0 else top // 2, width, height, variant))
+    if passes > MAX_PROGRESSIVE_CURVE_PASSES:
+        raise BenchError(f"config key 'progressive_curve.spp': {top} spp at {width}x{height} needs {passes} "
+                         f"passes per bin, more than the seed layout's {MAX_PROGRESSIVE_CURVE_PASSES}")
+    desc = scene_spec(module).build(width, height)
+    load_scene_dict(desc, key=key, variant=variant)
+    return desc
+
+
+def _curve_labels(entries: list[str], base_label: str, divergence: str) -> dict[str, str]:
+    """The table labels of the curve's entries (PD's weights are trained by mcbench on its own
+    training scenes: the mark † as in every table)."""
+    from mcbench import NOISY_LABEL
+
+    return {entries[0]: NOISY_LABEL, entries[1]: base_label,
+            entries[2]: f"PD† over {base_label} (divergence: {divergence})",
+            entries[3]: f"{base_label} bounded by the t-test alone (PD w/o h_NN)"}
+
+
+def _level_outputs(buffers: RenderBuffers, entries: list[str], denoise, combine, divergence: str, *,
+                   warm_up: bool) -> tuple[dict, dict]:
+    """``(images, seconds)`` of the base, PD and the t-test bound on one level's render, keyed
+    by entry (the noisy input's image is the render's; its seconds are the caller's). With
+    ``warm_up`` the methods run once untimed first (imports, PD's weights, OIDN's device; their
+    outputs are deterministic)."""
+    if warm_up:
+        combine(buffers, [denoise(buffers)], divergence=divergence)
+    spent = {}
+    clock = time.perf_counter()
+    base_out = denoise(buffers)
+    spent[entries[1]] = time.perf_counter() - clock
+    clock = time.perf_counter()
+    pd_out = combine(buffers, [base_out], divergence=divergence)
+    spent[entries[2]] = time.perf_counter() - clock
+    clock = time.perf_counter()
+    bound = combine(buffers, [base_out], network=False)
+    spent[entries[3]] = time.perf_counter() - clock
+    images = {entries[0]: buffers.color, entries[1]: base_out.full, entries[2]: pd_out.full, entries[3]: bound.full}
+    return images, spent
+
+
+def _write_curve(table: pd.DataFrame, *, table_csv: str, table_md: str, figure_png: str, title: str, base: str,
+                 entries: list[str], labels: dict[str, str], floor: float | None) -> None:
+    """The curve's table (CSV, and Markdown with the noise floor's note) and figure."""
+    write_csv(table_csv, table)
+    floor_text = ("The reference has no variance layer: no noise floor, no corrected relMSE." if floor is None else
+                  f"Reference noise floor (block-averaged reference, mean of Var / (μ² + 0.01), the relMSE a "
+                  f"perfect image would show): {floor:.4g}; relmse_corrected removes it.")
+    write_text(table_md, table_markdown(table, title=title) + "\n" + floor_text + "\n"
+               + consistency_markdown(table, base))
+    curve_figure(table, figure_png, entries=entries, labels=labels, floor=floor, title=title)
+
+
 def run_consistency_curve(scene: str, reference_path: str, *, table_csv: str, table_md: str, figure_png: str,
                           spp_levels: list[int], base: str = "oidn", divergence: str = "oidn",
                           downscale: int = 2, resolution=None, variant: str = "auto", seed: int = 0,
@@ -254,12 +330,9 @@ def run_consistency_curve(scene: str, reference_path: str, *, table_csv: str, ta
     renders' feature convention (config key ``features``); ``weights_dir``: the learned
     networks' folder (config key ``weights_dir``; default the committed one).
     """
-    from mcbench import NOISY_LABEL
-    from mcbench.pipeline.method_runs import method_function
-    from mcbench.pipeline.registry import load_method, single_image_methods
-    from mcbench.render.renderer import load_scene_dict, passes_for, render_dict_buffers
-    from mcbench.render.variants import pick_variant, set_threads
     from mcbench.pipeline.registry import load_scene
+    from mcbench.render.renderer import render_dict_buffers
+    from mcbench.render.variants import pick_variant, set_threads
 
     started = time.perf_counter()
     levels = check_spp_levels(spp_levels)
@@ -267,34 +340,15 @@ def run_consistency_curve(scene: str, reference_path: str, *, table_csv: str, ta
     scene_declaration = scene_spec(module)
     width, height = curve_size(resolution, scene_declaration.size, downscale)
     downscale = int(downscale)
-    base_module = load_method(base, kind="denoiser", config_key="progressive_curve.base")
-    combiner = load_method("progressive", kind="combiner", config_key="progressive_curve")
-    denoise = method_function(base_module, weights_dir=weights_dir)
-    combine = method_function(combiner, weights_dir=weights_dir)
-    divergences = ("none", *single_image_methods())     # the denoisers that declare a single-image function
-    if divergence not in divergences:
-        raise BenchError(f"config key 'progressive_curve.divergence': '{divergence}' is not one of "
-                         f"{', '.join(divergences)} (none, or a denoiser with a single-image function)")
+    base_module, denoise, combine = _curve_methods(base, divergence, weights_dir=weights_dir)
     mu, reference_variance = block_reference(reference_path, width, height, downscale)
     floor = reference_floor(mu, reference_variance)
-
     variant = pick_variant(variant)
     set_threads(threads)
-    top = levels[-1]
-    passes = len(passes_for(top // 4 if top % 4 == 0 else top // 2, width, height, variant))
-    if passes > MAX_PROGRESSIVE_CURVE_PASSES:
-        raise BenchError(f"config key 'progressive_curve.spp': {top} spp at {width}x{height} needs {passes} "
-                         f"passes per bin, more than the seed layout's {MAX_PROGRESSIVE_CURVE_PASSES}")
-    desc = scene_declaration.build(width, height)
     key = f"progressive_curve:{scene}"
-    load_scene_dict(desc, key=key, variant=variant)        # the scene's load is no level's time
-
+    desc = _curve_scene(module, width, height, levels[-1], variant, key)
     entries = entry_names(base)
-    base_label = method_spec(base_module).label
-    # PD's weights are ours (trained on our scenes): the mark † as in every table
-    labels = {entries[0]: NOISY_LABEL, entries[1]: base_label,
-              entries[2]: f"PD† over {base_label} (divergence: {divergence})",
-              entries[3]: f"{base_label} bounded by the t-test alone (PD w/o h_NN)"}
+    labels = _curve_labels(entries, method_spec(base_module).label, divergence)
     label = f"progressive curve {scene} ({width}x{height}, {variant})"
     records, done, render_seconds, method_seconds = [], 0, 0.0, 0.0
     for index, spp in enumerate(levels):
@@ -304,46 +358,26 @@ def run_consistency_curve(scene: str, reference_path: str, *, table_csv: str, ta
                                                                               base_seed=seed),
             key=key, variant=variant, features=features)
         buffers = RenderBuffers(layers=layers, spp=spp, source=f"progressive curve render of '{scene}' at {spp} spp")
-        spent = {entries[0]: time.perf_counter() - clock}
-        if index == 0:      # warm-up, untimed: imports, PD's weights, OIDN's device (outputs are deterministic)
-            combine(buffers, [denoise(buffers)], divergence=divergence)
-        clock = time.perf_counter()
-        base_out = denoise(buffers)
-        spent[entries[1]] = time.perf_counter() - clock
-        clock = time.perf_counter()
-        pd_out = combine(buffers, [base_out], divergence=divergence)
-        spent[entries[2]] = time.perf_counter() - clock
-        clock = time.perf_counter()
-        bound = combine(buffers, [base_out], network=False)
-        spent[entries[3]] = time.perf_counter() - clock
-        images = {entries[0]: buffers.color, entries[1]: base_out.full, entries[2]: pd_out.full,
-                  entries[3]: bound.full}
-        for entry in entries:
-            records.append({"spp": spp, "entry": entry, "label": labels[entry],
-                            **_errors(f"{entry} at {spp} spp", images[entry], mu, reference_variance),
-                            "seconds": float(spent[entry])})
+        render_spent = time.perf_counter() - clock
+        images, spent = _level_outputs(buffers, entries, denoise, combine, divergence, warm_up=index == 0)
+        spent[entries[0]] = render_spent
+        records += [{"spp": spp, "entry": entry, "label": labels[entry],
+                     **_errors(f"{entry} at {spp} spp", images[entry], mu, reference_variance),
+                     "seconds": float(spent[entry])} for entry in entries]
         # ETA: renders scale with spp, the methods' time per level does not (measured so far)
         done += spp
-        render_seconds += spent[entries[0]]
+        render_seconds += render_spent
         method_seconds += sum(spent[e] for e in entries[1:])
-        eta = (eta_seconds(render_seconds, done, sum(levels))
-               + method_seconds / (index + 1) * (len(levels) - index - 1))
+        eta = eta_seconds(render_seconds, done, sum(levels)) + method_seconds / (index + 1) * (len(levels) - index - 1)
         print(progress_line(label, f"{spp} spp done (level {index + 1}/{len(levels)})",
                             time.perf_counter() - started, eta), flush=True)
-
     table = pd.DataFrame.from_records(records, columns=[c for c in COLUMNS if c != "relmse_corrected"
                                                         or reference_variance is not None])
-    write_csv(table_csv, table)
-    seconds = time.perf_counter() - started
     title = (f"Progressive denoising's consistency curve (Firmino et al. 2022): {scene} at {width}x{height} "
              f"(harness resolution / {downscale}), spp {', '.join(map(str, levels))}, base {base}, "
-             f"divergence {divergence}, seed {seed}, {variant}; {seconds:.0f} s")
-    floor_text = ("The reference has no variance layer: no noise floor, no corrected relMSE." if floor is None else
-                  f"Reference noise floor (block-averaged reference, mean of Var / (μ² + 0.01), the relMSE a "
-                  f"perfect image would show): {floor:.4g}; relmse_corrected removes it.")
-    write_text(table_md, table_markdown(table, title=title) + "\n" + floor_text + "\n"
-               + consistency_markdown(table, base))
-    curve_figure(table, figure_png, entries=entries, labels=labels, floor=floor, title=title)
+             f"divergence {divergence}, seed {seed}, {variant}; {time.perf_counter() - started:.0f} s")
+    _write_curve(table, table_csv=table_csv, table_md=table_md, figure_png=figure_png, title=title, base=base,
+                 entries=entries, labels=labels, floor=floor)
     return table
 
 
@@ -356,10 +390,10 @@ def write_progressive_tables(metrics_csv: str, timings_csv: str, out_dir: str, *
     import pandas as pd
 
     from mcbench.analysis.progressive_tables import (added_seconds, consistency_markdown, consistency_summary,
-                                            consistency_table, per_spp_markdown, per_spp_table, table_entries)
+                                                     consistency_table, per_spp_markdown, per_spp_table, table_entries)
 
     out = Path(out_dir)
-    table = read_table(metrics_csv, columns=("scene", "spp", "candidate", "metric", "value"))
+    table = read_table(metrics_csv, columns=METRICS_COLUMNS)
     timings = read_table(timings_csv, columns=("scene", "spp", "method", "seconds"))
     consistency = consistency_table(table, dict(pairs), metric="relmse", noisy=NOISY)
     summary = consistency_summary(consistency)

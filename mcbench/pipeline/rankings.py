@@ -10,7 +10,7 @@ import re
 from pathlib import Path
 
 
-from mcbench import BenchError
+from mcbench import METRICS_COLUMNS, BenchError
 from mcbench.contracts.scene import scene_spec
 from mcbench.io.exr import check_finite, check_resolution, read_layers, read_metadata
 from mcbench.io.tables import read_table, write_csv, write_text
@@ -39,15 +39,15 @@ def unrankable_from_scene_table(metrics: pd.DataFrame, scenes_csv: str | None, *
 
 
 def write_rankings(metrics_csv: str, metric: str, csv_path: str, md_path: str, *,
-                   candidates: list[str], labels: dict[str, str], tex_path: str | None = None,
+                   entries: list[str], labels: dict[str, str], tex_path: str | None = None,
                    order: list[str] | None = None, note: str = "", scenes_csv: str | None = None,
                    noisy: str = "noisy") -> pd.DataFrame:
     """Score-and-rank table (Zheng et al. Table 3 layout) for one metric, as CSV and Markdown,
     and as a LaTeX booktabs table at ``tex_path`` when given (label ``tab:ranking-<metric>``).
 
-    ``candidates`` (with the noisy input) is the ranking pool: rows of other candidates (the
-    extra methods, ranked in their own tables) are left out; a metrics table missing a pool
-    candidate, or any incomplete case, stops here instead of being ranked. ``order``: the rows'
+    ``entries`` (the ranking pool's candidates and the noisy input) are the rows ranked: rows of
+    other candidates (the extra methods, ranked in their own tables) are left out; a metrics table
+    missing one of ``entries``, or any incomplete case, stops here instead of being ranked. ``order``: the rows'
     order (the pool's ID order; default best Avg. first). ``note``: a sentence for the Markdown
     (e.g. that the pool is partial, so the scores are on another scale than the paper's).
     ``scenes_csv``: the scene table, whose reference floors mark with ``‡`` the spp columns the
@@ -55,10 +55,10 @@ def write_rankings(metrics_csv: str, metric: str, csv_path: str, md_path: str, *
     from mcbench.analysis.ranking import check_complete, format_latex, format_markdown, ranking_table
     from mcbench.analysis.scene_summary import unrankable_note
 
-    metrics = read_table(metrics_csv, columns=("scene", "spp", "candidate", "metric", "value"))
+    metrics = read_table(metrics_csv, columns=METRICS_COLUMNS)
     # the ranking pool: the comparison methods' rows are ranked in their own tables
-    metrics = metrics[metrics["candidate"].isin(candidates)]
-    check_complete(metrics[metrics["metric"] == metric], candidates=candidates, metric_names=[metric],
+    metrics = metrics[metrics["entry"].isin(entries)]
+    check_complete(metrics[metrics["metric"] == metric], entries=entries, metric_names=[metric],
                    source=metrics_csv)
     table = ranking_table(metrics, metric, order=order)
     write_csv(csv_path, table.reset_index(), float_format="%.4f")
@@ -68,7 +68,7 @@ def write_rankings(metrics_csv: str, metric: str, csv_path: str, md_path: str, *
                f"{n_cases} test cases the {n_entries} entries (candidates and the noisy input) get "
                f"linearly spaced scores from {n_entries} (lowest error) to 1; columns are the mean over "
                f"scenes per spp, `Avg.` the mean over spp. Higher is better.")
-    marked = unrankable_from_scene_table(metrics, scenes_csv, pool=[c for c in candidates if c != noisy])
+    marked = unrankable_from_scene_table(metrics, scenes_csv, pool=[e for e in entries if e != noisy])
     shown_note = f"\n\n{note}" if note else ""
     floor_note = f"\n\n{unrankable_note(marked)}" if marked else ""
     write_text(md_path, f"# Ranking by {metric}\n\n{scoring}{shown_note}\n\n"
@@ -92,7 +92,7 @@ def write_extras_rankings(metrics_csv: str, metric: str, csv_path: str, md_path:
     from mcbench.analysis.ranking import extras_table, format_latex, format_markdown
     from mcbench.analysis.scene_summary import unrankable_note
 
-    metrics = read_table(metrics_csv, columns=("scene", "spp", "candidate", "metric", "value"))
+    metrics = read_table(metrics_csv, columns=METRICS_COLUMNS)
     table = extras_table(metrics, metric, pool=list(pool), extras=list(extras))
     write_csv(csv_path, table.reset_index(), float_format="%.4f")
     entries = len(pool) + 1
@@ -145,7 +145,7 @@ def write_scene_table(metrics_csv: str, reference_paths: dict[str, str], referen
     from mcbench.analysis.scene_summary import reference_relmse_floor, scene_latex, scene_markdown, scene_rows
     from mcbench.pipeline.registry import load_scene
 
-    metrics = read_table(metrics_csv, columns=["scene", "spp", "candidate", "metric", "value"])
+    metrics = read_table(metrics_csv, columns=METRICS_COLUMNS)
     floors, info, costs = {}, {}, {}
     for scene, path in reference_paths.items():
         meta = read_metadata(path)

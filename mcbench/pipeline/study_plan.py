@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Mapping
 
-from mcbench import NOISY
+from mcbench import METRICS_COLUMNS, NOISY
 from mcbench.io.weights import COMMITTED_WEIGHTS, WEIGHTS_SUFFIX
 
 __all__ = ["frozen_mapping", "MethodPlan", "CasePlan", "RankingPlan", "TrainingPlan", "SideStudyPlan", "StudyPaths", "StudyPlan",
@@ -212,11 +212,13 @@ class StudyPlan:
         """What a case's job depends on besides its files (the same for every case; rule
         run_case's params): the methods in dependency order with their settings and, for a
         learned method, the SHA-256 of the weights it reads (``weights_sha256``: weights name ->
-        digest, :meth:`weights_names`), the entries, the metrics."""
+        digest, :meth:`weights_names`), the entries, the metrics and the columns of the case's
+        metrics table (a table written with other columns is remade)."""
         return {"methods": [{"name": m.name, "module": m.module, "params": dict(m.params), "inputs": list(m.inputs),
                              **({"weights_sha256": weights_digest(m.weights, weights_sha256)} if m.learned else {})}
                             for m in self.methods.values()],
-                "entries": self.ranking.entries, "metrics": list(self.ranking.metrics)}
+                "entries": self.ranking.entries, "metrics": list(self.ranking.metrics),
+                "table_columns": list(METRICS_COLUMNS)}
 
     def case_job(self, scene: str, spp: int, *, outputs: Mapping) -> dict:
         """The description of one case's job (:func:`mcbench.pipeline.cases.run_case`): its

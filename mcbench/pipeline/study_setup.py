@@ -19,13 +19,13 @@ from pathlib import Path
 from typing import Mapping
 
 from mcbench import NOISY, BenchError
-from mcbench.analysis.study.figures import STUDY_FIGURES, curve_candidates, paper_recommended
+from mcbench.analysis.study.study_figures import STUDY_FIGURES, curve_candidates, paper_recommended
 from mcbench.contracts.method import method_spec
 from mcbench.io.weights import check_trained_features, file_sha256, is_learned_method
 from mcbench.pipeline.config import config_digest, resolve_config
 from mcbench.pipeline.plan import plan_study
 from mcbench.pipeline.registry import available_metrics, load_method, load_metric
-from mcbench.pipeline.render import folder_case_files, folder_reference_files
+from mcbench.pipeline.rendering import folder_case_files, folder_reference_files
 from mcbench.pipeline.resources import StudyRequests, load_job_costs
 from mcbench.pipeline.study_plan import StudyPlan
 

@@ -14,7 +14,7 @@ from mcbench.io.buffers import RenderBuffers
 from mcbench.io.exr import check_finite, read_layers, read_metadata, write_layers
 from mcbench.io.weights import record_path, weights_folder, weights_path
 from mcbench.pipeline.method_runs import method_function
-from mcbench.pipeline.render import resolution_pair
+from mcbench.pipeline.rendering import resolution_pair
 
 
 def write_training_example(seed: int, output_paths: list[str], *, spp_levels, target_spp: int, resolution,
@@ -51,7 +51,7 @@ def write_correlated_training_inputs(base: str, crop_paths: list[str], output_pa
     single-image function re-run on the perturbed colour; ``mcbench.filters.sure.divergence_map``,
     seeded by crop, level and image)."""
     from mcbench.io.buffers import SUB_OUTPUTS
-    from mcbench.nn.data import HALF_OF, crop_render_layers
+    from mcbench.nn.crops import HALF_OF, crop_render_layers
     from mcbench.render.variants import set_threads
     from mcbench.pipeline.registry import load_method
 
@@ -117,13 +117,13 @@ def learned_method(name: str):
 
 def training_data(name: str, crop_files: list[str], correlated_files: dict[str, list[str]] | None = None):
     """The training data of learned method ``name``: its crops (a denoiser: the crop paths
-    themselves) or, for a combiner, :func:`mcbench.nn.data.load_combiner_crops` over the results
+    themselves) or, for a combiner, :func:`mcbench.nn.crops.load_combiner_crops` over the results
     of its ``correlated_bases`` (``correlated_files``: {base: files, one per crop})."""
     spec = method_spec(learned_method(name))
     if spec.kind != "combiner":
         return list(crop_files)
     spec = spec.learned
-    from mcbench.nn.data import load_combiner_crops
+    from mcbench.nn.crops import load_combiner_crops
 
     correlated_files = correlated_files or {}
     missing = [b for b in spec.correlated_bases if b not in correlated_files]
@@ -159,7 +159,7 @@ def train_progressive_variant(variant: str, data: str = "results/training", step
     ``results/training/checkpoints/<name>.ckpt`` (a run resumes from it)."""
     import sys
 
-    from mcbench.nn.data import crop_paths
+    from mcbench.nn.crops import crop_paths
     from mcbench.nn.train import correlated_paths, train_network
     from mcbench.pipeline.registry import load_method
 

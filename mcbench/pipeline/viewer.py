@@ -7,7 +7,7 @@ import os
 from pathlib import Path
 
 
-from mcbench import NOISY, BenchError
+from mcbench import METRICS_COLUMNS, NOISY, BenchError
 from mcbench.io.checksums import crc32_hex
 from mcbench.io.tables import read_json, read_table, write_json
 
@@ -44,7 +44,7 @@ def _check_case_files(case_dir: Path, record: dict, record_path: Path) -> None:
     are not of the record's size."""
     from PIL import Image
 
-    from mcbench.analysis.viewer import case_files
+    from mcbench.analysis.viewer_images import case_files
 
     _check_case_record(record, record_path)
     checksums = record.get(FILE_CHECKSUMS)
@@ -75,12 +75,12 @@ def write_viewer(metrics_csv: str, case_dirs: list[str], output_dir: str, *, cas
     :func:`assemble_viewer_case`) and ``data.js``, the manifest with each case's numbers from
     ``metrics_csv`` (every entry must have every metric of ``metric_names``) and each metric's
     label, direction and map scale from its declaration (``metrics/<name>.py``). Returns the manifest."""
-    from mcbench.analysis.viewer import CASE_RECORD, assemble_viewer, build_manifest, case_numbers, directory_bytes
+    from mcbench.analysis.viewer_images import CASE_RECORD, assemble_viewer, build_manifest, case_numbers, directory_bytes
     from mcbench.pipeline.registry import load_metrics
 
     if len(case_dirs) != len(cases):
         raise BenchError(f"{output_dir}: {len(case_dirs)} case folders for {len(cases)} cases")
-    metrics = read_table(metrics_csv, columns=("scene", "spp", "candidate", "metric", "value"))
+    metrics = read_table(metrics_csv, columns=METRICS_COLUMNS)
     entries = [NOISY] + list(candidates)
     fragments, numbers = {}, {}
     for (scene, spp), case_dir in zip(cases, case_dirs):
@@ -118,7 +118,7 @@ def assemble_viewer_case(entry_dirs: dict[str, str], case_dir: str, *, scene: st
     case or entry, or an image differs from its checksum."""
     import shutil
 
-    from mcbench.analysis.viewer import CASE_RECORD, case_files, merge_fragments
+    from mcbench.analysis.viewer_images import CASE_RECORD, case_files, merge_fragments
     from mcbench.pipeline.metrics import ENTRY_RECORD
 
     fragments, checksums = [], {}

@@ -65,7 +65,7 @@ Scalar variants
 ---------------
 The scalar variant seeds pixel by pixel with ``seed * W * H + block_id * B^2 + i`` (B = block
 size :data:`SCALAR_BLOCK_SIZE`, i = pixel in the block), which would wrap around 2**32 and
-collide for seeds like ours. There each bin/buffer/chunk is rendered in one pass (pass 0), with
+collide for seeds like the harness's. There each bin/buffer/chunk is rendered in one pass (pass 0), with
 the Mitsuba seed ``(seed >> 15) * m`` where ``m = ceil(blocks * B^2 / (W*H))``
 (:func:`scalar_seed_stride`); renders are refused unless ``((seed >> 15) + 1) * m * W * H <=
 2**32``, so the pixel seed ranges of two different renders are disjoint integer intervals

@@ -40,7 +40,7 @@ import numpy as np
 
 from mcbench import BenchError
 from mcbench.render.renderer import (forget_scene, moments_to_mean_variance, render_dict_buffers,
-                            render_scene_sums)
+                                     render_scene_sums)
 from mcbench.render.seeds import training_render_seed
 from mcbench.training_data.fingerprints import scene_fingerprint
 from mcbench.training_data.generator import random_scene
@@ -48,7 +48,7 @@ from mcbench.render.variants import pick_variant
 
 __all__ = ["CROP_SALT", "require_vector_variant", "render_target", "crop_boxes", "training_example"]
 
-CROP_SALT = 0x0C509B0C          # mixed into the crop RNG so crop positions are ours alone
+CROP_SALT = 0x0C509B0C          # mixed into the crop RNG so crop positions are their own
 
 
 def require_vector_variant(variant: str = "auto") -> str:

@@ -24,7 +24,7 @@ from mcbench.training_data.materials import random_material
 
 __all__ = ["FIBRE_SALT", "FIBRE_REFERENCE_WIDTH", "add_fibre_clumps"]
 
-FIBRE_SALT = 0x0F1B4E55         # mixed into the fibre RNG so fibre streams are ours alone
+FIBRE_SALT = 0x0F1B4E55         # mixed into the fibre RNG so fibre streams are their own
 FIBRE_REFERENCE_WIDTH = 128     # strand radii are drawn in pixels of a 128-pixel-wide film
 
 

@@ -27,7 +27,7 @@ import numpy as np
 
 from mcbench import BenchError
 from mcbench.render.geometry import (gradient_sky, lathe, mesh_from_arrays, perspective_sensor, quad,
-                              thinlens_sensor, torus)
+                                     thinlens_sensor, torus)
 from mcbench.render.seeds import MAX_TRAINING_SEED, is_fibre_seed
 from mcbench.training_data.fibres import FIBRE_SALT, add_fibre_clumps
 from mcbench.training_data.materials import (color_or_texture, light_color, random_material,
@@ -36,7 +36,7 @@ from mcbench.render.variants import pick_variant
 
 __all__ = ["SCENE_SALT", "random_scene"]
 
-SCENE_SALT = 0x7A1D5CE7         # mixed into the scene RNG so scene streams are ours alone
+SCENE_SALT = 0x7A1D5CE7         # mixed into the scene RNG so scene streams are their own
 
 
 def _rotation(rng: np.random.Generator):
@@ -208,20 +208,9 @@ def _ensure_variant() -> None:
         pick_variant("auto")
 
 
-def random_scene(seed: int, width: int, height: int) -> dict:
-    """A complete Mitsuba scene dict (integrator and ``perspective``/``thinlens`` sensor
-    included, film ``width`` x ``height``) drawn from ``seed``; see the module docstring.
-    Sets a Mitsuba variant (``pick_variant("auto")``) when none is set."""
-    _ensure_variant()
-    seed = int(seed)
-    if not 0 <= seed <= MAX_TRAINING_SEED:
-        raise BenchError(f"training seed {seed} out of range 0..{MAX_TRAINING_SEED}")
-    rng = np.random.default_rng((SCENE_SALT, seed))
-    setting = str(rng.choice(["room", "room", "floor", "open"]))
-    scene: dict = {"type": "scene",
-                   "integrator": {"type": "path", "max_depth": int(rng.integers(4, 17))}}
-
-    # Objects in a disc of radius ~1.6 around the origin, resting on y = 0 (or floating).
+def _place_objects(rng, setting: str, scene: dict) -> tuple[list, np.ndarray]:
+    """Objects in a disc of radius ~1.6 around the origin, resting on y = 0 (or floating), added
+    to ``scene``: ``(their centres, the camera's target)``."""
     count = int(rng.integers(2, 8))
     centers, sizes = [], []
     for i in range(count):
@@ -237,17 +226,23 @@ def random_scene(seed: int, width: int, height: int) -> dict:
         scene[f"object_{i}"] = _shape(rng, center, size, i)
     target = np.mean(centers, axis=0) * 0.5 + rng.normal(scale=0.2, size=3)
     target[1] = float(np.clip(target[1], 0.2, 1.2))
+    return centers, target
 
-    # Camera on an orbit around the target.
+
+def _orbit_camera(rng, target: np.ndarray) -> tuple[float, np.ndarray, float]:
+    """A camera on an orbit around ``target``: ``(distance, origin, field of view)``."""
     distance = float(rng.uniform(3.0, 5.0))
     elevation = np.radians(rng.uniform(3, 45))
     azimuth = rng.uniform(0, 2 * np.pi)
     origin = target + distance * np.array([np.cos(elevation) * np.cos(azimuth), np.sin(elevation),
                                            np.cos(elevation) * np.sin(azimuth)])
     origin[1] = max(origin[1], 0.15)
-    fov = float(rng.uniform(25, 60))
+    return distance, origin, float(rng.uniform(25, 60))
 
-    # Setting and lights.
+
+def _surroundings(rng, setting: str, origin: np.ndarray, target: np.ndarray, scene: dict) -> None:
+    """The setting's room or floor, the lights and, where the sky is visible, the environment
+    map, added to ``scene``."""
     sky_visible = setting != "room"
     if setting == "room":
         half = 6.0
@@ -270,6 +265,22 @@ def random_scene(seed: int, width: int, height: int) -> dict:
     if sky_visible:
         scene["environment"] = _envmap(rng)
 
+
+def random_scene(seed: int, width: int, height: int) -> dict:
+    """A complete Mitsuba scene dict (integrator and ``perspective``/``thinlens`` sensor
+    included, film ``width`` x ``height``) drawn from ``seed``; see the module docstring.
+    Sets a Mitsuba variant (``pick_variant("auto")``) when none is set."""
+    _ensure_variant()
+    seed = int(seed)
+    if not 0 <= seed <= MAX_TRAINING_SEED:
+        raise BenchError(f"training seed {seed} out of range 0..{MAX_TRAINING_SEED}")
+    rng = np.random.default_rng((SCENE_SALT, seed))
+    setting = str(rng.choice(["room", "room", "floor", "open"]))
+    scene: dict = {"type": "scene",
+                   "integrator": {"type": "path", "max_depth": int(rng.integers(4, 17))}}
+    centers, target = _place_objects(rng, setting, scene)
+    distance, origin, fov = _orbit_camera(rng, target)
+    _surroundings(rng, setting, origin, target, scene)
     if rng.random() < 0.3:
         focus = centers[int(rng.integers(len(centers)))]
         scene["sensor"] = thinlens_sensor(

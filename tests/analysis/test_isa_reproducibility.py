@@ -31,7 +31,7 @@ def _results(root, *, pixel=0.3, metric=0.125, avg=4.5):
     color[1, 2, 0] = pixel
     write_layers(root / "outputs" / "s" / "spp4" / "oidn.exr", {"color": color})
     write_layers(root / "outputs" / "s" / "spp4" / "jbf.exr", {"color": np.full((4, 4, 3), 0.5, np.float32)})
-    pd.DataFrame({"scene": ["s"] * 4, "spp": [4] * 4, "candidate": ["oidn", "oidn", "jbf", "jbf"],
+    pd.DataFrame({"scene": ["s"] * 4, "spp": [4] * 4, "entry": ["oidn", "oidn", "jbf", "jbf"],
                   "metric": ["relmse", "dssim"] * 2, "value": [metric, 0.25, 0.5, 0.75]}).to_csv(
         root / "metrics.csv", index=False)
     (root / "tables" / "study").mkdir(parents=True)
@@ -61,7 +61,7 @@ def test_one_ulp_in_one_output_and_one_metric_differs_there_alone(tool, tmp_path
     assert list(methods["method"]) == ["oidn"]
     assert methods["max_abs"].iloc[0] == pytest.approx(ulp_pixel - float(np.float32(0.3)), rel=1e-9)
     assert methods["color_max_abs"].iloc[0] == methods["max_abs"].iloc[0]
-    metrics = tool.metrics_differences(a, b).set_index(["candidate", "metric"])
+    metrics = tool.metrics_differences(a, b).set_index(["entry", "metric"])
     assert metrics["differing"].to_dict() == {("jbf", "dssim"): 0, ("jbf", "relmse"): 0,
                                               ("oidn", "dssim"): 0, ("oidn", "relmse"): 1}
     assert metrics.at[("oidn", "relmse"), "max_rel"] == pytest.approx((ulp_metric - 0.125) / ulp_metric, rel=1e-9)

@@ -14,7 +14,7 @@ SCENES = ["a", "b", "c"]
 
 
 def _metrics(values: dict[str, dict[tuple[str, int], float]], metric: str = "relmse") -> pd.DataFrame:
-    rows = [{"scene": scene, "spp": spp, "candidate": name, "metric": metric, "value": value}
+    rows = [{"scene": scene, "spp": spp, "entry": name, "metric": metric, "value": value}
             for name, cases in values.items() for (scene, spp), value in cases.items()]
     return pd.DataFrame(rows)
 
@@ -61,7 +61,7 @@ def test_consistency_counts_ratios_and_gaps_by_construction():
 def test_gap_not_monotone_is_reported():
     metrics, _ = _constructed()
     # make PD at 64 spp 4x the noisy error (gap 3 x = 3 * 2/64 on average), above the 16-spp gap 0.6 * 2/16
-    mask = (metrics["candidate"] == "pd_oidn") & (metrics["spp"] == 64)
+    mask = (metrics["entry"] == "pd_oidn") & (metrics["spp"] == 64)
     metrics.loc[mask, "value"] = metrics.loc[mask, "value"] * (4.0 / 0.7)
     table = consistency_table(metrics, {"pd_oidn": "oidn"})
     gaps = table["gap"].to_numpy()

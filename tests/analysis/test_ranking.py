@@ -7,7 +7,7 @@ from mcbench.analysis.ranking import case_scores, format_markdown, ranking_table
 
 
 def _tidy(rows):
-    return pd.DataFrame(rows, columns=["scene", "spp", "candidate", "metric", "value"])
+    return pd.DataFrame(rows, columns=["scene", "spp", "entry", "metric", "value"])
 
 
 def test_linear_scores_best_gets_number_of_entries_and_ties_share_the_mean():
@@ -17,7 +17,7 @@ def test_linear_scores_best_gets_number_of_entries_and_ties_share_the_mean():
         ("s", 4, "b", "relmse", 2.0),
         ("s", 4, "c", "relmse", 2.0),
     ])
-    scores = case_scores(metrics, "relmse").set_index("candidate")["score"]
+    scores = case_scores(metrics, "relmse").set_index("entry")["score"]
     assert scores["a"] == 4.0          # best of 4 entries
     assert scores["noisy"] == 1.0      # worst
     assert scores["b"] == scores["c"] == 2.5  # tie on ranks 2 and 3 shares (3 + 2) / 2
@@ -57,8 +57,8 @@ def test_unknown_metric_raises():
 
 # --- incomplete tables stop instead of being ranked -----------------------------------------
 
-def _full_case(scene="s", spp=4, candidates=("noisy", "a", "b"), metrics=("relmse", "dssim")):
-    return [(scene, spp, c, m, float(i + 1)) for i, c in enumerate(candidates) for m in metrics]
+def _full_case(scene="s", spp=4, entries=("noisy", "a", "b"), metrics=("relmse", "dssim")):
+    return [(scene, spp, e, m, float(i + 1)) for i, e in enumerate(entries) for m in metrics]
 
 
 def test_a_case_missing_a_candidate_is_not_ranked_on_another_scale():
@@ -75,18 +75,18 @@ def test_non_finite_or_empty_values_stop_naming_the_case():
     rows = _full_case()
     rows[3] = rows[3][:4] + (float("nan"),)
     with pytest.raises(IncompleteMetricsError, match=r"1 value\(s\) missing or not finite, first at scene s, spp 4, a, dssim"):
-        check_complete(_tidy(rows), candidates=["noisy", "a", "b"], metric_names=["relmse", "dssim"])
+        check_complete(_tidy(rows), entries=["noisy", "a", "b"], metric_names=["relmse", "dssim"])
 
 
 def test_check_complete_refuses_duplicates_extras_and_lost_cases():
     from mcbench.analysis.ranking import IncompleteMetricsError, check_complete
 
-    kwargs = dict(candidates=["noisy", "a", "b"], metric_names=["relmse", "dssim"])
+    kwargs = dict(entries=["noisy", "a", "b"], metric_names=["relmse", "dssim"])
     check_complete(_tidy(_full_case()), **kwargs, cases=[("s", 4)])
     with pytest.raises(IncompleteMetricsError, match="duplicated"):
         check_complete(_tidy(_full_case() + _full_case()[:1]), **kwargs)
     with pytest.raises(IncompleteMetricsError, match="unexpected"):
-        check_complete(_tidy(_full_case(candidates=("noisy", "a", "b", "c"))), **kwargs)
+        check_complete(_tidy(_full_case(entries=("noisy", "a", "b", "c"))), **kwargs)
     with pytest.raises(IncompleteMetricsError, match=r"no rows for case\(s\) \[\('s', 8\)\]"):
         check_complete(_tidy(_full_case()), **kwargs, cases=[("s", 4), ("s", 8)])
 
@@ -102,7 +102,7 @@ def test_gather_refuses_a_case_csv_cut_mid_row(tmp_path):
     from mcbench import BenchError
     from mcbench.pipeline.metrics import gather_tables
 
-    kwargs = dict(candidates=["noisy", "a", "b"], metric_names=["relmse", "dssim"])
+    kwargs = dict(entries=["noisy", "a", "b"], metric_names=["relmse", "dssim"])
     good = _write_case(tmp_path / "x.csv", _full_case("x"))
     cut = tmp_path / "y.csv"
     text = _tidy(_full_case("y")).to_csv(index=False)
@@ -123,12 +123,12 @@ def test_write_rankings_refuses_a_table_with_other_candidates(tmp_path):
 
     path = _write_case(tmp_path / "metrics.csv", _full_case())
     write_rankings(path, "relmse", str(tmp_path / "r.csv"), str(tmp_path / "r.md"),
-                   candidates=["noisy", "a", "b"], labels={})
+                   entries=["noisy", "a", "b"], labels={})
     table = pd.read_csv(tmp_path / "r.csv")
     assert list(table["candidate"]) == ["noisy", "a", "b"]      # lowest error first: noisy = 1.0
     with pytest.raises(BenchError, match=r"missing \[\('c', 'relmse'\)\]"):
         write_rankings(path, "relmse", str(tmp_path / "r2.csv"), str(tmp_path / "r2.md"),
-                       candidates=["noisy", "a", "b", "c"], labels={})
+                       entries=["noisy", "a", "b", "c"], labels={})
 
 
 # --- LaTeX tables ------------------------------------------------------------------------------
@@ -204,7 +204,7 @@ def test_write_rankings_writes_the_latex_table(tmp_path):
 
     path = _write_case(tmp_path / "metrics.csv", _full_case())
     table = write_rankings(path, "dssim", str(tmp_path / "r.csv"), str(tmp_path / "r.md"),
-                           candidates=["noisy", "a", "b"], labels={"a": "Method_A"},
+                           entries=["noisy", "a", "b"], labels={"a": "Method_A"},
                            tex_path=str(tmp_path / "r.tex"))
     text = (tmp_path / "r.tex").read_text()
     assert r"\label{tab:ranking-dssim}" in text and r"\caption{Ranking by DSSIM." in text
@@ -212,7 +212,7 @@ def test_write_rankings_writes_the_latex_table(tmp_path):
     assert len(_body_rows(text)) == len(table) == 3 and r"Method\_A" in text
     # without tex_path, no LaTeX file
     write_rankings(path, "dssim", str(tmp_path / "q.csv"), str(tmp_path / "q.md"),
-                   candidates=["noisy", "a", "b"], labels={})
+                   entries=["noisy", "a", "b"], labels={})
     assert not (tmp_path / "q.tex").exists()
 
 
@@ -233,10 +233,10 @@ def test_extras_are_scored_each_alone_in_the_pool_by_hand():
     assert table.loc["x", "4"] == pytest.approx((4 + 1.5) / 2)
     assert table.loc["y", "4"] == pytest.approx((3 + 3.5) / 2)
     # the pool's own scores do not move whatever the extras are
-    pool_only = ranking_table(metrics[metrics["candidate"].isin(["a", "b", "noisy"])], "relmse")
+    pool_only = ranking_table(metrics[metrics["entry"].isin(["a", "b", "noisy"])], "relmse")
     assert pool_only.loc["a", "Avg."] == pytest.approx((3 + 2) / 2)
     with pytest.raises(Exception, match="incomplete|missing"):
-        extras_table(metrics[metrics["candidate"] != "x"], "relmse", pool=["a", "b", "noisy"], extras=["x"])
+        extras_table(metrics[metrics["entry"] != "x"], "relmse", pool=["a", "b", "noisy"], extras=["x"])
 
 
 def test_ranking_rows_follow_a_given_order_and_refuse_a_wrong_one():

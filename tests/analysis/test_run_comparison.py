@@ -25,7 +25,7 @@ def _results(root, *, nfor=0.0456, seconds=1.25, machine="host-a", metric_value=
     progressive table, each value settable."""
     (root / "tables" / "study").mkdir(parents=True)
     (root / "progressive" / "cornell_box").mkdir(parents=True)
-    pd.DataFrame({"scene": ["a", "a"], "spp": [4, 16], "candidate": ["oidn", "nfor"],
+    pd.DataFrame({"scene": ["a", "a"], "spp": [4, 16], "entry": ["oidn", "nfor"],
                   "metric": ["relmse"] * 2, "value": [metric_value, 0.25]}).to_csv(root / "metrics.csv", index=False)
     pd.DataFrame({"candidate": ["oidn", "nfor"], "score": [12.5, 7.0], "cpu_seconds": [cpu, 2 * cpu]}).to_csv(
         root / "tables" / "ranking.csv", index=False)

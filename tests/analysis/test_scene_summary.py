@@ -27,7 +27,7 @@ def test_floor_predicts_relmse_of_a_noisy_reference_against_the_truth():
 def _metrics(best_value):
     rows = [("s", 1024, "noisy", "relmse", 1e-2), ("s", 1024, "a", "relmse", best_value),
             ("s", 1024, "b", "relmse", 1.0), ("s", 4, "a", "relmse", 1e-6)]
-    return pd.DataFrame(rows, columns=["scene", "spp", "candidate", "metric", "value"])
+    return pd.DataFrame(rows, columns=["scene", "spp", "entry", "metric", "value"])
 
 
 def test_scene_rows_ratio_and_warning():
@@ -77,7 +77,7 @@ def _two_scene_metrics():
     for (scene, spp), (a, b, n) in values.items():
         rows += [(scene, spp, "a", "relmse", a), (scene, spp, "b", "relmse", b), (scene, spp, "n", "relmse", n),
                  (scene, spp, "a", "smape", 9.0)]
-    return pd.DataFrame(rows, columns=["scene", "spp", "candidate", "metric", "value"])
+    return pd.DataFrame(rows, columns=["scene", "spp", "entry", "metric", "value"])
 
 
 def test_column_floor_ratios_and_unrankable_columns_by_closed_form():
@@ -107,7 +107,7 @@ def test_ranking_markdown_marks_the_columns_the_references_cannot_rank(tmp_path)
     metrics.to_csv(path, index=False)
     scenes = tmp_path / "scenes.csv"
     pd.DataFrame({"scene": ["s1", "s2"], "reference_relmse": [0.01, 0.01]}).to_csv(scenes, index=False)
-    write_rankings(str(path), "relmse", str(tmp_path / "r.csv"), str(tmp_path / "r.md"), candidates=["n", "a", "b"],
+    write_rankings(str(path), "relmse", str(tmp_path / "r.csv"), str(tmp_path / "r.md"), entries=["n", "a", "b"],
                    labels={}, tex_path=str(tmp_path / "r.tex"), scenes_csv=str(scenes), noisy="n")
     text = (tmp_path / "r.md").read_text()
     header = next(line for line in text.splitlines() if line.startswith("| candidate"))
@@ -115,6 +115,6 @@ def test_ranking_markdown_marks_the_columns_the_references_cannot_rank(tmp_path)
     assert "1024 spp (s1 9.9×)" in text
     assert r"1024 spp \ddag{}" in (tmp_path / "r.tex").read_text()
     assert list(pd.read_csv(tmp_path / "r.csv").columns) == ["candidate", "512", "1024", "Avg."]  # CSV unmarked
-    write_rankings(str(path), "relmse", str(tmp_path / "q.csv"), str(tmp_path / "q.md"), candidates=["n", "a", "b"],
+    write_rankings(str(path), "relmse", str(tmp_path / "q.csv"), str(tmp_path / "q.md"), entries=["n", "a", "b"],
                    labels={}, noisy="n")
     assert "‡" not in (tmp_path / "q.md").read_text()

@@ -1,4 +1,4 @@
-"""Fast tests of the static image viewer (mcbench.analysis.viewer, the viewer steps and the page's DOM
+"""Fast tests of the static image viewer (mcbench.analysis.viewer_images, the viewer steps and the page's DOM
 contract) on synthetic arrays and tiny EXRs written here; the browser test is in test_report.py.
 
 Independent truths: the ACES + sRGB closed form written out below, the relMSE formula, NVIDIA's
@@ -18,7 +18,7 @@ import pytest
 from PIL import Image
 
 from mcbench import BenchError
-from mcbench.analysis import viewer
+from mcbench.analysis import viewer_images as viewer
 from mcbench.pipeline import viewer as viewer_step
 from mcbench.io.exr import write_layers
 from tests.conftest import case_job
@@ -251,7 +251,7 @@ def test_case_images_refuse_bad_input(tmp_path):
 
 def metrics_frame(cases, entries, metric_names):
     """A tidy metrics table with distinct planted values: 1000 * case + 10 * entry + metric."""
-    rows = [{"scene": scene, "spp": spp, "candidate": entry, "metric": metric,
+    rows = [{"scene": scene, "spp": spp, "entry": entry, "metric": metric,
              "value": 1000.0 * c + 10.0 * e + m}
             for c, (scene, spp) in enumerate(cases) for e, entry in enumerate(entries)
             for m, metric in enumerate(metric_names)]

@@ -13,7 +13,7 @@ import torch
 
 from mcbench.io.buffers import RenderBuffers
 from mcbench.io.tables import read_json
-from mcbench.nn.data import CropSet, is_validation_seed
+from mcbench.nn.crops import CropSet, is_validation_seed
 from mcbench.nn.inference import image_tensors, load_network, run_network
 from mcbench.nn.train import evaluate
 from mcbench.io.weights import COMMITTED_WEIGHTS, is_learned_method, load_weights, record_path, weights_path

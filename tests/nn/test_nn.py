@@ -10,8 +10,8 @@ import torch
 
 from mcbench import BenchError
 from mcbench.nn import features, kernels, losses
-from mcbench.nn.data import (BUFFER_KEYS, CropSet, dihedral, is_validation_seed, load_crops, sample_batch,
-                             validation_batches)
+from mcbench.nn.crops import (BUFFER_KEYS, CropSet, dihedral, is_validation_seed, load_crops, sample_batch,
+                              validation_batches)
 
 
 # ----------------------------------------------------------------------------- kernels

@@ -107,7 +107,7 @@ def test_a_case_job_makes_what_is_missing_or_stale_and_keeps_the_rest(case_dir):
     values = json.loads((case_dir / "results/values/jbf.json").read_text())["values"]
     assert set(values) == {"relmse", "smape", "dssim"}
     rows = pd.read_csv(case_dir / "results/case.csv")
-    assert list(rows.candidate.unique()) == [NOISY, *names] and list(rows.metric[:3]) == ["relmse", "smape", "dssim"]
+    assert list(rows.entry.unique()) == [NOISY, *names] and list(rows.metric[:3]) == ["relmse", "smape", "dssim"]
     assert rows[rows.metric != "dssim"].reset_index(drop=True).equals(table)
 
 

@@ -43,7 +43,7 @@ from hypothesis import HealthCheck, event, given, note, settings, strategies as 
 
 import methods
 from mcbench import NOISY_LABEL, BenchError
-from mcbench.analysis.comparisons import comparison_role
+from mcbench.analysis.comparison_tables import comparison_role
 from mcbench.pipeline.registry import available_metrics
 from mcbench.analysis.pool import ENSEMBLE_IDS, pool_methods
 from mcbench.io.weights import is_learned_method

@@ -85,7 +85,7 @@ def build_case(tree: Path) -> None:
     run_methods(entries, str(tree / "render.exr"), scene=SCENE, spp=SPP)
     run_methods([_entry(tree, "ens", "ensemble", BASES)], str(tree / "render.exr"), scene=SCENE, spp=SPP)
     _run_case(tree, tree, cache=tree / "cache")
-    gather_tables([str(tree / "case.csv")], str(tree / "metrics.csv"), candidates=ENTRIES,
+    gather_tables([str(tree / "case.csv")], str(tree / "metrics.csv"), entries=ENTRIES,
                   metric_names=METRICS, cases=[(SCENE, SPP)])
     _benchmark_record(tree / "benchmarks" / f"{SCENE}_spp{SPP}.tsv", 2.5)
     _benchmark_record(tree / "benchmarks" / f"{SCENE}_chunk0.tsv", 40.0)
@@ -136,7 +136,7 @@ def _run_case(tree: Path, out: Path, *, cache: Path | None = None) -> None:
 def _run_gather(tree: Path, out: Path) -> None:
     from mcbench.pipeline.metrics import gather_tables
 
-    gather_tables([str(tree / "case.csv")], str(out / "metrics.csv"), candidates=ENTRIES,
+    gather_tables([str(tree / "case.csv")], str(out / "metrics.csv"), entries=ENTRIES,
                   metric_names=METRICS, cases=[(SCENE, SPP)])
 
 
@@ -150,7 +150,7 @@ def _run_rankings(tree: Path, out: Path) -> None:
     from mcbench.pipeline.rankings import write_rankings
 
     write_rankings(str(tree / "metrics.csv"), "relmse", str(out / "ranking.csv"), str(out / "ranking.md"),
-                   candidates=ENTRIES, labels=LABELS)
+                   entries=ENTRIES, labels=LABELS)
 
 
 def _run_scene_table(tree: Path, out: Path) -> None:

@@ -120,7 +120,7 @@ def test_block_mean_variance_is_the_block_average_over_downscale_squared(tmp_pat
     """Var of a 2x2 block mean = sum of the four variances / 16; without a variance layer there
     is no corrected relMSE and no floor."""
     from mcbench.io.exr import write_layers
-    from mcbench.combine.oracle import block_average
+    from mcbench.combine.oracle_weights import block_average
     from mcbench.pipeline.progressive_study import block_reference, reference_floor
 
     rng = np.random.default_rng(0)
@@ -138,7 +138,7 @@ def test_block_mean_variance_is_the_block_average_over_downscale_squared(tmp_pat
 
 def test_block_mean_variance_matches_simulated_noise():
     """The formula against simulation: 2x2 block means of independent pixels with variances v."""
-    from mcbench.combine.oracle import block_average
+    from mcbench.combine.oracle_weights import block_average
 
     rng = np.random.default_rng(1)
     v = rng.uniform(0.5, 2.0, (4, 4, 1))

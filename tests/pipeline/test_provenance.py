@@ -168,13 +168,13 @@ def test_write_manifest_writes_json_and_markdown(tmp_path, smoke_config):
 
 
 def test_the_study_step_ends_summary_md_with_the_manifests_block(tmp_path, smoke_config):
-    """mcbench.pipeline.study.write_study (rule study_tables) reads results/manifest.json and puts
+    """mcbench.pipeline.pool_study.write_study (rule study_tables) reads results/manifest.json and puts
     its short block last in summary.md; the other study files are the same as without it."""
     import numpy as np
 
     from mcbench.analysis.study.markdown import PROVENANCE_HEADING
     from mcbench.io.tables import write_csv
-    from mcbench.pipeline.study import write_study
+    from mcbench.pipeline.pool_study import write_study
     from tests.analysis.study.synthetic import tidy
 
     rng = np.random.default_rng(3)
@@ -183,7 +183,7 @@ def test_the_study_step_ends_summary_md_with_the_manifests_block(tmp_path, smoke
                                               for s in range(3) for spp in (4, 64) for n in names]))
     manifest = write_manifest(str(tmp_path / "manifest.json"), str(tmp_path / "manifest.md"), repo_dir=REPO,
                               config=smoke_config)
-    options = dict(metrics=["relmse"], labels={}, candidates=names, n_resamples=200, seed=1)
+    options = dict(metrics=["relmse"], labels={}, entries=names, n_resamples=200, seed=1)
     write_study(str(tmp_path / "metrics.csv"), str(tmp_path / "with"), manifest_json=str(tmp_path / "manifest.json"),
                 **options)
     write_study(str(tmp_path / "metrics.csv"), str(tmp_path / "without"), **options)

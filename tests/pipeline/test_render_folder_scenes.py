@@ -119,7 +119,7 @@ def test_a_folder_with_every_layer_takes_every_method(folder_scenes):
 
 def test_imported_case_is_denoised_and_scored_like_a_render(folder_scenes, tmp_path):
     from mcbench.pipeline.cases import run_case
-    from mcbench.pipeline.render import merge_reference, render_noisy
+    from mcbench.pipeline.rendering import merge_reference, render_noisy
     from tests.conftest import case_job
 
     render, reference = tmp_path / "render.exr", tmp_path / "reference.exr"
@@ -136,7 +136,7 @@ def test_imported_case_is_denoised_and_scored_like_a_render(folder_scenes, tmp_p
     output = Denoised.load(case / "outputs" / "oidn.exr")
     assert output.a is None and output.b is None and output.full.shape == (H, W, 3)
     table = pd.read_csv(case / "case.csv")
-    values = table.set_index("candidate")["value"]
+    values = table.set_index("entry")["value"]
     from mcbench.io.render_folders import read_image_any
     truth = read_image_any(folder_scenes / "oidn" / "kitchen_ref.hdr.exr")
     noisy = read_image_any(folder_scenes / "oidn" / "kitchen_0016.hdr.exr")
@@ -184,7 +184,7 @@ def test_a_study_ranks_renders_from_another_renderer_end_to_end(tmp_path):
                             cwd=copy, env=env, capture_output=True, text=True, timeout=1500)
     assert result.returncode == 0, result.stderr[-4000:]
     metrics = pd.read_csv(copy / "results" / "metrics.csv")
-    relmse_rows = metrics[metrics["metric"] == "relmse"].set_index(["scene", "spp", "candidate"])["value"]
+    relmse_rows = metrics[metrics["metric"] == "relmse"].set_index(["scene", "spp", "entry"])["value"]
     truth = read_image_any(tmp_path / "oidn" / "kitchen_ref.hdr.exr")
     noisy = read_image_any(tmp_path / "oidn" / "kitchen_0004.hdr.exr")
     assert relmse_rows[("kitchen", 4, "noisy")] == pytest.approx(relmse(noisy, truth), rel=1e-9)

@@ -11,7 +11,7 @@ import pytest
 
 from mcbench import NOISY, BenchError
 
-from mcbench.pipeline import method_runs, metrics, rankings, render
+from mcbench.pipeline import method_runs, metrics, rankings, rendering
 from mcbench.pipeline.cases import run_case
 from mcbench.pipeline.registry import load_metric
 from mcbench.io.buffers import Denoised, RenderBuffers
@@ -133,13 +133,13 @@ def test_the_case_table_equals_the_metrics_recomputed(case_files, tmp_path):
     frame, csv, output = case_metrics(render, reference, tmp_path)
     truth = read_layers(reference, ["color"])["color"]
     images = {NOISY: RenderBuffers.load(render).color, "jbf": Denoised.load(output).full}
-    assert list(frame.columns) == ["scene", "spp", "candidate", "metric", "value"]
-    assert list(zip(frame.candidate, frame.metric)) == [(entry, m) for entry in images for m in METRICS]
+    assert list(frame.columns) == ["scene", "spp", "entry", "metric", "value"]
+    assert list(zip(frame.entry, frame.metric)) == [(entry, m) for entry in images for m in METRICS]
     for row in frame.itertuples():
         assert (row.scene, row.spp) == (SCENE, SPP)
-        assert row.value == load_metric(row.metric).value(images[row.candidate], truth)
-    assert frame.set_index(["candidate", "metric"]).loc[("jbf", "relmse"), "value"] < \
-        frame.set_index(["candidate", "metric"]).loc[(NOISY, "relmse"), "value"]
+        assert row.value == load_metric(row.metric).value(images[row.entry], truth)
+    assert frame.set_index(["entry", "metric"]).loc[("jbf", "relmse"), "value"] < \
+        frame.set_index(["entry", "metric"]).loc[(NOISY, "relmse"), "value"]
 
 
 def test_the_case_job_draws_the_flip_map_its_flip_value_comes_from(case_files, tmp_path):
@@ -147,13 +147,13 @@ def test_the_case_job_draws_the_flip_map_its_flip_value_comes_from(case_files, t
     FLIP scale, and the table's flip value is the package's mean of it; the relMSE map is drawn
     too, and no other metric has a map."""
     from mcbench.analysis.metrics import flip, flip_map, relmse_map
-    from mcbench.analysis.viewer import FLIP_SCALE, RELMSE_SCALE, scale_indices, write_indexed_png
+    from mcbench.analysis.viewer_images import FLIP_SCALE, RELMSE_SCALE, scale_indices, write_indexed_png
 
     render, reference = case_files
     frame, csv, output = case_metrics(render, reference, tmp_path, metric_names=["relmse", "smape", "flip"])
     truth = read_layers(reference, ["color"])["color"]
     image = Denoised.load(output).full
-    flip_values = frame[frame.metric == "flip"].set_index("candidate")["value"]
+    flip_values = frame[frame.metric == "flip"].set_index("entry")["value"]
     assert flip_values["jbf"] == flip(image, truth)
     case = csv.parent / "viewer_case"
     assert sorted(p.name for p in case.glob("jbf_*.png")) == ["jbf_flip.png", "jbf_relmse.png"]
@@ -167,7 +167,7 @@ def test_gather_tables_concatenates_the_cases(case_files, tmp_path):
     first, csv_a, _ = case_metrics(render, reference, tmp_path, scene="box", spp=8)
     second, csv_b, _ = case_metrics(render, reference, tmp_path, scene="room", spp=16)
     out = tmp_path / "metrics.csv"
-    frame = metrics.gather_tables([str(csv_a), str(csv_b)], str(out), candidates=[NOISY, "jbf"],
+    frame = metrics.gather_tables([str(csv_a), str(csv_b)], str(out), entries=[NOISY, "jbf"],
                                 metric_names=METRICS, cases=[("box", 8), ("room", 16)])
     expected = pd.concat([first, second], ignore_index=True)
     pd.testing.assert_frame_equal(frame.reset_index(drop=True), expected)
@@ -178,7 +178,7 @@ def test_write_rankings_scores_the_lower_error_higher(case_files, tmp_path):
     render, reference = case_files
     frame, csv, _ = case_metrics(render, reference, tmp_path)
     table = rankings.write_rankings(str(csv), "relmse", str(tmp_path / "r.csv"), str(tmp_path / "r.md"),
-                                 candidates=[NOISY, "jbf"], labels={"jbf": "JBF"})
+                                 entries=[NOISY, "jbf"], labels={"jbf": "JBF"})
     # two entries: the lower relMSE scores 2, the other 1 (Sec. 5.3.3)
     assert table.loc["jbf", "Avg."] == 2.0 and table.loc[NOISY, "Avg."] == 1.0
     assert "JBF" in (tmp_path / "r.md").read_text()
@@ -221,7 +221,7 @@ def test_merge_reference_is_the_spp_weighted_mean(tmp_path):
         chunks.append((spp, layers))
         paths.append(str(path))
     out = tmp_path / "reference.exr"
-    render.merge_reference(paths, str(out))
+    rendering.merge_reference(paths, str(out))
     merged = read_layers(out)
 
     def pooled(name):

@@ -97,6 +97,15 @@ def test_a_case_plan_carries_the_learned_methods_weights_digest(plan):
     assert [m.get("weights_sha256") for m in one["methods"]] == [None, None, "a" * 64, None, None]
 
 
+def test_a_case_plan_names_the_columns_of_the_case_table(plan):
+    """The columns of a case's metrics table are part of its job's params: a table written with
+    other columns (the entries headed ``candidate``) makes Snakemake rerun the case."""
+    from mcbench import METRICS_COLUMNS
+
+    assert plan.case_plan({"kpcn": "a" * 64})["table_columns"] == list(METRICS_COLUMNS) == \
+        ["scene", "spp", "entry", "metric", "value"]
+
+
 def test_the_resource_requests_follow_each_jobs_size(plan):
     """A case's job asks for the sum of its methods' and evaluations' fitted costs; a bigger scene
     or more samples ask for more; GPUs only for the rules that render, when the config asks."""

@@ -9,7 +9,7 @@ import pytest
 from mcbench import BenchError
 from mcbench.io.buffers import ALL_LAYERS, BIN_LAYERS, SUB_OUTPUTS, Denoised, RenderBuffers
 from mcbench.io.exr import read_layers, write_layers
-from mcbench.nn.data import BUFFER_KEYS, crop_render_layers, load_combiner_crops
+from mcbench.nn.crops import BUFFER_KEYS, crop_render_layers, load_combiner_crops
 from mcbench.io.weights import COMMITTED_WEIGHTS
 from mcbench.pipeline.method_runs import method_function
 from mcbench.pipeline.training import write_correlated_training_inputs

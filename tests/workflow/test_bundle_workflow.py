@@ -104,7 +104,7 @@ def test_an_imported_study_plans_nothing_and_an_added_method_only_its_jobs(smoke
     assert made_methods(clone, cases) == {case: [NEW_METHOD["name"]] for case in cases}
     exported, ranked = workdir / "results", clone / "results"
     before, after = (pd.read_csv(root / "metrics.csv") for root in (exported, ranked))
-    new_rows = after.candidate == NEW_METHOD["name"]
+    new_rows = after.entry == NEW_METHOD["name"]
     pd.testing.assert_frame_equal(after[~new_rows].reset_index(drop=True), before)
     assert sorted(zip(after[new_rows].scene, after[new_rows].spp, after[new_rows].metric)) == sorted(
         (scene, spp, metric) for scene, spp in cases for metric in config["metrics"])

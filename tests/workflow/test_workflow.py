@@ -67,12 +67,12 @@ EXTRAS = ["jbf", "ensemble", "ensemble_exact", "onehot_sbf", "onehot_nfor", "one
           "ensemble_unconstrained", "pd_oidn"]
 METRICS = ("relmse", "relmse_corrected", "smape", "dssim", "flip")
 SCORE_TOL = 5e-5              # scores and score means are written with 4 decimals
-DPI = 110                     # mcbench.analysis.figures.save_figure: PNGs of figsize x 110 pixels, no cropping
+DPI = 110                     # mcbench.analysis.error_speed_figures.save_figure: PNGs of figsize x 110 pixels, no cropping
 
 
 def _wide(metrics: pd.DataFrame, metric: str) -> pd.DataFrame:
-    """metrics.csv's values of one metric: index (scene, spp), one column per candidate."""
-    return metrics[metrics.metric == metric].pivot_table(index=["scene", "spp"], columns="candidate", values="value")
+    """metrics.csv's values of one metric: index (scene, spp), one column per entry."""
+    return metrics[metrics.metric == metric].pivot_table(index=["scene", "spp"], columns="entry", values="value")
 
 
 def _scores_by_counting(values: pd.DataFrame) -> pd.DataFrame:
@@ -133,13 +133,13 @@ def _assert_png(path, *, inches: tuple[float, float] | None = None, width_inches
 
 # --- metrics.csv and the claims checked on it -------------------------------------------------
 
-def test_metrics_table_holds_every_case_candidate_and_metric_once(smoke_run, metrics):
+def test_metrics_table_holds_every_case_entry_and_metric_once(smoke_run, metrics):
     _, config = smoke_run
-    assert list(metrics.columns) == ["scene", "spp", "candidate", "metric", "value"]
-    twice = metrics[metrics.duplicated(["scene", "spp", "candidate", "metric"], keep=False)]
+    assert list(metrics.columns) == ["scene", "spp", "entry", "metric", "value"]
+    twice = metrics[metrics.duplicated(["scene", "spp", "entry", "metric"], keep=False)]
     assert twice.empty, f"rows written twice:\n{twice}"
     assert sorted(set(metrics.scene)) == sorted(config["scenes"]) and sorted(set(metrics.spp)) == SPPS
-    assert set(metrics.candidate) == set(RANKED + EXTRAS) and set(metrics.metric) == set(METRICS)
+    assert set(metrics.entry) == set(RANKED + EXTRAS) and set(metrics.metric) == set(METRICS)
     assert len(metrics) == 3 * 2 * 16 * 5  # scenes × spp × (candidates + noisy) × metrics
     assert np.isfinite(metrics["value"]).all()
     # the ranges of the definitions (mcbench.analysis.metrics): relMSE >= 0, SMAPE and FLIP in [0, 1],

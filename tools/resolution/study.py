@@ -63,11 +63,11 @@ def cropped_metrics(folder: Path, crop: int):
     for (scene, spp), case in full[full["metric"] == "relmse"].groupby(["scene", "spp"]):
         reference = read_layers(folder / "results" / "references" / f"{scene}.exr", ["color"])["color"]
         window = (slice(crop, -crop), slice(crop, -crop))
-        for candidate in case["candidate"]:
-            path = (folder / "results" / "renders" / scene / f"spp{spp}.exr" if candidate == "noisy" else
-                    folder / "results" / "outputs" / scene / f"spp{spp}" / f"{candidate}.exr")
+        for entry in case["entry"]:
+            path = (folder / "results" / "renders" / scene / f"spp{spp}.exr" if entry == "noisy" else
+                    folder / "results" / "outputs" / scene / f"spp{spp}" / f"{entry}.exr")
             image = read_layers(path, ["color"])["color"]
-            rows.append({"scene": scene, "spp": spp, "candidate": candidate, "metric": "relmse",
+            rows.append({"scene": scene, "spp": spp, "entry": entry, "metric": "relmse",
                          "value": relmse(image[window], reference[window])})
     return pd.DataFrame(rows)
 

@@ -32,17 +32,17 @@ wildcard_constraints:
     metric=METRIC_PATTERN,
 
 
-# The case jobs (run_case) run in warm worker processes (mcbench.pipeline.pool): their
+# The case jobs (run_case) run in warm worker processes (mcbench.pipeline.worker_pool): their
 # rule's `run:` block calls run_in_pool in Snakemake's own process, which needs Snakemake's
 # threads for `run:` jobs (force-use-threads, set by the workflow profile profiles/default;
 # without it each such job would start a whole Snakemake process: the same results, far slower).
 
 
 def run_in_pool(step, *args, log, **kwargs):
-    """Run ``step`` ("module:function") of a ``run:`` rule in a warm worker (mcbench.pipeline.pool),
+    """Run ``step`` ("module:function") of a ``run:`` rule in a warm worker (mcbench.pipeline.worker_pool),
     with as many workers as the cores Snakemake was given and this checkout on the workers' paths
     (a learned method's weights file travels in the job's description, case_job)."""
-    from mcbench.pipeline.pool import run_step
+    from mcbench.pipeline.worker_pool import run_step
 
     run_step(step, *args, log_path=log, workers=max(1, int(workflow.cores or 1)),
              paths=[str(Path(workflow.basedir))], **kwargs)

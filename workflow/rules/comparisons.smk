@@ -1,4 +1,4 @@
-# The comparisons of Zheng et al. 2021 Sec. 5.2 (mcbench.analysis.comparisons): Tables 1-2 (ensemble
+# The comparisons of Zheng et al. 2021 Sec. 5.2 (mcbench.analysis.comparison_tables): Tables 1-2 (ensemble
 # against one-hot selection), the ablation table and the comparison methods' own ranking.
 # Which method compares with which is read from the method table (module docstring).
 

@@ -1,4 +1,4 @@
-# Figures of the report (mcbench.analysis.figures): error against spp per scene for each metric, and
+# Figures of the report (mcbench.analysis.error_speed_figures): error against spp per scene for each metric, and
 # each method's speed against its error.
 
 # The speed figure's metric: PLAN.ranking.speed_metric; the curves' lines: STUDY.curve_entries.
@@ -19,7 +19,7 @@ rule error_curves:
     params:
         metric_label=lambda wildcards: STUDY.metric_labels[wildcards.metric],
         labels=dict(PLAN.ranking.labels),
-        candidates=STUDY.curve_entries,
+        entries=STUDY.curve_entries,
     threads: 1
     resources:
         **STUDY.resources("error_curves"),

@@ -8,7 +8,7 @@
 # content; mcbench.pipeline.cases) it keeps, so an edit of the config makes only what it changes:
 # a new method runs alone, changed params rerun the method and the combiners that read it, an
 # added metric is the only one computed. The rule is the same whatever exists under results/.
-# It runs in a warm worker process that imports once (mcbench.pipeline.pool).
+# It runs in a warm worker process that imports once (mcbench.pipeline.worker_pool).
 # `snakemake -f results/cases/<scene>/spp<N>.json` reassembles a case; delete a method's output to
 # make it again.
 

@@ -1,8 +1,8 @@
-# Errors of every candidate and of the noisy input against the reference, gathered from the
+# Errors of every entry (the noisy input and every candidate) against the reference, gathered from the
 # cases' tables (rule run_case, methods.smk), and the methods' timings from the cases' records.
 
 
-# One table of every error; every case must hold every candidate and metric with a finite value
+# One table of every error; every case must hold every entry and metric with a finite value
 # (mcbench.analysis.ranking.check_complete), or the run stops naming the case file.
 rule gather_metrics:
     localrule: True
@@ -14,10 +14,10 @@ rule gather_metrics:
             caption="../report/metrics.rst",
             category="Data",
             subcategory="Errors",
-            labels={"table": "metrics.csv", "rows": "scene, spp, candidate, metric"},
+            labels={"table": "metrics.csv", "rows": "scene, spp, entry, metric"},
         ),
     params:
-        candidates=PLAN.ranking.entries,
+        entries=PLAN.ranking.entries,
         metrics=list(PLAN.ranking.metrics),
         cases=PLAN.cases.case_list,
     threads: 1

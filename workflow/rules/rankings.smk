@@ -18,7 +18,7 @@ rule ranking_table:
         tex="results/tables/ranking_{metric}.tex",
     params:
         metric_label=lambda wildcards: STUDY.metric_labels[wildcards.metric],
-        candidates=PLAN.ranking.ranked_entries,
+        entries=PLAN.ranking.ranked_entries,
         labels=dict(PLAN.ranking.labels),
         order=PLAN.ranking.table_order,
         note=PLAN.ranking.pool_note,

@@ -73,7 +73,7 @@ rule study_tables:
     params:
         metrics=list(PLAN.ranking.metrics),
         labels=dict(PLAN.ranking.labels),
-        candidates=PLAN.ranking.ranked_entries,
+        entries=PLAN.ranking.ranked_entries,
         n_resamples=config["study"]["bootstrap"],
         seed=config["study"]["seed"],
     threads: 1
@@ -107,7 +107,7 @@ rule study_figures:
             for key in STUDY_FIGURES
         },
     params:
-        candidates=PLAN.ranking.ranked_entries,
+        entries=PLAN.ranking.ranked_entries,
         labels=dict(PLAN.ranking.labels),
         inputs=PLAN.method_inputs,
     threads: 1

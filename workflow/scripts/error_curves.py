@@ -7,4 +7,4 @@ from mcbench.pipeline.logs import run_logged  # noqa: E402
 
 # rule error_curves of workflow/rules/figures.smk
 run_logged(snakemake.log[0], write_error_curves, snakemake.input.metrics, snakemake.wildcards.metric,
-           snakemake.output[0], labels=dict(snakemake.params.labels), candidates=list(snakemake.params.candidates))
+           snakemake.output[0], labels=dict(snakemake.params.labels), entries=list(snakemake.params.entries))

@@ -7,5 +7,5 @@ from mcbench.pipeline.metrics import gather_tables  # noqa: E402
 
 cases = [(case["scene"], int(case["spp"])) for case in snakemake.params.cases]
 run_logged(snakemake.log[0], gather_tables, list(snakemake.input), snakemake.output[0],
-           candidates=list(snakemake.params.candidates), metric_names=list(snakemake.params.metrics),
+           entries=list(snakemake.params.entries), metric_names=list(snakemake.params.metrics),
            cases=cases)

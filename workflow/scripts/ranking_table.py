@@ -7,7 +7,7 @@ from mcbench.pipeline.rankings import write_rankings  # noqa: E402
 
 # rule ranking_table of workflow/rules/rankings.smk
 run_logged(snakemake.log[0], write_rankings, snakemake.input[0], snakemake.wildcards.metric,
-           snakemake.output.csv, snakemake.output.md, candidates=list(snakemake.params.candidates),
+           snakemake.output.csv, snakemake.output.md, entries=list(snakemake.params.entries),
            labels=dict(snakemake.params.labels), tex_path=snakemake.output.tex,
            order=snakemake.params.order, note=snakemake.params.note,
            scenes_csv=snakemake.input.scenes)

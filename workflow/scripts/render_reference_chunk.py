@@ -3,7 +3,7 @@ from mcbench.pipeline.threads import limit_threads
 limit_threads(snakemake.threads)  # before any heavy import (numba, torch, OpenBLAS, OIDN read it)  # noqa: F821
 
 from mcbench.pipeline.logs import run_logged  # noqa: E402
-from mcbench.pipeline.render import render_reference_chunk  # noqa: E402
+from mcbench.pipeline.rendering import render_reference_chunk  # noqa: E402
 
 run_logged(snakemake.log[0], render_reference_chunk, snakemake.wildcards.scene, snakemake.params.spp,
            int(snakemake.wildcards.chunk), snakemake.output[0], resolution=snakemake.params.resolution,

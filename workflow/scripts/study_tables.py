@@ -5,10 +5,10 @@ limit_threads(snakemake.threads)  # before any heavy import (numba, torch, OpenB
 from pathlib import Path  # noqa: E402
 
 from mcbench.pipeline.logs import run_logged  # noqa: E402
-from mcbench.pipeline.study import write_study  # noqa: E402
+from mcbench.pipeline.pool_study import write_study  # noqa: E402
 
 # rule study_tables of workflow/rules/study.smk
 run_logged(snakemake.log[0], write_study, snakemake.input.metrics, str(Path(snakemake.output.summary).parent),
            metrics=list(snakemake.params.metrics), labels=dict(snakemake.params.labels),
-           candidates=list(snakemake.params.candidates), n_resamples=int(snakemake.params.n_resamples),
+           entries=list(snakemake.params.entries), n_resamples=int(snakemake.params.n_resamples),
            seed=int(snakemake.params.seed), manifest_json=snakemake.input.manifest)

@@ -1,6 +1,6 @@
 """The 39-candidate study of Zheng et al. 2021, Sec. 5.3, checked with numbers.
 
-Pure functions over the tidy metrics table (columns scene, spp, candidate, metric, value), one
+Pure functions over the tidy metrics table (columns scene, spp, entry, metric, value), one
 module per concern:
 
 * :mod:`~mcbench.analysis.study.data` -- one metric's values and per-case scores on a full grid
@@ -15,9 +15,9 @@ module per concern:
   against each member;
 * :mod:`~mcbench.analysis.study.findings` -- the observations of Sec. 5.3.4 with a verdict each;
 * :mod:`~mcbench.analysis.study.reference_noise` -- raw against reference-noise-corrected relMSE;
-* :mod:`~mcbench.analysis.study.tables` -- every table of one metrics table, in memory;
+* :mod:`~mcbench.analysis.study.study_tables` -- every table of one metrics table, in memory;
 * :mod:`~mcbench.analysis.study.markdown` -- the tables as Markdown and sentences, ``summary.md``;
 * :mod:`~mcbench.analysis.study.writers` -- the files under ``results/tables/study/``;
 * :mod:`~mcbench.analysis.study.scores_and_costs`, :mod:`~mcbench.analysis.study.equal_time` and
-  :mod:`~mcbench.analysis.study.figures` -- the study's figures: their data and their plots.
+  :mod:`~mcbench.analysis.study.study_figures` -- the study's figures: their data and their plots.
 """

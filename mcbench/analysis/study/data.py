@@ -1,6 +1,6 @@
 """One metric of the 39-candidate study on a full grid, and the constants the study shares.
 
-:func:`study_data` turns the tidy metrics table (columns scene, spp, candidate, metric, value;
+:func:`study_data` turns the tidy metrics table (columns scene, spp, entry, metric, value;
 the pool's harness names of :mod:`mcbench.analysis.pool` plus ``noisy``) into
 :class:`StudyData`: values and the paper's per-case scores as (scenes, spp, names) arrays.
 
@@ -135,7 +135,7 @@ def study_data(metrics: pd.DataFrame, metric: str, *, candidates=None, noisy: st
     rows = metrics[metrics["metric"] == metric]
     if rows.empty:
         raise BenchError(f"{source}: no values for metric '{metric}'")
-    present = set(rows["candidate"])
+    present = set(rows["entry"])
     if candidates is None:
         names = [c.name for c in pool.POOL if c.name in present]
     else:
@@ -144,19 +144,19 @@ def study_data(metrics: pd.DataFrame, metric: str, *, candidates=None, noisy: st
         raise BenchError(f"{source}: no candidate of the pool has a '{metric}' value")
     if noisy is not None:
         names.append(noisy)
-    rows = rows[rows["candidate"].isin(names)].copy()
+    rows = rows[rows["entry"].isin(names)].copy()
     rows["scene"] = rows["scene"].astype(str)
     rows["spp"] = rows["spp"].astype(int)
     scenes = sorted(set(rows["scene"]))
     spps = sorted(set(rows["spp"]))
-    check_complete(rows, candidates=names, metric_names=[metric], cases=[(s, n) for s in scenes for n in spps],
+    check_complete(rows, entries=names, metric_names=[metric], cases=[(s, n) for s in scenes for n in spps],
                    source=source)
-    index = pd.MultiIndex.from_product([scenes, spps, names], names=["scene", "spp", "candidate"])
-    values = rows.set_index(["scene", "spp", "candidate"])["value"].astype(np.float64).reindex(index)
+    index = pd.MultiIndex.from_product([scenes, spps, names], names=["scene", "spp", "entry"])
+    values = rows.set_index(["scene", "spp", "entry"])["value"].astype(np.float64).reindex(index)
     scored = case_scores(rows, metric)
     scored["scene"] = scored["scene"].astype(str)
     scored["spp"] = scored["spp"].astype(int)
-    scores = scored.set_index(["scene", "spp", "candidate"])["score"].astype(np.float64).reindex(index)
+    scores = scored.set_index(["scene", "spp", "entry"])["score"].astype(np.float64).reindex(index)
     shape = (len(scenes), len(spps), len(names))
     return StudyData(metric, tuple(scenes), tuple(int(s) for s in spps), tuple(names),
                      values.to_numpy(dtype=np.float64).reshape(shape), scores.to_numpy(dtype=np.float64).reshape(shape))

@@ -2,7 +2,7 @@
 render given the same total time (render + method), per test case (:func:`equal_time_table`)
 and as the geometric mean over scenes (:func:`equal_time_curves`).
 
-Inputs: ``metrics`` (columns ``scene, spp, candidate, metric, value``; ``results/metrics.csv``),
+Inputs: ``metrics`` (columns ``scene, spp, entry, metric, value``; ``results/metrics.csv``),
 ``timings`` (columns ``scene, spp, method, seconds``; compute seconds of one method run, I/O
 excluded) and render times (columns ``scene, spp, seconds``, :func:`read_render_seconds`).
 
@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from mcbench.analysis.figures import input_closure
+from mcbench.analysis.error_speed_figures import input_closure
 from mcbench.analysis.study.scores_and_costs import select_rows
 
 __all__ = ["read_render_seconds", "loglog_interp", "equal_time_table", "equal_time_curves"]
@@ -118,6 +118,57 @@ def _invertible(spp: np.ndarray, seconds: np.ndarray) -> tuple[np.ndarray, np.nd
     return spp[keep], seconds[keep]
 
 
+def _closure_cost(name: str, inputs: dict[str, list[str]], per_case: pd.Series, scene: str, spp: int) -> float:
+    """The seconds of ``name``'s input closure in one case (each method once), from ``per_case``
+    (mean seconds by scene, spp, method); ValueError naming a method without a timing."""
+    cost = 0.0
+    for method in input_closure(name, inputs):
+        if (scene, spp, method) not in per_case.index:
+            raise ValueError(f"no timing of '{method}' (needed by '{name}') in scene '{scene}' "
+                             f"at {spp} spp")
+        cost += float(per_case[(scene, spp, method)])
+    return cost
+
+
+def _scene_equal_time(scene: str, scene_rows: pd.DataFrame, renders: pd.DataFrame, per_case: pd.Series, *,
+                      names: list[str], inputs: dict[str, list[str]], metric: str, noisy: str,
+                      tiny: float) -> list[dict]:
+    """The rows of :func:`equal_time_table` of one scene (``scene_rows``: its ``metric`` rows;
+    ``renders``: its render times)."""
+    if renders.empty:
+        raise ValueError(f"no render time for scene '{scene}'")
+    if not (np.isfinite(renders["seconds"].to_numpy(np.float64)).all() and (renders["seconds"] > 0).all()):
+        raise ValueError(f"render times of scene '{scene}' must be positive numbers")
+    m_spp, m_sec = _monotone_times(renders["spp"].to_numpy(np.float64), renders["seconds"].to_numpy(np.float64))
+    r_spp, r_sec = _invertible(m_spp, m_sec)
+    noisy_rows = scene_rows[scene_rows["entry"] == noisy].groupby("spp")["value"].mean().sort_index()
+    if noisy_rows.empty:
+        raise ValueError(f"no '{metric}' of the noisy input '{noisy}' in scene '{scene}'")
+    n_spp = noisy_rows.index.to_numpy(np.float64)
+    n_err = np.maximum(noisy_rows.to_numpy(np.float64), tiny)
+    values = scene_rows.groupby(["spp", "entry"])["value"].mean()
+    out = []
+    for spp in sorted(set(int(s) for s in scene_rows["spp"])):
+        if not np.any(m_spp == spp):
+            raise ValueError(f"no render time for scene '{scene}' at {spp} spp")
+        render_time = float(m_sec[m_spp == spp][0])  # the measured time, made monotone
+        for name in names:
+            if (spp, name) not in values.index:
+                raise ValueError(f"no '{metric}' of '{name}' in scene '{scene}' at {spp} spp")
+            cost = _closure_cost(name, inputs, per_case, scene, spp)
+            total = render_time + cost
+            equal_spp, beyond = loglog_interp(total, r_sec, r_spp, slope=None if len(r_spp) > 1 else 1.0)
+            noisy_error, beyond_error = loglog_interp(equal_spp, n_spp, n_err)
+            noisy_error = np.maximum(noisy_error, tiny)
+            error = max(float(values[(spp, name)]), tiny)
+            out.append({"scene": scene, "spp": spp, "candidate": name, "error": error,
+                        "method_seconds": cost, "render_seconds": render_time, "total_seconds": total,
+                        "equal_spp": float(equal_spp[0]), "noisy_error": float(noisy_error[0]),
+                        "ratio": error / float(noisy_error[0]),
+                        "extrapolated": bool(beyond[0] or beyond_error[0])})
+    return out
+
+
 def equal_time_table(metrics: pd.DataFrame, timings: pd.DataFrame, render_seconds: pd.DataFrame, *,
                      metric: str, inputs: dict[str, list[str]], candidates: list[str] | None = None,
                      noisy: str = "noisy", tiny: float = 1e-12) -> pd.DataFrame:
@@ -142,48 +193,13 @@ def equal_time_table(metrics: pd.DataFrame, timings: pd.DataFrame, render_second
     rows = metrics[metrics["metric"] == metric]
     if rows.empty:
         raise ValueError(f"no '{metric}' values in the metrics table")
-    names = [c for c in dict.fromkeys(rows["candidate"]) if c != noisy] if candidates is None else \
+    names = [c for c in dict.fromkeys(rows["entry"]) if c != noisy] if candidates is None else \
         [c for c in candidates if c != noisy]
     per_case = timings.groupby(["scene", "spp", "method"])["seconds"].mean()
     out = []
     for scene, scene_rows in rows.groupby("scene", sort=True):
-        renders = render_seconds[render_seconds["scene"] == scene]
-        if renders.empty:
-            raise ValueError(f"no render time for scene '{scene}'")
-        if not (np.isfinite(renders["seconds"].to_numpy(np.float64)).all() and (renders["seconds"] > 0).all()):
-            raise ValueError(f"render times of scene '{scene}' must be positive numbers")
-        m_spp, m_sec = _monotone_times(renders["spp"].to_numpy(np.float64), renders["seconds"].to_numpy(np.float64))
-        r_spp, r_sec = _invertible(m_spp, m_sec)
-        noisy_rows = scene_rows[scene_rows["candidate"] == noisy].groupby("spp")["value"].mean().sort_index()
-        if noisy_rows.empty:
-            raise ValueError(f"no '{metric}' of the noisy input '{noisy}' in scene '{scene}'")
-        n_spp = noisy_rows.index.to_numpy(np.float64)
-        n_err = np.maximum(noisy_rows.to_numpy(np.float64), tiny)
-        values = scene_rows.groupby(["spp", "candidate"])["value"].mean()
-        for spp in sorted(set(int(s) for s in scene_rows["spp"])):
-            if not np.any(m_spp == spp):
-                raise ValueError(f"no render time for scene '{scene}' at {spp} spp")
-            render_time = float(m_sec[m_spp == spp][0])  # the measured time, made monotone
-            for name in names:
-                if (spp, name) not in values.index:
-                    raise ValueError(f"no '{metric}' of '{name}' in scene '{scene}' at {spp} spp")
-                cost = 0.0
-                for method in input_closure(name, inputs):
-                    if (scene, spp, method) not in per_case.index:
-                        raise ValueError(f"no timing of '{method}' (needed by '{name}') in scene '{scene}' "
-                                         f"at {spp} spp")
-                    cost += float(per_case[(scene, spp, method)])
-                total = render_time + cost
-                equal_spp, beyond = loglog_interp(total, r_sec, r_spp,
-                                                  slope=None if len(r_spp) > 1 else 1.0)
-                noisy_error, beyond_error = loglog_interp(equal_spp, n_spp, n_err)
-                noisy_error = np.maximum(noisy_error, tiny)
-                error = max(float(values[(spp, name)]), tiny)
-                out.append({"scene": scene, "spp": spp, "candidate": name, "error": error,
-                            "method_seconds": cost, "render_seconds": render_time, "total_seconds": total,
-                            "equal_spp": float(equal_spp[0]), "noisy_error": float(noisy_error[0]),
-                            "ratio": error / float(noisy_error[0]),
-                            "extrapolated": bool(beyond[0] or beyond_error[0])})
+        out += _scene_equal_time(scene, scene_rows, render_seconds[render_seconds["scene"] == scene], per_case,
+                                 names=names, inputs=inputs, metric=metric, noisy=noisy, tiny=tiny)
     table = pd.DataFrame(out)
     numeric = table.drop(columns=["scene", "candidate", "extrapolated"]).to_numpy(np.float64)
     if not np.all(np.isfinite(numeric)):

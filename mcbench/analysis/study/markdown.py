@@ -12,7 +12,7 @@ from mcbench.analysis.study.findings import CLAIMS
 from mcbench.analysis.study.pair_members import ALMOST, ALMOST_ALWAYS
 from mcbench.analysis.study.paper import PAPER_TABLE3_BASES, paper_comparison, paper_kendall
 from mcbench.analysis.study.recommendations import COMBINED_RULE
-from mcbench.analysis.study.tables import StudyTables
+from mcbench.analysis.study.study_tables import StudyTables
 
 __all__ = ["NO_RELMSE_MARKDOWN", "paper_comparison_markdown", "recommendation_sentences", "recommendations_markdown",
            "recommendations_both_sentences", "recommendations_both_markdown", "pair_members_markdown",

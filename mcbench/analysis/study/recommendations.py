@@ -1,7 +1,7 @@
 """The best ensemble per scope, derived from the data, beside the paper's (Zheng et al. 2021
 Sec. 5.3.5-5.3.6): :func:`recommendations` per metric, among all 31 pool ensembles and among
 only the 12 the paper names; :func:`recommendations_both` relMSE's and DSSIM's picks side by
-side and one combined pick by a rule of ours (:data:`COMBINED_RULE`)."""
+side and one combined pick by mcbench's own rule (:data:`COMBINED_RULE`)."""
 
 from __future__ import annotations
 
@@ -20,7 +20,7 @@ REC_COLUMNS = ["metric", "scope", "key", "spp", "candidates", "ours", "ours_id",
                "named_ci_low", "named_ci_high", "named_fraction", "paper", "paper_id", "paper_score", "paper_ci_low",
                "paper_ci_high", "paper_fraction", "difference", "difference_ci_low", "difference_ci_high",
                "real_difference", "agrees", "named_agrees", "note"]
-# The rule of ours that weighs relMSE and DSSIM together (Sec. 5.3.6 does so for #27 without a formula).
+# mcbench's own rule that weighs relMSE and DSSIM together (Sec. 5.3.6 does so for #27 without a formula).
 COMBINED_RULE = ("ours, not the paper's: the highest mean of the relMSE and DSSIM ranking scores (each the paper's "
                  "per-case score over the same entries, averaged over the scope's spp and the scenes)")
 BOTH_METRICS = ("relmse", "dssim")
@@ -77,6 +77,62 @@ def _pick(per_scene: np.ndarray, eligible: list[str], place: int, indices: np.nd
             "tied": [eligible[i] for i in order if i != mine and round(means[i], 9) == round(means[mine], 9)]}
 
 
+def _scope_row(data: StudyData, scope: str, key, eligible: list[str], spps, place: int, paper_id, indices,
+               resampling: Resampling) -> dict:
+    """One row of :func:`recommendations`: the scope's two picks, beside the paper's choice."""
+    row = dict.fromkeys(REC_COLUMNS)
+    named = _paper_named(eligible)
+    row.update(metric=data.metric, scope=scope, key=str(key), spp=" ".join(str(s) for s in spps),
+               candidates=len(eligible), named_candidates=len(named), note="")
+    paper = pool.candidate_name(paper_id) if paper_id is not None else None
+    row["paper_id"] = paper_id
+    row["paper"] = paper
+    if not spps or len(eligible) < place:
+        row["note"] = "no spp of the band in our data" if not spps else f"fewer than {place} ensembles"
+        return row
+    per_scene = data.scene_scores(spps)[:, data.columns(eligible)]
+    best = _pick(per_scene, eligible, place, indices, resampling)
+    row.update(ours=best["name"], ours_id=best["id"], ours_score=best["score"], ours_ci_low=best["ci_low"],
+               ours_ci_high=best["ci_high"], ours_fraction=best["fraction"])
+    notes = [f"tied with {', '.join('#%d' % pool.candidate(t).id for t in best['tied'])}"] if best["tied"] else []
+    chosen = _pick(data.scene_scores(spps)[:, data.columns(named)], named, place, indices, resampling) \
+        if named else None
+    if chosen is not None:
+        row.update(named=chosen["name"], named_id=chosen["id"], named_score=chosen["score"],
+                   named_ci_low=chosen["ci_low"], named_ci_high=chosen["ci_high"],
+                   named_fraction=chosen["fraction"])
+        if chosen["tied"]:
+            notes.append(f"paper-named pick tied with {id_list(chosen['tied'])}")
+    else:
+        notes.append(f"fewer than {place} paper-named ensembles in this scope")
+    if paper is not None:
+        notes += _against_paper(row, paper, paper_id, eligible, best, chosen, per_scene, resampling)
+    row["note"] = "; ".join(notes)
+    return row
+
+
+def _against_paper(row: dict, paper: str, paper_id: int, eligible: list[str], best: dict, chosen: dict | None,
+                   per_scene, resampling: Resampling) -> list[str]:
+    """The paper's choice beside the picks, into ``row`` (agreement, its score and fraction,
+    the paired difference with ours); the notes it adds."""
+    ours, mine = best["name"], best["index"]
+    row["agrees"] = "yes" if paper == ours else "no"
+    if chosen is not None:
+        row["named_agrees"] = "yes" if paper == chosen["name"] else "no"
+    if paper not in eligible:
+        return [f"the paper's #{paper_id} is not in our data"]
+    theirs = eligible.index(paper)
+    row.update(paper_score=float(best["means"][theirs]), paper_ci_low=best["found"]["ci_low"][theirs],
+               paper_ci_high=best["found"]["ci_high"][theirs], paper_fraction=float(best["fractions"][theirs]))
+    if paper != ours:
+        diff = bootstrap_ci(per_scene[:, mine] - per_scene[:, theirs], resampling=resampling).iloc[0]
+        real = is_real(diff["ci_low"], diff["ci_high"])
+        row.update(difference=float(diff["estimate"]), difference_ci_low=diff["ci_low"],
+                   difference_ci_high=diff["ci_high"],
+                   real_difference="" if real is None else ("yes" if real else "no"))
+    return []
+
+
 def recommendations(data: StudyData, *, resampling: Resampling = Resampling()) -> pd.DataFrame:
     """The best ensemble per scope, derived from ``data``, beside the paper's choice.
 
@@ -97,54 +153,8 @@ def recommendations(data: StudyData, *, resampling: Resampling = Resampling()) -
     paper's or either is missing; ``agrees`` / ``named_agrees`` yes/no, empty when the paper has no choice for
     the scope (sizes 5, 6, 8). """
     indices = resample_indices(len(data.scenes), resampling=resampling)
-    rows = []
-    for scope, key, eligible, spps, place, paper_id in _scopes(data):
-        row = dict.fromkeys(REC_COLUMNS)
-        named = _paper_named(eligible)
-        row.update(metric=data.metric, scope=scope, key=str(key), spp=" ".join(str(s) for s in spps),
-                   candidates=len(eligible), named_candidates=len(named), note="")
-        paper = pool.candidate_name(paper_id) if paper_id is not None else None
-        row["paper_id"] = paper_id
-        row["paper"] = paper
-        if not spps or len(eligible) < place:
-            row["note"] = "no spp of the band in our data" if not spps else f"fewer than {place} ensembles"
-            rows.append(row)
-            continue
-        per_scene = data.scene_scores(spps)[:, data.columns(eligible)]
-        best = _pick(per_scene, eligible, place, indices, resampling)
-        mine, means, fractions, found = best["index"], best["means"], best["fractions"], best["found"]
-        ours = best["name"]
-        row.update(ours=ours, ours_id=best["id"], ours_score=best["score"], ours_ci_low=best["ci_low"],
-                   ours_ci_high=best["ci_high"], ours_fraction=best["fraction"])
-        notes = [f"tied with {', '.join('#%d' % pool.candidate(t).id for t in best['tied'])}"] if best["tied"] else []
-        chosen = _pick(data.scene_scores(spps)[:, data.columns(named)], named, place, indices, resampling) \
-            if named else None
-        if chosen is not None:
-            row.update(named=chosen["name"], named_id=chosen["id"], named_score=chosen["score"],
-                       named_ci_low=chosen["ci_low"], named_ci_high=chosen["ci_high"],
-                       named_fraction=chosen["fraction"])
-            if chosen["tied"]:
-                notes.append(f"paper-named pick tied with {id_list(chosen['tied'])}")
-        else:
-            notes.append(f"fewer than {place} paper-named ensembles in this scope")
-        if paper is not None:
-            row["agrees"] = "yes" if paper == ours else "no"
-            if chosen is not None:
-                row["named_agrees"] = "yes" if paper == chosen["name"] else "no"
-            if paper in eligible:
-                theirs = eligible.index(paper)
-                row.update(paper_score=float(means[theirs]), paper_ci_low=found["ci_low"][theirs],
-                           paper_ci_high=found["ci_high"][theirs], paper_fraction=float(fractions[theirs]))
-                if paper != ours:
-                    diff = bootstrap_ci(per_scene[:, mine] - per_scene[:, theirs], resampling=resampling).iloc[0]
-                    real = is_real(diff["ci_low"], diff["ci_high"])
-                    row.update(difference=float(diff["estimate"]), difference_ci_low=diff["ci_low"],
-                               difference_ci_high=diff["ci_high"],
-                               real_difference="" if real is None else ("yes" if real else "no"))
-            else:
-                notes.append(f"the paper's #{paper_id} is not in our data")
-        row["note"] = "; ".join(notes)
-        rows.append(row)
+    rows = [_scope_row(data, scope, key, eligible, spps, place, paper_id, indices, resampling)
+            for scope, key, eligible, spps, place, paper_id in _scopes(data)]
     return _with_int_ids(pd.DataFrame(rows, columns=REC_COLUMNS),
                          ("candidates", "ours_id", "named_candidates", "named_id", "paper_id"))
 

@@ -3,7 +3,7 @@ spp and overall, by ensemble size, and each candidate's total compute cost with 
 
 Inputs are the workflow's tidy tables:
 
-* ``scores``: :func:`mcbench.analysis.ranking.case_scores` output, columns ``scene, spp, candidate,
+* ``scores``: :func:`mcbench.analysis.ranking.case_scores` output, columns ``scene, spp, entry,
   score`` (score K for the best of K entries of a case, 1 for the worst; higher is better);
 * ``timings``: columns ``scene, spp, method, seconds`` (``results/timings.csv``; compute seconds
   of one method run, I/O excluded).
@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from mcbench.analysis.figures import combined_seconds, input_closure
+from mcbench.analysis.error_speed_figures import combined_seconds, input_closure
 
 __all__ = ["select_rows", "score_curves", "average_scores", "candidate_sizes", "score_size_points",
            "score_size_summary", "closure_seconds", "own_seconds", "pareto_front", "speed_score_points"]
@@ -37,11 +37,11 @@ def score_curves(scores: pd.DataFrame, *, candidates: list[str] | None = None) -
     """Mean score over scenes per spp (Fig. 14 c): index spp (ascending int), one column per
     candidate (``candidates`` in their order, or all in order of first appearance). Scores are
     unitless (K for the best of K entries of a case)."""
-    rows = select_rows(scores, "candidate", candidates)
+    rows = select_rows(scores, "entry", candidates)
     if rows.empty:
         raise ValueError("no scores to average")
-    order = list(candidates) if candidates is not None else list(dict.fromkeys(rows["candidate"]))
-    table = rows.groupby(["spp", "candidate"])["score"].mean().unstack("candidate")
+    order = list(candidates) if candidates is not None else list(dict.fromkeys(rows["entry"]))
+    table = rows.groupby(["spp", "entry"])["score"].mean().unstack("entry")
     if table.isna().to_numpy().any():
         lacking = table.columns[table.isna().any()].tolist()
         raise ValueError(f"candidate(s) {lacking} lack scores at some spp")
@@ -110,7 +110,7 @@ def score_size_summary(points: pd.DataFrame) -> pd.DataFrame:
 def closure_seconds(own: dict[str, float], inputs: dict[str, list[str]], *,
                     names: list[str] | None = None) -> dict[str, float]:
     """Total cost of each method (seconds per case) of ``names`` (default: all of ``own``):
-    :func:`mcbench.analysis.figures.combined_seconds`, the sum of ``own`` seconds over its input closure,
+    :func:`mcbench.analysis.error_speed_figures.combined_seconds`, the sum of ``own`` seconds over its input closure,
     each method counted once. Raises ``ValueError`` naming a method without a timing."""
     chosen = names if names is not None else list(own)
     needed = {m for name in chosen for m in input_closure(name, inputs)}

@@ -1,5 +1,5 @@
 """The study's files: :func:`write_study_tables` computes every table of a metrics CSV
-(:func:`mcbench.analysis.study.tables.study_tables`) and :func:`write_study_files` writes them,
+(:func:`mcbench.analysis.study.study_tables.study_tables`) and :func:`write_study_files` writes them,
 CSV and Markdown, atomically (:mod:`mcbench.io.tables`), with ``summary.md``."""
 
 from __future__ import annotations
@@ -8,13 +8,13 @@ from pathlib import Path
 
 import pandas as pd
 
-from mcbench import NOISY
+from mcbench import METRICS_COLUMNS, NOISY
 from mcbench.analysis.study.data import CONFIDENCE, N_RESAMPLES, SEED, Resampling
 from mcbench.analysis.study.markdown import (NO_RELMSE_MARKDOWN, findings_markdown, pair_members_markdown,
                                              paper_comparison_markdown, recommendations_both_markdown,
                                              recommendations_markdown, reference_noise_markdown, summary_markdown)
 from mcbench.analysis.study.statistics import SCORE_CI_COLUMNS
-from mcbench.analysis.study.tables import StudyTables, study_tables
+from mcbench.analysis.study.study_tables import StudyTables, study_tables
 from mcbench.io.tables import read_table, write_csv, write_text
 
 __all__ = ["STUDY_FILES", "study_outputs", "write_study_files", "write_study_tables"]
@@ -99,7 +99,7 @@ def write_study_tables(metrics_csv, out_dir, *, metrics=("relmse", "dssim"), lab
     scored entries; ``metric_labels`` {metric: label} name the metrics in the Markdown (default:
     their names). Returns the tables by file stem.
     """
-    table = read_table(metrics_csv, columns=("scene", "spp", "candidate", "metric", "value"))
+    table = read_table(metrics_csv, columns=METRICS_COLUMNS)
     resampling = Resampling(n_resamples=n_resamples, seed=seed, confidence=confidence)
     tables = study_tables(table, metrics=metrics, labels=labels, candidates=candidates, noisy=noisy,
                           resampling=resampling, source=str(metrics_csv), metric_labels=metric_labels)

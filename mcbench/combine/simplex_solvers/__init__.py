@@ -7,7 +7,7 @@ independently (numba ``prange`` over chunks of problems). One module per solver 
 * :mod:`~mcbench.combine.simplex_solvers.iterative` -- the paper's iterative solver (Sec. 4.1)
   with its counter-based random numbers;
 * :mod:`~mcbench.combine.simplex_solvers.exact` -- closed-form 2D geometry per pixel-channel,
-  minimum-norm tie-break (ours);
+  minimum-norm tie-break (mcbench's, not the paper's);
 * :mod:`~mcbench.combine.simplex_solvers.shared_exact` -- one weight vector shared by the
   channels, Wolfe's minimum-norm-point algorithm (Sec. 5.2.3);
 * :mod:`~mcbench.combine.simplex_solvers.unconstrained` -- sum w = 1 without w >= 0 (Sec. 5.2.1);

@@ -1,5 +1,5 @@
 """The exact simplex solver per pixel-channel: closed-form 2D geometry with a minimum-norm tie-break
-(ours; the problem: :mod:`mcbench.combine.simplex_solvers.problem`).
+(mcbench's, not the paper's; the problem: :mod:`mcbench.combine.simplex_solvers.problem`).
 
 :func:`exact_weights` (our addition): closed-form 2D geometry. p* = b if b lies in the hull (on
 a segment, or in a triangle of the points by Caratheodory), else p* is the closest point over

@@ -23,7 +23,7 @@ tests/combine/test_ensemble.py compares how many problems reach the optimum with
 ``std::max(c1, 1e-6)`` (src/solve.h:92, :110), an absolute constant that shrinks every step of
 dark pixels (radiance differences below ~1e-3) by the factor c1 / 1e-6. The text decides: no
 floor; only c1 = 0 (then c2 = 0: the ensemble equals denoiser i) leaves w unchanged.
-**Stop:** the paper stops when "w is not changing for several iterations" or at 1024; ours stops
+**Stop:** the paper stops when "w is not changing for several iterations" or at 1024; this solver stops
 after a whole cycle of N updates none of which moved a weight by more than ``tolerance`` (the
 code: 2N + 1 consecutive steps with alpha < 1e-10, src/solve.h:91, :104, :113).
 **Departure (random numbers):** a counter-based splitmix64 generator seeded from

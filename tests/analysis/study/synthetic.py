@@ -17,7 +17,7 @@ SIZE2 = ["ens09", "ens10", "ens11", "ens12", "ens13", "ens14", "ens15", "ens16"]
 
 
 def tidy(rows):
-    return pd.DataFrame(rows, columns=["scene", "spp", "candidate", "metric", "value"])
+    return pd.DataFrame(rows, columns=["scene", "spp", "entry", "metric", "value"])
 
 
 def from_orders(order, *, scenes, spps, metric="relmse", names=None):

@@ -28,10 +28,10 @@ def synthetic_study(seed: int = 0) -> tuple[pd.DataFrame, pd.DataFrame]:
     rows = []
     for scene, spp in itertools.product(SCENES, SPPS):
         for metric in ("relmse", "dssim"):
-            rows.append({"scene": scene, "spp": spp, "candidate": "noisy", "metric": metric,
+            rows.append({"scene": scene, "spp": spp, "entry": "noisy", "metric": metric,
                          "value": NOISY_CONSTANT / spp})
             for name in METHODS:
-                rows.append({"scene": scene, "spp": spp, "candidate": name, "metric": metric,
+                rows.append({"scene": scene, "spp": spp, "entry": name, "metric": metric,
                              "value": float(rng.uniform(0.05, 0.9)) * NOISY_CONSTANT / spp})
     metrics = pd.DataFrame(rows).sample(frac=1.0, random_state=seed)  # row order must not matter
     timings = pd.DataFrame([{"scene": scene, "spp": spp, "method": name, "seconds": OWN[name] * factor}

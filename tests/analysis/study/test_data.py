@@ -23,7 +23,7 @@ def test_avg_is_the_ranking_tables_avg_and_a_missing_candidate_is_named():
     ours = ranking_from(data)
     theirs = ranking_table(metrics, "relmse")
     pd.testing.assert_series_equal(ours["Avg."].sort_index(), theirs["Avg."].sort_index(), check_exact=False)
-    dropped = metrics[~((metrics["scene"] == "s1") & (metrics["spp"] == 8) & (metrics["candidate"] == "ens27"))]
+    dropped = metrics[~((metrics["scene"] == "s1") & (metrics["spp"] == 8) & (metrics["entry"] == "ens27"))]
     with pytest.raises(BenchError, match="ens27"):
         study_data(dropped, "relmse", source="metrics.csv")
     no_spp = metrics[~((metrics["scene"] == "s2") & (metrics["spp"] == 16))]

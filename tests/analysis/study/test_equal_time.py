@@ -32,7 +32,7 @@ def test_equal_time_on_synthetic_power_laws():
     table = equal_time_table(metrics, timings, render_times(), metric="relmse", inputs=INPUTS)
     assert len(table) == len(SCENES) * len(SPPS) * len(METHODS)
     totals = {"kpcn": 2.0, "nfor": 3.0, "rdfc": 0.5, "kpcn_dc": 3.0, "ens10": 5.25, "ens18": 5.625}
-    relmse = metrics[metrics.metric == "relmse"].set_index(["scene", "spp", "candidate"])["value"]
+    relmse = metrics[metrics.metric == "relmse"].set_index(["scene", "spp", "entry"])["value"]
     for row in table.itertuples():
         cost = totals[row.candidate]
         equal_spp = row.spp + cost / RENDER_SECONDS_PER_SPP

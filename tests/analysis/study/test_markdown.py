@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from mcbench.analysis.study.markdown import summary_markdown
-from mcbench.analysis.study.tables import study_tables
+from mcbench.analysis.study.study_tables import study_tables
 from tests.analysis.study.synthetic import FASTER, tidy
 
 

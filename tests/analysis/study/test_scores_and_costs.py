@@ -9,7 +9,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from mcbench.analysis.figures import input_closure
+from mcbench.analysis.error_speed_figures import input_closure
 from mcbench.analysis.ranking import case_scores
 from mcbench.analysis.study.scores_and_costs import (average_scores, closure_seconds, own_seconds, pareto_front,
                                                      score_curves, score_size_points, score_size_summary,
@@ -87,12 +87,12 @@ def test_score_curves_and_averages_are_hand_computed_means():
     curves = score_curves(scores, candidates=["kpcn", "ens18"])
     assert list(curves.columns) == ["kpcn", "ens18"] and list(curves.index) == SPPS
     for spp, name in itertools.product(SPPS, ["kpcn", "ens18"]):
-        by_hand = sum(scores[(scores.scene == scene) & (scores.spp == spp) & (scores.candidate == name)]["score"].item()
+        by_hand = sum(scores[(scores.scene == scene) & (scores.spp == spp) & (scores.entry == name)]["score"].item()
                       for scene in SCENES) / len(SCENES)
         assert curves.loc[spp, name] == pytest.approx(by_hand)
     averages = average_scores(scores)
     for name in ["noisy"] + METHODS:
-        rows = scores[scores.candidate == name]
+        rows = scores[scores.entry == name]
         by_hand = np.mean([rows[rows.spp == spp]["score"].mean() for spp in SPPS])
         assert averages[name] == pytest.approx(by_hand)
     assert list(averages) == sorted(averages, reverse=True)

@@ -40,7 +40,7 @@ def test_writer_writes_the_declared_files_without_nan_and_skips_absent_metrics(t
     paper = pd.read_csv(out / "paper_table3.csv")
     assert set(paper["id"]) == set(pool.PAPER_TABLE3)
     broken = tidy(rows)
-    broken = broken[~((broken["candidate"] == "ens31") & (broken["scene"] == "s0") & (broken["spp"] == 64))]
+    broken = broken[~((broken["entry"] == "ens31") & (broken["scene"] == "s0") & (broken["spp"] == 64))]
     broken.to_csv(path, index=False)
     with pytest.raises(BenchError, match="ens31"):
         write_study_tables(str(path), out, metrics=("relmse",), n_resamples=100)

@@ -10,9 +10,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from mcbench.combine.oracle import (MseMatrixAccumulator, block_average, one_hot_weights, quadratic_objective,
-                            simplex_problem_weights, simplex_weights, unconstrained_problem_weights,
-                            unconstrained_weights)
+from mcbench.combine.oracle_weights import (MseMatrixAccumulator, block_average, one_hot_weights, quadratic_objective,
+                                            simplex_problem_weights, simplex_weights, unconstrained_problem_weights,
+                                            unconstrained_weights)
 
 # --------------------------------------------------------------------------- accumulator
 

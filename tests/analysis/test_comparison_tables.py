@@ -1,4 +1,4 @@
-"""Comparison tables (mcbench.analysis.comparisons): roles of methods, Tables 1-2, the ablation table and
+"""Comparison tables (mcbench.analysis.comparison_tables): roles of methods, Tables 1-2, the ablation table and
 the comparison ranking against tables computed by hand on a small synthetic study (2 scenes x
 2 spp, full ensembles of sizes 2 and 3), the incomplete-variant and missing-case paths, and the
 rule script run without Snakemake."""
@@ -13,9 +13,9 @@ import pandas as pd
 import pytest
 
 from mcbench import BenchError
-from mcbench.analysis.comparisons import (ablation_cases, ablation_table, beats_cases, beats_table, comparison_ranking,
-                                 comparison_role, find_comparisons, write_ablation_table, write_comparison_ranking,
-                                 write_onehot_tables)
+from mcbench.analysis.comparison_tables import (ablation_cases, ablation_table, beats_cases, beats_table,
+                                                comparison_ranking, comparison_role, find_comparisons,
+                                                write_ablation_table, write_comparison_ranking, write_onehot_tables)
 
 ROOT = Path(__file__).resolve().parents[2]
 SCENES, SPPS = ("s1", "s2"), (4, 8)
@@ -71,7 +71,7 @@ def metrics_frame(relmse=RELMSE, *, dssim=True) -> pd.DataFrame:
     rows = [(s, n, name, "relmse", values[i]) for name, values in relmse.items() for i, (s, n) in enumerate(CASES)]
     if dssim:
         rows += [(s, n, c, "dssim", v / 10) for s, n, c, _, v in list(rows)]
-    return pd.DataFrame(rows, columns=["scene", "spp", "candidate", "metric", "value"])
+    return pd.DataFrame(rows, columns=["scene", "spp", "entry", "metric", "value"])
 
 
 def timings_frame() -> pd.DataFrame:
@@ -149,16 +149,16 @@ def test_table2_leaves_out_ensembles_without_the_post_variant_and_guards_empty_c
 
 def test_a_missing_case_of_a_listed_method_stops_with_method_and_case_named():
     metrics = metrics_frame()
-    lost = (metrics["candidate"] == "oh2_nfor") & (metrics["scene"] == "s2") & (metrics["spp"] == 8)
+    lost = (metrics["entry"] == "oh2_nfor") & (metrics["scene"] == "s2") & (metrics["spp"] == 8)
     with pytest.raises(BenchError, match=r"m.csv: no relmse value for method 'oh2_nfor' in case scene s2, spp 8"):
         beats_cases(metrics[~lost], find_comparisons(METHODS), variants=("sbf", "nfor"), source="m.csv")
     # a method no table lists may be missing (the base denoiser c)
-    beats_cases(metrics[metrics["candidate"] != "c"], find_comparisons(METHODS), variants=("sbf", "nfor"))
+    beats_cases(metrics[metrics["entry"] != "c"], find_comparisons(METHODS), variants=("sbf", "nfor"))
     # a listed method that is missing everywhere, or a non-finite value, is refused as well
     with pytest.raises(BenchError, match="'oh2_post'"):
-        beats_cases(metrics[metrics["candidate"] != "oh2_post"], find_comparisons(METHODS), variants=("post",))
+        beats_cases(metrics[metrics["entry"] != "oh2_post"], find_comparisons(METHODS), variants=("post",))
     broken = metrics.copy()
-    broken.loc[(broken["candidate"] == "e2") & (broken["metric"] == "relmse"), "value"] = float("nan")
+    broken.loc[(broken["entry"] == "e2") & (broken["metric"] == "relmse"), "value"] = float("nan")
     with pytest.raises(BenchError, match="method 'e2'.*not finite"):
         beats_cases(broken, find_comparisons(METHODS), variants=("post",))
 
@@ -293,10 +293,10 @@ def test_ensemble_defaults_are_the_ensembles_own():
     the ensemble plugin's combine() takes them as its defaults."""
     import inspect
 
-    from mcbench.analysis import comparisons
+    from mcbench.analysis import comparison_tables
     from mcbench.combine.ensemble_weights import ENSEMBLE_DEFAULTS
     from methods import load_method
 
-    assert comparisons.ENSEMBLE_DEFAULTS is ENSEMBLE_DEFAULTS
+    assert comparison_tables.ENSEMBLE_DEFAULTS is ENSEMBLE_DEFAULTS
     signature = inspect.signature(load_method("ensemble").combine)
     assert {key: signature.parameters[key].default for key in ENSEMBLE_DEFAULTS} == ENSEMBLE_DEFAULTS

@@ -286,7 +286,7 @@ def case_folder(scene: str, spp: int) -> str:
 
 def case_numbers(metrics, *, scene: str, spp: int, entries: list[str], metric_names: list[str],
                  source: str = "metrics.csv") -> dict:
-    """{entry: {metric: value}} of one case from a tidy metrics table (scene, spp, candidate,
+    """{entry: {metric: value}} of one case from a tidy metrics table (scene, spp, entry,
     metric, value). Every entry must have every metric once with a finite value, else the error
     names ``source`` and the missing row."""
     rows = metrics[(metrics["scene"] == scene) & (metrics["spp"] == int(spp))]
@@ -294,7 +294,7 @@ def case_numbers(metrics, *, scene: str, spp: int, entries: list[str], metric_na
     for entry in entries:
         numbers[entry] = {}
         for metric in metric_names:
-            values = rows.loc[(rows["candidate"] == entry) & (rows["metric"] == metric), "value"]
+            values = rows.loc[(rows["entry"] == entry) & (rows["metric"] == metric), "value"]
             if len(values) != 1 or not np.isfinite(float(values.iloc[0])):
                 raise BenchError(f"{source}: no single finite {metric} of '{entry}' for ({scene}, {spp})")
             numbers[entry][metric] = float(values.iloc[0])

@@ -1,4 +1,4 @@
-"""mcbench.analysis.figures: the report's error curves and speed-against-error figure, checked against
+"""mcbench.analysis.error_speed_figures: the report's error curves and speed-against-error figure, checked against
 means computed by hand on synthetic tables, and the PNGs they write."""
 
 from __future__ import annotations
@@ -9,8 +9,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from mcbench.analysis.figures import (MEAN_PANEL, combined_seconds, error_curves, error_curves_figure, speed_error_figure,
-                             speed_error_points)
+from mcbench.analysis.error_speed_figures import (MEAN_PANEL, combined_seconds, error_curves, error_curves_figure,
+                                                  speed_error_figure, speed_error_points)
 
 SCENES = ["box", "glass"]
 SPPS = [4, 16, 64]
@@ -19,9 +19,9 @@ CANDIDATES = ["noisy", "oidn", "jbf", "ens"]
 
 def synthetic_metrics(seed: int = 0) -> pd.DataFrame:
     rng = np.random.default_rng(seed)
-    rows = [{"scene": scene, "spp": spp, "candidate": candidate, "metric": metric,
+    rows = [{"scene": scene, "spp": spp, "entry": entry, "metric": metric,
              "value": float(rng.uniform(0.001, 1.0))}
-            for scene, spp, candidate, metric in itertools.product(SCENES, SPPS, CANDIDATES, ["relmse", "dssim"])]
+            for scene, spp, entry, metric in itertools.product(SCENES, SPPS, CANDIDATES, ["relmse", "dssim"])]
     return pd.DataFrame(rows).sample(frac=1.0, random_state=seed)  # row order must not matter
 
 
@@ -37,7 +37,7 @@ def test_error_curves_are_the_table_and_its_mean_over_scenes():
     panels = error_curves(metrics, metric="dssim")
     assert list(panels)[0] == MEAN_PANEL and set(panels) == {MEAN_PANEL, *SCENES}
     for scene, spp, candidate in itertools.product(SCENES, SPPS, CANDIDATES):
-        row = metrics[(metrics.scene == scene) & (metrics.spp == spp) & (metrics.candidate == candidate)
+        row = metrics[(metrics.scene == scene) & (metrics.spp == spp) & (metrics.entry == candidate)
                       & (metrics.metric == "dssim")]
         assert panels[scene].loc[spp, candidate] == row["value"].item()
     for spp, candidate in itertools.product(SPPS, CANDIDATES):
@@ -69,14 +69,14 @@ def test_speed_error_points_are_means_over_cases():
     assert list(points.index) == ["oidn", "jbf", "ens"]  # no row for the noisy input
     for method in points.index:
         seconds = timings[timings.method == method]["seconds"]
-        errors = metrics[(metrics.candidate == method) & (metrics.metric == "relmse")]["value"]
+        errors = metrics[(metrics.entry == method) & (metrics.metric == "relmse")]["value"]
         assert points.loc[method, "seconds"] == pytest.approx(seconds.sum() / len(seconds), rel=1e-12)
         assert points.loc[method, "error"] == pytest.approx(errors.sum() / len(errors), rel=1e-12)
         assert points.loc[method, "runs"] == len(SCENES) * len(SPPS)
     assert points.loc["ens", "total_seconds"] == pytest.approx(points["seconds"].sum(), rel=1e-12)
     assert points.loc["jbf", "total_seconds"] == points.loc["jbf", "seconds"]
     with pytest.raises(ValueError, match="timed method.*ens"):
-        speed_error_points(metrics[metrics.candidate != "ens"], timings, metric="relmse")
+        speed_error_points(metrics[metrics.entry != "ens"], timings, metric="relmse")
 
 
 def _png_pixels(path):

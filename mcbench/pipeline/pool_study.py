@@ -11,8 +11,9 @@ from mcbench.io.tables import read_json, read_table
 
 
 def write_study(metrics_csv: str, out_dir: str, *, metrics: list[str], labels: dict[str, str],
-                candidates: list[str], n_resamples: int, seed: int, manifest_json: str | None = None) -> dict:
-    """The 39-candidate study's tables (:func:`mcbench.analysis.study.writers.write_study_tables`) under ``out_dir``:
+                entries: list[str], n_resamples: int, seed: int, manifest_json: str | None = None) -> dict:
+    """The 39-candidate study's tables (:func:`mcbench.analysis.study.writers.write_study_tables`) under ``out_dir``
+    over ``entries`` (the candidates ranked and the noisy input):
     beside the paper's Table 3, recommendations, findings, bootstrap intervals, summary;
     ``summary.md`` ends with the provenance block of ``manifest_json`` (the run's
     ``results/manifest.json``, :mod:`mcbench.pipeline.provenance`) when given; each metric named by
@@ -23,7 +24,7 @@ def write_study(metrics_csv: str, out_dir: str, *, metrics: list[str], labels: d
     provenance = None if manifest_json is None else read_json(manifest_json)
     metric_labels = {name: spec.label for name, spec in load_metrics(metrics).items()}
     return write_study_tables(metrics_csv, out_dir, metrics=list(metrics), labels=labels,
-                              candidates=[c for c in candidates if c != NOISY], noisy=NOISY,
+                              candidates=[e for e in entries if e != NOISY], noisy=NOISY,
                               n_resamples=n_resamples, seed=seed, provenance=provenance, metric_labels=metric_labels)
 
 
@@ -39,18 +40,19 @@ def recommended_names(recommendations_csv: str, metric: str) -> list[str]:
 
 
 def write_study_figures_of(metrics_csv: str, timings_csv: str, recommendations_csv: str, scores_ci_csv: str,
-                           render_paths: list[str], paths: dict[str, str], *, metric: str, candidates: list[str],
+                           render_paths: list[str], paths: dict[str, str], *, metric: str, entries: list[str],
                            labels: dict[str, str], inputs: dict[str, list[str]]) -> None:
-    """The study's figures for one metric (:func:`mcbench.analysis.study.figures.write_study_figures`): the
+    """The study's figures for one metric (:func:`mcbench.analysis.study.study_figures.write_study_figures`) over
+    ``entries`` (the candidates ranked and the noisy input): the
     bases and the ensembles the study recommends (``recommendations_csv``) as curves, the bootstrap
     intervals of ``scores_ci_csv`` on the size figure, render times from the renders' EXRs."""
-    from mcbench.analysis.study.figures import curve_candidates, write_study_figures
+    from mcbench.analysis.study.study_figures import curve_candidates, write_study_figures
 
-    recommended = [n for n in recommended_names(recommendations_csv, metric) if n in candidates]
+    recommended = [n for n in recommended_names(recommendations_csv, metric) if n in entries]
     intervals = read_table(scores_ci_csv)
     ci = (intervals.rename(columns={"avg_ci_low": "ci_low", "avg_ci_high": "ci_high"})[["candidate", "ci_low", "ci_high"]]
           .dropna() if len(intervals) else None)
     write_study_figures(metrics_csv, timings_csv, render_paths, paths, metric=metric,
-                        candidates=[c for c in candidates if c != NOISY],
-                        curves=[c for c in curve_candidates(recommended) if c in candidates], recommended=recommended,
+                        candidates=[e for e in entries if e != NOISY],
+                        curves=[c for c in curve_candidates(recommended) if c in entries], recommended=recommended,
                         labels=labels, inputs=inputs, noisy=NOISY, ci=ci)

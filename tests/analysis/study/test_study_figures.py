@@ -1,4 +1,4 @@
-"""mcbench.analysis.study.figures: the PNGs of a tiny synthetic study, the figure set and the curves
+"""mcbench.analysis.study.study_figures: the PNGs of a tiny synthetic study, the figure set and the curves
 drawn."""
 
 from __future__ import annotations
@@ -8,8 +8,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from mcbench.analysis.study.figures import (STUDY_FIGURES, curve_candidates, paper_recommended, study_figure_paths,
-                                            write_study_figures)
+from mcbench.analysis.study.study_figures import (STUDY_FIGURES, curve_candidates, paper_recommended,
+                                                  study_figure_paths, write_study_figures)
 from tests.analysis.study.synthetic_timings import SCENES, SPPS, METHODS, INPUTS, synthetic_study, write_records
 
 

@@ -74,7 +74,7 @@ def display_labels(names, labels: dict[str, str] | None) -> dict[str, str]:
 def study_tables(table: pd.DataFrame, *, metrics=("relmse", "dssim"), labels: dict[str, str] | None = None,
                  candidates=None, noisy: str | None = NOISY, resampling: Resampling = Resampling(),
                  source: str = "metrics", metric_labels: dict[str, str] | None = None) -> StudyTables:
-    """The study's tables of the tidy metrics ``table`` (columns scene, spp, candidate, metric,
+    """The study's tables of the tidy metrics ``table`` (columns scene, spp, entry, metric,
     value) for each of ``metrics``; a metric without values in ``table`` is skipped.
     ``candidates`` (default: the pool candidates present) and ``noisy`` are the scored entries;
     a pool candidate missing in a case stops with a :class:`mcbench.BenchError` naming it and

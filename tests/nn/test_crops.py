@@ -1,4 +1,4 @@
-"""The plane-sharing CropSet of mcbench.nn.data against the dense layout it replaced: a
+"""The plane-sharing CropSet of mcbench.nn.crops against the dense layout it replaced: a
 hand-built ``(items, levels, 3, C, H, W)`` array of synthetic crops (every plane random, so any
 mix-up of crop, base, level, buffer or channel shows), and batches drawn from it by the original
 dense sampler, must equal the new ones bit for bit (the trained weights stay the same)."""
@@ -13,8 +13,8 @@ import torch
 
 from mcbench import BenchError
 from mcbench.io.exr import write_layers
-from mcbench.nn.data import (BUFFER_KEYS, CropSet, PlaneStore, dihedral, is_validation_seed, load_combiner_crops,
-                             load_crops, sample_batch, validation_batches)
+from mcbench.nn.crops import (BUFFER_KEYS, CropSet, PlaneStore, dihedral, is_validation_seed, load_combiner_crops,
+                              load_crops, sample_batch, validation_batches)
 
 LEVELS = (4, 16)
 SIZE = 12

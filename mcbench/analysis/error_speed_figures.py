@@ -1,12 +1,12 @@
 """Figures of the report: error against spp per scene, and speed against error.
 
 Both read the tidy tables the workflow writes: ``metrics`` with columns ``scene, spp,
-candidate, metric, value`` (``results/metrics.csv``; candidate ``noisy`` is the noisy input)
+entry, metric, value`` (``results/metrics.csv``; entry ``noisy`` is the noisy input)
 and ``timings`` with ``scene, spp, method, seconds`` (``results/timings.csv``; compute time of
 one method run in seconds, I/O excluded).
 
 * :func:`error_curves` / :func:`error_curves_figure`: one log-log panel per scene of a metric's
-  error against spp for every candidate and the noisy input (like Fig. 13 of Zheng et al. 2021),
+  error against spp for every entry, the candidates and the noisy input (like Fig. 13 of Zheng et al. 2021),
   plus a first panel with the mean over scenes.
 * :func:`speed_error_points` / :func:`speed_error_figure`: each method's mean compute time
   against its mean error over all test cases. A combiner's time includes the runs of the
@@ -30,11 +30,11 @@ MEAN_PANEL = "all scenes (mean)"
 
 
 def error_curves(metrics: pd.DataFrame, *, metric: str) -> dict[str, pd.DataFrame]:
-    """Error of every candidate against spp, per scene, for one metric.
+    """Error of every entry (the noisy input and the candidates) against spp, per scene, for one metric.
 
     Returns ``{panel: frame}`` with ``frame`` indexed by spp (ascending int) and one column per
-    candidate (in order of first appearance in ``metrics``). The first panel,
-    :data:`MEAN_PANEL`, is the arithmetic mean over scenes of each (spp, candidate), the
+    entry (in order of first appearance in ``metrics``). The first panel,
+    :data:`MEAN_PANEL`, is the arithmetic mean over scenes of each (spp, entry), the
     per-case average the ranking tables also use; then one panel per scene in order of
     appearance. Raises ``ValueError`` naming the metric when ``metrics`` has no row of it.
     """
@@ -42,9 +42,9 @@ def error_curves(metrics: pd.DataFrame, *, metric: str) -> dict[str, pd.DataFram
     if rows.empty:
         known = ", ".join(sorted(metrics["metric"].unique())) or "none"
         raise ValueError(f"no '{metric}' values in the metrics table (metrics present: {known})")
-    candidates = list(dict.fromkeys(rows["candidate"]))
-    table = rows.pivot_table(index=["scene", "spp"], columns="candidate", values="value", aggfunc="mean")
-    table = table[candidates]
+    entries = list(dict.fromkeys(rows["entry"]))
+    table = rows.pivot_table(index=["scene", "spp"], columns="entry", values="value", aggfunc="mean")
+    table = table[entries]
     panels = {MEAN_PANEL: table.groupby(level="spp").mean().sort_index()}
     for scene in dict.fromkeys(rows["scene"]):
         panels[scene] = table.xs(scene, level="scene").sort_index()
@@ -105,7 +105,7 @@ def speed_error_points(metrics: pd.DataFrame, timings: pd.DataFrame, *, metric: 
     """
     rows = metrics[metrics["metric"] == metric]
     methods = list(dict.fromkeys(timings["method"]))
-    mean_error = rows.groupby("candidate")["value"].mean()
+    mean_error = rows.groupby("entry")["value"].mean()
     missing = [name for name in methods if name not in mean_error.index]
     if missing:
         raise ValueError(f"no '{metric}' values for timed method(s) {', '.join(missing)} in the metrics table")
@@ -147,13 +147,13 @@ def _ordered(names, labels: dict[str, str]) -> list[str]:
     return [name for name in labels if name in names] + [name for name in names if name not in labels]
 
 
-def candidate_styles(candidates: list[str], noisy: str) -> dict[str, dict]:
-    """Line style per candidate: the noisy input dashed grey, the others the colours of
+def entry_styles(entries: list[str], noisy: str) -> dict[str, dict]:
+    """Line style per entry: the noisy input dashed grey, the others the colours of
     matplotlib's tab10/tab20 cycle in order (same order, same colours in every figure)."""
     plt = pyplot_agg()
-    cmap = plt.get_cmap("tab10" if len(candidates) <= 10 else "tab20")
+    cmap = plt.get_cmap("tab10" if len(entries) <= 10 else "tab20")
     styles, index = {}, 0
-    for name in candidates:
+    for name in entries:
         if name == noisy:
             styles[name] = {"color": "0.45", "linestyle": "--"}
         else:
@@ -166,17 +166,17 @@ def error_curves_figure(panels: dict[str, pd.DataFrame], path: str | Path, *, me
                         labels: dict[str, str] | None = None, noisy: str = "noisy", columns: int = 6) -> None:
     """Log-log error-against-spp panels (from :func:`error_curves`) with one shared legend.
 
-    Every candidate keeps its colour in all panels; ``labels`` maps candidate names to legend
+    Every entry keeps its colour in all panels; ``labels`` maps entry names to legend
     labels. Values that are not positive cannot be drawn on a log axis and are left out of
     the curve (a gap), never replaced.
     """
     plt = pyplot_agg()
     labels = labels or {}
-    candidates = _ordered((name for frame in panels.values() for name in frame.columns), labels)
-    styles = candidate_styles(candidates, noisy)
+    entries = _ordered((name for frame in panels.values() for name in frame.columns), labels)
+    styles = entry_styles(entries, noisy)
     columns = max(1, min(columns, len(panels)))
     rows = math.ceil(len(panels) / columns)
-    legend_rows = math.ceil(len(candidates) / 6)
+    legend_rows = math.ceil(len(entries) / 6)
     legend_inches = 0.2 + 0.2 * legend_rows
     figure, axes = plt.subplots(rows, columns, figsize=(2.9 * columns, 2.5 * rows + legend_inches), squeeze=False)
     for axis in axes.ravel()[len(panels):]:
@@ -195,9 +195,9 @@ def error_curves_figure(panels: dict[str, pd.DataFrame], path: str | Path, *, me
         axis.grid(True, which="major", alpha=0.3)
         axis.set_xlabel("spp", fontsize=7)
         axis.set_ylabel(metric, fontsize=7)
-    handles = [plt.Line2D([], [], marker="o", markersize=3, **styles[name]) for name in candidates]
-    figure.legend(handles, [labels.get(name, name) for name in candidates], loc="lower center",
-                  ncol=min(len(candidates), 6), fontsize=7, frameon=False)
+    handles = [plt.Line2D([], [], marker="o", markersize=3, **styles[name]) for name in entries]
+    figure.legend(handles, [labels.get(name, name) for name in entries], loc="lower center",
+                  ncol=min(len(entries), 6), fontsize=7, frameon=False)
     figure.tight_layout(rect=(0, legend_inches / (2.5 * rows + legend_inches), 1, 1))
     save_figure(figure, path)
 
@@ -212,7 +212,7 @@ def speed_error_figure(points: pd.DataFrame, path: str | Path, *, metric: str,
     labels = labels or {}
     # the colours of error_curves_figure (its first colour is the noisy input's grey, skipped)
     order = _ordered(points.index, labels)
-    styles = candidate_styles([noisy] + order, noisy)
+    styles = entry_styles([noisy] + order, noisy)
     figure, axis = plt.subplots(figsize=(6.4, 4.6))
     by_time = sorted(order, key=lambda name: points.loc[name, "total_seconds"])
     for rank, name in enumerate(by_time):

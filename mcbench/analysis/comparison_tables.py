@@ -1,7 +1,7 @@
 """The comparisons of Zheng et al. 2021 Sec. 5.2 as tables: Tables 1-2 (the ensemble against
 one-hot selection), the ablation table (Sec. 5.2.1-5.2.5) and a ranking of the comparison
 methods beside the full ensembles they belong to. Pure functions over the tidy metrics table
-(columns scene, spp, candidate, metric, value), the timings table (scene, spp, method, seconds)
+(columns scene, spp, entry, metric, value), the timings table (scene, spp, method, seconds)
 and the method table (name -> {module, kind, inputs, params, label, comparison_role}); core: no
 plugin import, no plugin name: a method's role is the ``comparison_role`` its declaration sets
 (``mcbench.contracts.method.MethodSpec``), copied into the method table by the registry.
@@ -40,7 +40,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from mcbench import BenchError
+from mcbench import METRICS_COLUMNS, BenchError
 from mcbench.combine.ensemble_weights import ENSEMBLE_DEFAULTS
 from mcbench.io.tables import read_table, write_csv, write_text
 from mcbench.analysis.ranking import format_markdown, ranking_table
@@ -143,7 +143,7 @@ def _cases(frame: pd.DataFrame) -> list[tuple[str, int]]:
 
 
 def metric_values(frame: pd.DataFrame, metric: str | None, names: list[str], *, cases=None,
-                  name_column: str = "candidate", value_column: str = "value",
+                  name_column: str = "entry", value_column: str = "value",
                   source: str = "metrics") -> pd.DataFrame:
     """Wide float64 frame, index (scene, spp) = ``cases`` (default: every case of ``frame``),
     one column per name, of the ``metric`` rows (``None``: all rows, e.g. a timings table with
@@ -366,9 +366,9 @@ def comparison_ranking(metrics: pd.DataFrame, methods: dict[str, dict], metric: 
     if not of_set:
         return pd.DataFrame(columns=["role", "compared_with"])
     names = [n for n in methods if n in of_set or any(n in group for group in of_set.values())]
-    names += [noisy] if noisy is not None and noisy in set(metrics["candidate"]) else []
+    names += [noisy] if noisy is not None and noisy in set(metrics["entry"]) else []
     metric_values(metrics, metric, names, source=source)
-    table = ranking_table(metrics[metrics["candidate"].isin(names)], metric)
+    table = ranking_table(metrics[metrics["entry"].isin(names)], metric)
     table.insert(0, "compared_with", [" ".join(of_set.get(n, [])) for n in table.index])
     table.insert(0, "role", [roles.get(n) or ("full ensemble" if n in comparisons else n) for n in table.index])
     return table
@@ -379,7 +379,7 @@ def write_onehot_tables(metrics_csv: str, metric: str, *, methods: dict[str, dic
                         metric_label: str | None = None) -> dict[int, pd.DataFrame]:
     """Tables 1 and 2 for ``metric`` (named ``metric_label`` in the Markdown) from ``metrics.csv``,
     each as CSV (long: size, spp, cases, wins, percent) and Markdown, written atomically."""
-    metrics = read_table(metrics_csv, columns=("scene", "spp", "candidate", "metric", "value"))
+    metrics = read_table(metrics_csv, columns=METRICS_COLUMNS)
     comparisons = find_comparisons(methods)
     spps = sorted({int(s) for s in metrics["spp"]})
     sizes = sorted({c["size"] for c in comparisons.values()})
@@ -398,7 +398,7 @@ def write_onehot_tables(metrics_csv: str, metric: str, *, methods: dict[str, dic
 def write_ablation_table(metrics_csv: str, timings_csv: str, *, methods: dict[str, dict], labels: dict[str, str],
                          csv_path: str, md_path: str) -> pd.DataFrame:
     """The ablation table from ``metrics.csv`` and ``timings.csv``, as CSV and Markdown."""
-    metrics = read_table(metrics_csv, columns=("scene", "spp", "candidate", "metric", "value"))
+    metrics = read_table(metrics_csv, columns=METRICS_COLUMNS)
     timings = read_table(timings_csv, columns=("scene", "spp", "method", "seconds"))
     cases = ablation_cases(metrics, timings, find_comparisons(methods), metrics_source=metrics_csv,
                            timings_source=timings_csv)
@@ -412,7 +412,7 @@ def write_comparison_ranking(metrics_csv: str, metric: str, *, methods: dict[str
                              csv_path: str, md_path: str, metric_label: str | None = None) -> pd.DataFrame:
     """The comparison methods' score-and-rank table for ``metric`` (named ``metric_label`` in the
     Markdown), as CSV and Markdown."""
-    metrics = read_table(metrics_csv, columns=("scene", "spp", "candidate", "metric", "value"))
+    metrics = read_table(metrics_csv, columns=METRICS_COLUMNS)
     table = comparison_ranking(metrics, methods, metric, source=metrics_csv)
     write_csv(csv_path, table.reset_index(), float_format="%.4f")
     text = (f"# Comparison ranking by {metric_label or metric}\n\nOne-hot variants, naive averages "

@@ -1,4 +1,4 @@
-"""mcbench.analysis.study.tables: every table of a metrics table in memory, the metrics without
+"""mcbench.analysis.study.study_tables: every table of a metrics table in memory, the metrics without
 values skipped, the relMSE-only and relMSE-with-corrected tables present exactly when their
 metrics are."""
 
@@ -9,7 +9,7 @@ import numpy as np
 from mcbench.analysis.study.findings import FINDING_COLUMNS
 from mcbench.analysis.study.paper import PAPER_COLUMNS
 from mcbench.analysis.study.reference_noise import REFERENCE_NOISE_COLUMNS
-from mcbench.analysis.study.tables import display_labels, study_tables
+from mcbench.analysis.study.study_tables import display_labels, study_tables
 from tests.analysis.study.synthetic import FASTER, tidy
 
 NAMES = ["kpcn", "nfor", "oidn", "rdfc", "ens10", "ens27"]

@@ -1,11 +1,11 @@
 """Figures of the 39-candidate study (Zheng et al. 2021, Sec. 5.3), PNGs written with
-matplotlib's Agg backend through :func:`mcbench.analysis.figures.save_figure`; their data come
+matplotlib's Agg backend through :func:`mcbench.analysis.error_speed_figures.save_figure`; their data come
 from :mod:`mcbench.analysis.study.scores_and_costs` and :mod:`mcbench.analysis.study.equal_time`.
 
 Figures (:func:`write_study_figures`, files named by :func:`study_figure_paths`):
 
 1. ``error_curves_<metric>.png``: error against spp per scene and the mean over scenes for the
-   bases and the recommended ensembles (Fig. 13), drawn by :mod:`mcbench.analysis.figures`;
+   bases and the recommended ensembles (Fig. 13), drawn by :mod:`mcbench.analysis.error_speed_figures`;
 2. ``score_curves_<metric>.png``: mean score over scenes against spp for those candidates, and
    every candidate's overall score ``Avg.`` (Fig. 14 c, d);
 3. ``score_size_<metric>.png``: each candidate's ``Avg.`` against its ensemble size (bases at 1),
@@ -23,7 +23,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from mcbench.analysis.figures import candidate_styles, error_curves, error_curves_figure, pyplot_agg, save_figure
+from mcbench import METRICS_COLUMNS
+from mcbench.analysis.error_speed_figures import (entry_styles, error_curves, error_curves_figure, pyplot_agg,
+                                                  save_figure)
 from mcbench.analysis.study.equal_time import equal_time_curves, equal_time_table, read_render_seconds
 from mcbench.analysis.study.scores_and_costs import (average_scores, score_curves, score_size_points,
                                                      score_size_summary, speed_score_points)
@@ -88,9 +90,9 @@ def study_error_curves_figure(metrics: pd.DataFrame, path: str | Path, *, metric
                               labels: dict[str, str] | None = None, noisy: str = "noisy") -> None:
     """Fig. 13: error against spp per scene and the mean over scenes for ``candidates`` (the
     bases and the recommended ensembles) and the noisy input, by
-    :func:`mcbench.analysis.figures.error_curves_figure`."""
+    :func:`mcbench.analysis.error_speed_figures.error_curves_figure`."""
     wanted = [noisy] + [c for c in candidates if c != noisy]
-    rows = metrics[metrics["candidate"].isin(wanted)]
+    rows = metrics[metrics["entry"].isin(wanted)]
     labels = {name: _label(name, labels) for name in wanted}
     error_curves_figure(error_curves(rows, metric=metric), path, metric=metric, labels=labels, noisy=noisy)
 
@@ -103,7 +105,7 @@ def score_curves_figure(curves: pd.DataFrame, averages: pd.Series, path: str | P
     those of the left panel in their colours and the others grey."""
     plt = pyplot_agg()
     names = list(curves.columns)
-    styles = candidate_styles([noisy] + [n for n in names if n != noisy], noisy)
+    styles = entry_styles([noisy] + [n for n in names if n != noisy], noisy)
     height = max(4.2, 0.16 * len(averages) + 1.0)
     figure, (left, right) = plt.subplots(1, 2, figsize=(11.5, height), gridspec_kw={"width_ratios": [1.5, 1]})
     for name in names:
@@ -244,7 +246,7 @@ def equal_time_figure(ratios: pd.DataFrame, path: str | Path, *, metric: str, la
     measured spp (``extrapolated``) are hollow and footnoted."""
     plt = pyplot_agg()
     names = list(ratios.columns)
-    styles = candidate_styles([noisy] + [n for n in names if n != noisy], noisy)
+    styles = entry_styles([noisy] + [n for n in names if n != noisy], noisy)
     figure, axis = plt.subplots(figsize=(8.6, 4.8))
     spps = ratios.index.to_numpy()
     any_beyond = False
@@ -301,8 +303,8 @@ def write_study_figures(metrics_csv: str, timings_csv: str, render_records: list
         raise ValueError(f"unknown study figure(s) {unknown}; known: {', '.join(STUDY_FIGURES)}")
     inputs = _pool_inputs() if inputs is None else inputs
     pool = [noisy] + [c for c in candidates if c != noisy]
-    metrics = read_table(metrics_csv, columns=["scene", "spp", "candidate", "metric", "value"])
-    metrics = metrics[metrics["candidate"].isin(pool) & (metrics["metric"] == metric)]
+    metrics = read_table(metrics_csv, columns=METRICS_COLUMNS)
+    metrics = metrics[metrics["entry"].isin(pool) & (metrics["metric"] == metric)]
     timings = read_table(timings_csv, columns=["scene", "spp", "method", "seconds"])
     scores = case_scores(metrics, metric)
     lines = [c for c in curves if c != noisy]
