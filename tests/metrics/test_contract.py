@@ -143,11 +143,11 @@ def test_an_added_metric_file_reaches_the_case_table_the_viewer_and_the_tables(s
                                methods=[("jbf", "jbf", {}, [])]))
     assert record["made"]["metrics"] == [NOISY, "jbf"]
     table = pd.read_csv(case / "case.csv")
-    assert list(zip(table.candidate, table.metric)) == [(NOISY, "relmse"), (NOISY, "mae"), ("jbf", "relmse"),
+    assert list(zip(table.entry, table.metric)) == [(NOISY, "relmse"), (NOISY, "mae"), ("jbf", "relmse"),
                                                         ("jbf", "mae")]
     spec = load_metric("mae")
     expected = spec.value(buffers.color, truth)
-    assert table.set_index(["candidate", "metric"]).loc[(NOISY, "mae"), "value"] == expected
+    assert table.set_index(["entry", "metric"]).loc[(NOISY, "mae"), "value"] == expected
     fragment = json.loads((case / "viewer_case" / "case.json").read_text())
     assert fragment["errors"]["jbf"] == {"relmse": "jbf_relmse.png", "mae": "jbf_mae.png"}
 

@@ -248,7 +248,7 @@ def test_training_writes_loadable_weights_and_a_faithful_record(tmp_path, crop_f
     record = train_network(module, crop_files, tmp_path / "w.pt", tmp_path / "w.json", tmp_path / "ck.pt",
                            TINY, log=lambda m: None)
     blob = torch.load(tmp_path / "w.pt", weights_only=True)
-    assert blob["arch"] == module.METHOD.network
+    assert blob["arch"] == module.METHOD.learned.network
     network = module.build_network(**blob["arch"])
     network.load_state_dict(blob["state_dict"])
     assert record["parameters"] == sum(p.numel() for p in network.parameters())
@@ -324,7 +324,7 @@ def test_training_learns_to_denoise(tmp_path):
 
     noisy = evaluate(Identity(), validation, record["loss"])["loss"]
     torch.manual_seed(settings["seed"])                 # the trainer's initial weights
-    untrained = evaluate(module.build_network(**module.METHOD.network), validation, record["loss"])["loss"]
+    untrained = evaluate(module.build_network(**module.METHOD.learned.network), validation, record["loss"])["loss"]
     assert record["validation"]["loss"] < 0.7 * noisy
     assert record["validation"]["loss"] < 0.8 * untrained
 
@@ -361,7 +361,7 @@ def test_damaged_checkpoint_is_refused_naming_it(crop_files, tmp_path, damage):
             return os.mkdir, (str(tmp_path / "pwned"),)
 
     checkpoint = tmp_path / "k.ckpt"
-    torch.save({"arch": kpcn.METHOD.network, "network": RunsCode(), "payload": torch.ones(256)}, checkpoint)
+    torch.save({"arch": kpcn.METHOD.learned.network, "network": RunsCode(), "payload": torch.ones(256)}, checkpoint)
     if damage == "truncated":
         checkpoint.write_bytes(checkpoint.read_bytes()[:300])
     with pytest.raises(BenchError, match=r"k\.ckpt: cannot load checkpoint") as caught:

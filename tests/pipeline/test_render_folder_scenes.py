@@ -143,7 +143,7 @@ def test_imported_case_is_denoised_and_scored_like_a_render(folder_scenes, tmp_p
     assert values["noisy"] == pytest.approx(relmse(noisy, truth), rel=1e-12)
     assert values["oidn"] == pytest.approx(relmse(output.full, truth), rel=1e-12)
     assert values["oidn"] < values["noisy"]
-    assert list(table.candidate) == ["noisy", "oidn"]
+    assert list(table.entry) == ["noisy", "oidn"]
 
 
 @pytest.mark.extended     # a whole scratch study (75 s): beside the worked example's end-to-end run
