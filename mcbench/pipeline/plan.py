@@ -51,6 +51,7 @@ from mcbench.contracts.scene import scene_spec
 from mcbench.io.weights import COMMITTED_WEIGHTS
 from mcbench.pipeline.config import ConfigError, key_path, schema_defaults
 from mcbench.pipeline.oracle import oracle_size, usable_downscale
+from mcbench.pipeline.reference_sources import STORE_FOLDER, reference_source
 from mcbench.pipeline.registry import (available_scenes, config_method_table, load_method, load_metrics,
                                        load_scene, single_image_methods)
 from mcbench.pipeline.study_plan import (CasePlan, MethodPlan, RankingPlan, SideStudyPlan, StudyPaths, StudyPlan,
@@ -109,13 +110,40 @@ def _plan(config: dict, is_learned) -> StudyPlan:
                                                  comparison_role=spec.get("comparison_role"),
                                                  weights=_weights_read(spec))
                                 for name, spec in methods.items()}),
-        cases=CasePlan(scenes=tuple(scenes), spps=tuple(spps), reference_spp=frozen_mapping(reference_spp),
-                       reference_chunks=config["reference"]["chunks"], render_folders=frozen_mapping(render_folders),
-                       resolutions=frozen_mapping({scene: tuple(int(n) for n in (config["resolution"] or
-                                                                                 scene_spec(load_scene(scene)).size))
-                                                   for scene in scenes})),
+        cases=_case_plan(config, scenes, spps, reference_spp, render_folders),
         ranking=ranking, training=training, side=side,
         paths=StudyPaths(weights_dir=config.get("weights_dir") or str(COMMITTED_WEIGHTS)))
+
+
+def _case_plan(config: dict, scenes: list[str], spps: list[int], reference_spp: dict,
+               render_folders: dict) -> CasePlan:
+    """The cases, each scene's image size and where its reference comes from
+    (:func:`mcbench.pipeline.reference_sources.reference_source`: the store, when it holds a
+    reference of this identity and ``reference.source`` is ``store``; else rendered, with why)."""
+    resolutions = {scene: tuple(int(n) for n in (config["resolution"] or scene_spec(load_scene(scene)).size))
+                   for scene in scenes}
+    store = config["reference"]["store"] or STORE_FOLDER
+    sources = {scene: reference_source(scene, load_scene(scene), resolutions[scene],
+                                       requested=config["reference"]["source"], store=store) for scene in scenes}
+    return CasePlan(scenes=tuple(scenes), spps=tuple(spps), reference_spp=frozen_mapping(reference_spp),
+                    reference_chunks=config["reference"]["chunks"], render_folders=frozen_mapping(render_folders),
+                    resolutions=frozen_mapping(resolutions),
+                    reference_sources=frozen_mapping({scene: source.kind for scene, source in sources.items()}),
+                    stored_references=frozen_mapping({scene: str(source.stored.record_path)
+                                                      for scene, source in sources.items() if source.stored}),
+                    reference_notes=_reference_notes(sources, store) if config["reference"]["source"] == "store" else ())
+
+
+def _reference_notes(sources: dict, store) -> tuple[str, ...]:
+    """The log's lines on where the references come from: the scenes whose reference the store
+    lacks in one line, each other scene's reason in its own."""
+    missing = [scene for scene, source in sources.items() if source.kind == "render" and source.stored is None
+               and "has no reference" in source.reason]
+    notes = [f"reference of {scene}: {source.reason}" for scene, source in sources.items()
+             if source.kind != "folder" and scene not in missing]
+    if missing:
+        notes.append(f"references rendered (the store {store} has none of this resolution): {', '.join(missing)}")
+    return tuple(notes)
 
 
 def _scenes_and_spps(config: dict) -> tuple[list[str], list[int]]:

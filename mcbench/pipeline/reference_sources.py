@@ -35,7 +35,8 @@ from mcbench.io.reference_store import (StoredReference, identity_mismatches, re
                                         read_stored_layers)
 
 __all__ = ["STORE_FOLDER", "ReferenceSource", "scene_files", "scene_digest", "reference_identity",
-           "reference_source", "copy_stored_reference", "check_stored_reference"]
+           "reference_source", "copy_stored_reference", "check_stored_reference", "store_reference_chunks",
+           "stored_reference"]
 
 #: The repository's reference store.
 STORE_FOLDER = Path(__file__).resolve().parents[2] / "references"
@@ -88,16 +89,16 @@ def _xml_assets(path: Path) -> list[Path]:
 
 def scene_files(module: ModuleType) -> dict[str, Path]:
     """The files scene ``module`` is made of, by a machine-independent name: its own file
-    (``scene:<file name>``) and either the ``mcbench.render`` modules it builds with (Python) or the
-    assets its XML names (``asset:<path relative to the XML's folder>``)."""
-    source = getattr(module, "SOURCE", None)
-    if source is not None:
-        source = Path(source)
+    (``scene:<file name>``, the module's ``__file__``) and either the ``mcbench.render`` modules it
+    builds with (Python) or the assets its XML names (``asset:<path relative to the XML's folder>``)."""
+    source = Path(module.__file__)
+    if source.suffix == ".xml":
         files = {f"scene:{source.name}": source}
         for asset in _xml_assets(source):
             if not asset.exists():
                 raise BenchError(f"{source}: names the file {asset}, which does not exist")
-            files[f"asset:{asset.relative_to(source.parent) if asset.is_relative_to(source.parent) else asset.name}"] = asset
+            name = asset.relative_to(source.parent) if asset.is_relative_to(source.parent) else asset.name
+            files[f"asset:{name}"] = asset
         return files
     source = Path(module.__file__)
     files = {f"scene:{source.name}": source}
@@ -133,7 +134,7 @@ def reference_source(scene: str, module: ModuleType, resolution: tuple[int, int]
                      store: str | Path = STORE_FOLDER) -> ReferenceSource:
     """Where the reference of ``scene`` comes from when the config asks for ``requested``
     (``"store"`` or ``"render"``): the store only when it holds a reference of this identity."""
-    if getattr(module, "RENDER_FOLDER", None) is not None:
+    if getattr(getattr(module, "SCENE", None), "render_folder", None) is not None:
         return ReferenceSource(scene, "folder", "imported from the scene's folder of renders")
     if requested == "render":
         return ReferenceSource(scene, "render", "rendered: reference.source is 'render'")
@@ -148,6 +149,16 @@ def reference_source(scene: str, module: ModuleType, resolution: tuple[int, int]
         return ReferenceSource(scene, "render", f"rendered: the stored reference {stored.record_path} is of "
                                "another scene or renderer (" + "; ".join(mismatches) + ")")
     return ReferenceSource(scene, "store", f"from the store: {stored.record_path}", stored)
+
+
+def stored_reference(record_path: str, output_path: str) -> None:
+    """Write the stored reference whose record is ``record_path`` as this run's reference file."""
+    record_path = Path(record_path)
+    stored = read_store_record(record_path.parent.parent, record_path.stem,
+                               tuple(int(v) for v in record_path.parent.name.split("x")))
+    if stored is None:
+        raise BenchError(f"{record_path}: the stored reference's record is missing")
+    copy_stored_reference(stored, output_path)
 
 
 def copy_stored_reference(stored: StoredReference, output_path: str) -> None:
@@ -189,27 +200,37 @@ def check_stored_reference(scene: str, reference_path: str, render_path: str, ou
                              "passed": True, "test": numbers, "summary": agreement.describe()})
 
 
-def store_rendered_reference(scene: str, reference_path: str, *, store: str | Path = STORE_FOLDER,
-                             features: str) -> StoredReference:
-    """Put this run's rendered reference of ``scene`` (``reference_path``, merged from its chunks)
-    into ``store``, with its identity and provenance (commit, Mitsuba and Dr.Jit versions, variant,
-    CPU, spp, seeds, render seconds, feature convention)."""
-    from mcbench.io.exr import read_layers, read_metadata
+def store_reference_chunks(scene: str, chunk_paths: list[str], record_path: str, *, features: str) -> StoredReference:
+    """Merge this run's reference chunks of ``scene`` (spp-weighted, as the run's own reference)
+    and put the result into the store whose record is ``record_path`` (``<store>/<W>x<H>/<scene>.json``),
+    with its identity and provenance (commit, Mitsuba and Dr.Jit versions, variant, CPU, spp,
+    seeds, render seconds, feature convention, the scene's files)."""
+    from mcbench.io.exr import check_finite, check_resolution, read_layers, read_metadata
     from mcbench.io.reference_store import write_stored_reference
     from mcbench.pipeline.provenance import cpu_info, git_state, package_versions
     from mcbench.pipeline.registry import load_scene
+    from mcbench.render.renderer import merge_reference_chunks
 
-    metadata = read_metadata(reference_path)
-    if "stored_reference" in metadata or "imported_from" in metadata:
-        raise BenchError(f"{reference_path}: not rendered by this run (it came from a store or a folder); "
-                         "store references with reference: {source: render}")
-    layers = read_layers(reference_path, ["color", "variance"])
+    chunks = []
+    for path in chunk_paths:
+        layers = read_layers(path)
+        check_finite(path, layers)
+        check_resolution(path, layers["color"].shape)
+        chunks.append((layers, read_metadata(path)))
+    layers, metadata = merge_reference_chunks(chunks)
     height, width = layers["color"].shape[:2]
-    identity = reference_identity(scene, load_scene(scene), (width, height))
+    module = load_scene(scene)
+    identity = reference_identity(scene, module, (width, height))
     versions = package_versions()
     provenance = {"commit": git_state(STORE_FOLDER.parent)["commit"], "mitsuba": versions.get("mitsuba"),
                   "drjit": versions.get("drjit"), "variant": metadata.get("variant"), "cpu": cpu_info(),
                   "spp": int(metadata["spp"]), "seeds": metadata.get("seeds"), "seed": metadata.get("seed"),
-                  "chunks": metadata.get("chunks"), "render_seconds": metadata.get("seconds"),
-                  "features": features, "scene_files": sorted(scene_files(load_scene(scene)))}
-    return write_stored_reference(store, scene, layers, identity=identity, provenance=provenance)
+                  "chunks": len(chunk_paths), "render_seconds": sum(float(read_metadata(p).get("seconds", 0))
+                                                                    for p in chunk_paths),
+                  "features": features, "scene_files": sorted(scene_files(module))}
+    stored = write_stored_reference(Path(record_path).parent.parent, scene, layers, identity=identity,
+                                    provenance=provenance)
+    if stored.record_path != Path(record_path):
+        raise BenchError(f"{record_path}: the reference of '{scene}' is {width}x{height}; it was stored as "
+                         f"{stored.record_path}")
+    return stored

@@ -67,6 +67,23 @@ class CasePlan:
     reference_chunks: int
     render_folders: Mapping
     resolutions: Mapping = field(default_factory=lambda: frozen_mapping({}))   # scene -> (width, height)
+    reference_sources: Mapping = field(default_factory=lambda: frozen_mapping({}))   # scene -> store|render|folder
+    stored_references: Mapping = field(default_factory=lambda: frozen_mapping({}))   # scene -> store record path
+    reference_notes: tuple = ()                                       # why each reference comes from where
+
+    def reference_source(self, scene: str) -> str:
+        """Where the reference of ``scene`` comes from: ``store``, ``render`` or ``folder``."""
+        return self.reference_sources.get(scene, "folder" if scene in self.render_folders else "render")
+
+    @property
+    def rendered_references(self) -> list[str]:
+        """The scenes whose reference this run renders (chunks, then their merge)."""
+        return [scene for scene in self.scenes if self.reference_source(scene) == "render"]
+
+    @property
+    def stored_scenes(self) -> list[str]:
+        """The scenes whose reference comes from the store (and is checked against this run's render)."""
+        return [scene for scene in self.scenes if self.reference_source(scene) == "store"]
 
     def pixels(self, scene: str) -> int:
         """Pixels of a scene's images (the config's resolution, else the scene's own)."""

@@ -24,6 +24,7 @@ from mcbench.contracts.method import method_spec
 from mcbench.io.weights import check_trained_features, file_sha256, is_learned_method
 from mcbench.pipeline.config import config_digest, resolve_config
 from mcbench.pipeline.plan import plan_study
+from mcbench.pipeline.reference_sources import STORE_FOLDER
 from mcbench.pipeline.registry import available_metrics, load_method, load_metric
 from mcbench.pipeline.rendering import folder_case_files, folder_reference_files
 from mcbench.pipeline.resources import StudyRequests, load_job_costs
@@ -54,8 +55,10 @@ class StudySetup:
 
     @property
     def summary(self) -> str:
-        """The line the workflow logs when it is parsed: the config's files and digest."""
-        return f"mcbench: configuration {self.source} with the schema's defaults, digest {self.digest}"
+        """What the workflow logs when it is parsed: the config's files and digest, and where the
+        references come from (the reference store or this run's renders, and why)."""
+        lines = [f"mcbench: configuration {self.source} with the schema's defaults, digest {self.digest}"]
+        return "\n".join(lines + [f"mcbench: {note}" for note in self.plan.cases.reference_notes])
 
     @property
     def feature_params(self) -> dict:
@@ -158,20 +161,68 @@ class StudySetup:
         return [] if folder is None else folder_case_files(folder, int(spp))
 
     def reference_inputs(self, scene: str, chunk: str) -> list[str]:
-        """A reference's inputs: its chunks (``chunk``: their pattern) for a rendered scene, the
-        folder's reference files for an imported one."""
+        """A reference's inputs: its chunks (``chunk``: their pattern) for a rendered reference, the
+        store's EXR and record for a stored one, the folder's reference files for an imported one."""
         cases = self.plan.cases
-        folder = cases.render_folders.get(scene)
-        if folder is None:
+        source = cases.reference_source(scene)
+        if source == "render":
             return [chunk.format(scene=scene, chunk=k) for k in range(cases.reference_chunks)]
-        return folder_reference_files(folder)
+        if source == "store":
+            record = Path(cases.stored_references[scene])
+            return [str(record.with_suffix(".exr")), str(record)]
+        return folder_reference_files(cases.render_folders[scene])
+
+    def reference_inputs_rendered(self, scene: str, chunk: str) -> list[str]:
+        """The chunks (``chunk``: their pattern) of ``scene``'s reference as this config renders
+        them, whatever the reference's source (the store's input, rule store_reference)."""
+        if scene in self.plan.cases.render_folders:
+            raise BenchError(f"scene '{scene}' is a folder of renders made elsewhere: its reference is not stored")
+        return [chunk.format(scene=scene, chunk=k) for k in range(self.plan.cases.reference_chunks)]
+
+    def reference_checks(self, scene: str, check: str) -> list[str]:
+        """The check of a stored reference (``check``: its pattern) that a case of ``scene`` waits
+        for; nothing for a reference rendered here or imported."""
+        return [check.format(scene=scene)] if self.plan.cases.reference_source(scene) == "store" else []
+
+    def checked_render(self, scene: str, render: str) -> str:
+        """The render a stored reference is checked against: this run's highest-spp render of
+        ``scene`` (``render``: the renders' pattern)."""
+        return render.format(scene=scene, spp=max(self.plan.cases.spps))
+
+    @property
+    def stored_scene_pattern(self) -> str:
+        """The ``scene`` wildcard of rule stored_reference: the scenes whose reference comes from
+        the store (a pattern that matches nothing when there is none)."""
+        stored = self.plan.cases.stored_scenes
+        return f"(?:{'|'.join(stored)})(?![A-Za-z0-9_])" if stored else "(?!x)x"
+
+    @property
+    def merged_scene_pattern(self) -> str:
+        """The ``scene`` wildcard of rule merge_reference: every scene name but the stored ones (a
+        name is excluded where no name character follows it: the wildcard sits inside a path)."""
+        stored = self.plan.cases.stored_scenes
+        return (f"(?!(?:{'|'.join(stored)})(?![A-Za-z0-9_]))" if stored else "") + "[A-Za-z][A-Za-z0-9_]*"
+
+    @property
+    def store_folder(self) -> str:
+        """The reference store's folder (``reference.store``, else the repository's ``references/``),
+        relative to the working directory when it lies below it."""
+        folder = Path(self.config["reference"]["store"] or STORE_FOLDER).resolve()
+        return str(folder.relative_to(Path.cwd())) if folder.is_relative_to(Path.cwd()) else str(folder)
+
+    def store_records(self, pattern: str) -> list[str]:
+        """The store records ``store_references`` writes (``pattern``: rule store_reference's
+        output, wildcards ``resolution`` and ``scene``): one per scene this run can render."""
+        cases = self.plan.cases
+        return [pattern.format(resolution="{}x{}".format(*cases.resolutions[scene]), scene=scene)
+                for scene in cases.scenes if scene not in cases.render_folders]
 
     def render_cost_records(self, noisy: str, chunk: str) -> dict[str, list[str]]:
-        """The benchmark records of the noisy renders and of the rendered scenes' reference
-        chunks (``noisy``, ``chunk``: their patterns), the scene table's CPU-hours."""
+        """The benchmark records of the noisy renders and of the reference chunks this run renders
+        (``noisy``, ``chunk``: their patterns), the scene table's CPU-hours."""
         cases = self.plan.cases
         return {"noisy": [noisy.format(scene=scene, spp=spp) for scene, spp in cases.pairs],
-                "reference": [chunk.format(scene=scene, chunk=k) for scene in cases.rendered_scenes
+                "reference": [chunk.format(scene=scene, chunk=k) for scene in cases.rendered_references
                               for k in range(cases.reference_chunks)]}
 
     # -- tables and figures ----------------------------------------------------------------------

@@ -91,6 +91,7 @@ def scene_module(path: str | Path) -> ModuleType:
     (the first comment), sizes it (its film) and builds an :class:`XmlScene` of it."""
     path = Path(path).resolve()
     module = ModuleType(f"scenes.{path.stem}", f"Mitsuba XML scene {path}")
+    module.__file__ = str(path)        # the scene's file (its digest, mcbench.pipeline.reference_sources)
     module.SCENE = SceneSpec(description=_description(path), category="xml", resolution=film_resolution(path),
                              build=lambda width, height: XmlScene(path, int(width), int(height)))
     return module

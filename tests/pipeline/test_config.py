@@ -63,9 +63,9 @@ def test_a_config_file_is_the_whole_configuration():
     narrowed = resolve_config({"scenes": ["cornell_box"]})
     assert narrowed["scenes"] == ["cornell_box"]
     # nothing is inherited from config.yaml: the per-scene reference spp stays the schema's (empty)
-    assert narrowed["reference"] == {"spp": 16384, "chunks": 4, "scene_spp": {}}
+    assert narrowed["reference"] == {"spp": 16384, "chunks": 4, "scene_spp": {}, "source": "store", "store": ""}
     smoke = resolve_config(yaml.safe_load((REPO / "workflow/configs/smoke.yaml").read_text()))
-    assert smoke["reference"] == {"spp": 1024, "chunks": 2, "scene_spp": {}}
+    assert smoke["reference"] == {"spp": 1024, "chunks": 2, "scene_spp": {}, "source": "store", "store": ""}
     # a nested object given in part keeps its own values and takes the rest from the schema
     assert resolve_config({"training": {"count": 3}})["training"]["crops"] == 4
 

@@ -32,7 +32,7 @@ def _xml_scene(folder: Path, asset_bytes=b"v 0 0 0\n") -> ModuleType:
     path.write_text('<scene version="3.0.0"><shape type="obj"><string name="filename" value="meshes/a.obj"/>'
                     '</shape></scene>')
     module = ModuleType("scenes.room")
-    module.SOURCE = path
+    module.__file__ = str(path)
     return module
 
 

@@ -10,6 +10,8 @@ import pytest
 
 from mcbench import NOISY, BenchError
 from mcbench.io.weights import COMMITTED_WEIGHTS, file_sha256
+from mcbench.pipeline.reference_sources import STORE_FOLDER, reference_identity
+from mcbench.pipeline.registry import load_scene
 from mcbench.pipeline.study_setup import METRIC_PATTERN, setup_study
 
 CONFIG = {"scenes": ["cornell_box", "glass_caustics"], "spp": [16, 4], "resolution": [16, 16],
@@ -34,7 +36,10 @@ def test_the_config_is_resolved_planned_and_summarised(study):
     assert study.config["features"] == "first_hit" and study.config["scenes"] == ["cornell_box", "glass_caustics"]
     assert list(study.plan.methods) == ["jbf", "oidn", "kpcn", "ens", "avg"]
     assert study.weights_dir == str(COMMITTED_WEIGHTS)
-    assert study.summary == f"mcbench: configuration test.yaml with the schema's defaults, digest {study.digest}"
+    first, *notes = study.summary.splitlines()
+    assert first == f"mcbench: configuration test.yaml with the schema's defaults, digest {study.digest}"
+    assert notes == ["mcbench: references rendered (the store "
+                     f"{STORE_FOLDER} has none of this resolution): cornell_box, glass_caustics"]
     assert "relmse" in METRIC_PATTERN.split("|") and "flip" in METRIC_PATTERN.split("|")
     assert list(study.metric_labels) == ["smape", "dssim"] and all(study.metric_labels.values())
 
@@ -134,3 +139,46 @@ def test_the_plan_values_the_rules_read(study):
     assert study.plan.comparison_methods["ens"] == {"module": "ensemble", "kind": "combiner", "inputs": ["jbf", "oidn"],
                                                     "params": {}, "label": study.plan.methods["ens"].label,
                                                     "comparison_role": "ensemble"}
+
+
+def _stored_study(tmp_path, **reference):
+    """A study of CONFIG whose store (in ``tmp_path``) holds cornell_box's reference at 16x16."""
+    import numpy as np
+
+    from mcbench.io.reference_store import write_stored_reference
+
+    layers = {"color": np.ones((16, 16, 3), np.float32), "variance": np.zeros((16, 16, 3), np.float32)}
+    write_stored_reference(tmp_path, "cornell_box", layers, provenance={"spp": 4096},
+                           identity=reference_identity("cornell_box", load_scene("cornell_box"), (16, 16)))
+    return setup_study({**CONFIG, "reference": {**CONFIG["reference"], "store": str(tmp_path), **reference}},
+                       source="test.yaml")
+
+
+def test_a_stored_reference_replaces_the_chunks_and_is_checked(tmp_path):
+    study = _stored_study(tmp_path)
+    cases = study.plan.cases
+    assert cases.reference_source("cornell_box") == "store" and cases.rendered_references == ["glass_caustics"]
+    chunk, check = "r/{scene}/chunk{chunk}.exr", "r/{scene}.check.json"
+    assert study.reference_inputs("cornell_box", chunk) == [str(tmp_path / "16x16" / "cornell_box.exr"),
+                                                            str(tmp_path / "16x16" / "cornell_box.json")]
+    assert study.reference_inputs("glass_caustics", chunk) == ["r/glass_caustics/chunk0.exr",
+                                                               "r/glass_caustics/chunk1.exr"]
+    assert study.reference_checks("cornell_box", check) == ["r/cornell_box.check.json"]
+    assert study.reference_checks("glass_caustics", check) == []
+    assert study.checked_render("cornell_box", "r/{scene}/spp{spp}.exr") == "r/cornell_box/spp16.exr"
+    assert study.render_cost_records("n/{scene}_{spp}", chunk)["reference"] == ["r/glass_caustics/chunk0.exr",
+                                                                              "r/glass_caustics/chunk1.exr"]
+    assert "reference of cornell_box: from the store" in study.summary
+
+
+def test_the_rules_wildcards_split_stored_and_merged_scenes(tmp_path):
+    import re
+
+    study = _stored_study(tmp_path)
+    stored = re.compile(rf"results/references/(?P<scene>{study.stored_scene_pattern})\.exr$")
+    merged = re.compile(rf"results/references/(?P<scene>{study.merged_scene_pattern})\.exr$")
+    for scene, is_stored in (("cornell_box", True), ("glass_caustics", False), ("cornell_box2", False)):
+        path = f"results/references/{scene}.exr"
+        assert bool(stored.match(path)) == is_stored and bool(merged.match(path)) != is_stored, scene
+    rendered = _stored_study(tmp_path, source="render")
+    assert rendered.plan.cases.stored_scenes == [] and not re.fullmatch(rendered.stored_scene_pattern, "cornell_box")

@@ -80,6 +80,22 @@ def get_reference_inputs(wildcards):
     return STUDY.reference_inputs(wildcards.scene, rules.render_reference_chunk.output[0])
 
 
+def get_checked_render(wildcards):
+    return STUDY.checked_render(wildcards.scene, rules.render_noisy.output[0])
+
+
+def get_reference_check(wildcards):
+    return STUDY.reference_checks(wildcards.scene, rules.check_reference.output[0])
+
+
+def get_store_chunks(wildcards):
+    return STUDY.reference_inputs_rendered(wildcards.scene, rules.render_reference_chunk.output[0])
+
+
+def get_store_records(wildcards):
+    return STUDY.store_records(rules.store_reference.output[0])
+
+
 def get_references():
     """Scene -> its merged reference."""
     return {scene: rules.merge_reference.output[0].format(scene=scene) for scene in PLAN.cases.scenes}

@@ -17,6 +17,7 @@ rule run_case:
     input:
         render=rules.render_noisy.output[0],
         reference=rules.merge_reference.output[0],
+        reference_check=get_reference_check,
     output:
         metrics="results/metrics/{scene}/spp{spp}.csv",
         viewer=directory("results/viewer_cases/{scene}/spp{spp}"),

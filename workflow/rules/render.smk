@@ -52,6 +52,8 @@ rule merge_reference:
         get_reference_inputs,
     output:
         "results/references/{scene}.exr",
+    wildcard_constraints:
+        scene=STUDY.merged_scene_pattern,
     params:
         chunks=PLAN.cases.reference_chunks,
         spp=lambda wildcards: PLAN.cases.reference_spp[wildcards.scene],
@@ -65,3 +67,70 @@ rule merge_reference:
         "results/logs/merge_reference/{scene}.log",
     script:
         "../scripts/merge_reference.py"
+
+
+# A reference from the reference store (reference.source: store, mcbench.pipeline.reference_sources):
+# read and checked against its record, then tested against this run's highest-spp render before a
+# case uses it (check_reference); `snakemake --cores 2 store_references` fills the store from this
+# config's reference settings (`--forcerun store_reference` to render it again).
+
+
+rule stored_reference:
+    input:
+        get_reference_inputs,
+    output:
+        "results/references/{scene}.exr",
+    wildcard_constraints:
+        scene=STUDY.stored_scene_pattern,
+    params:
+        record=lambda wildcards: PLAN.cases.stored_references[wildcards.scene],
+    threads: 1
+    resources:
+        **STUDY.resources("merge_reference"),
+    conda:
+        "../envs/mcbench.yaml"
+    log:
+        "results/logs/stored_reference/{scene}.log",
+    script:
+        "../scripts/stored_reference.py"
+
+
+rule check_reference:
+    input:
+        reference="results/references/{scene}.exr",
+        render=get_checked_render,
+    output:
+        "results/references/{scene}.check.json",
+    threads: 1
+    resources:
+        **STUDY.resources("merge_reference"),
+    conda:
+        "../envs/mcbench.yaml"
+    log:
+        "results/logs/check_reference/{scene}.log",
+    script:
+        "../scripts/check_reference.py"
+
+
+rule store_reference:
+    input:
+        get_store_chunks,
+    output:
+        f"{STUDY.store_folder}/{{resolution}}/{{scene}}.json",
+    params:
+        features=config["features"],
+    threads: 1
+    resources:
+        **STUDY.resources("merge_reference"),
+    conda:
+        "../envs/mcbench.yaml"
+    log:
+        "results/logs/store_reference/{scene}_{resolution}.log",
+    script:
+        "../scripts/store_reference.py"
+
+
+rule store_references:
+    input:
+        get_store_records,
+    localrule: True
