@@ -12,7 +12,7 @@ whatever exists under ``results/``; the job itself decides, item by item, what i
   method's parameters changes its key and those of the combiners that read it, nothing else.
 * an entry's metric values (``metrics/<scene>/spp<N>/values/<entry>.json``) are kept per metric
   when the image's and the reference's content checksums and the metric code's digest are those
-  they were computed from (:func:`mcbench.pipeline.metrics.read_metric_values`): an added metric
+  they were computed from (:func:`mcbench.pipeline.evaluation.read_metric_values`): an added metric
   is the only one computed.
 * an entry's viewer images (``viewer_entries/<scene>/spp<N>/<entry>/``) are kept when their record
   names the same image, reference, weight inputs and error maps (:func:`viewer_key`).
@@ -59,7 +59,7 @@ def method_key(*, module: str, params: dict, input_keys: list[str], weights_sha2
 def viewer_key(*, image: str, reference: str, weight_inputs: list[str], maps: list[str]) -> str:
     """The key of an entry's viewer images: its image's and the reference's content checksums, the
     names of the inputs whose weight maps it draws and of the metrics whose error maps it draws
-    (with their code digests, :func:`mcbench.pipeline.metrics.metric_code_digest`)."""
+    (with their code digests, :func:`mcbench.pipeline.evaluation.metric_code_digest`)."""
     return _digest({"image": image, "reference": reference, "weight_inputs": list(weight_inputs), "maps": list(maps)})
 
 
@@ -79,7 +79,7 @@ def _stored_method_key(exr: str, timing: str) -> str | None:
 
 
 def _stored_viewer_key(folder: str) -> str | None:
-    from mcbench.pipeline.metrics import ENTRY_RECORD
+    from mcbench.pipeline.evaluation import ENTRY_RECORD
 
     path = Path(folder) / ENTRY_RECORD
     if not path.exists():
@@ -142,7 +142,7 @@ def _evaluate_case(case: dict) -> dict[str, dict]:
     """Each entry's metric values and viewer images, made where not kept; per entry, which it
     made (``{"metrics": [names computed], "viewer": bool}``) and its metric values
     (``"values"``, in the order of the case's metrics)."""
-    from mcbench.pipeline.metrics import evaluate_entry_values, metric_code_digest
+    from mcbench.pipeline.evaluation import evaluate_entry_values, metric_code_digest
     from mcbench.pipeline.registry import load_metrics
 
     scene, spp = case["scene"], int(case["spp"])
@@ -195,8 +195,8 @@ def case_timing_paths(record_path: str | Path) -> list[str]:
 
 
 def gather_case_timings(record_paths: list[str], output_path: str):
-    """``timings.csv`` (:func:`mcbench.pipeline.metrics.gather_timings`) from the timing records
+    """``timings.csv`` (:func:`mcbench.pipeline.evaluation.gather_timings`) from the timing records
     the case records list (:func:`case_timing_paths`)."""
-    from mcbench.pipeline.metrics import gather_timings
+    from mcbench.pipeline.evaluation import gather_timings
 
     return gather_timings([path for record in record_paths for path in case_timing_paths(record)], output_path)

@@ -114,7 +114,7 @@ def block_reference(reference_path: str, width: int, height: int, downscale: int
     The reference must have the harness's resolution ``(width * downscale, height * downscale)``
     and finite ``color`` (and ``variance``) layers. Its ``variance`` layer holds each pixel's
     variance of the mean v_i (as the case job's entry evaluation,
-    :func:`mcbench.pipeline.metrics.evaluate_entry_values`, reads it for ``relmse_corrected``). The pixels of a block are independent estimates (their samples are), so
+    :func:`mcbench.pipeline.evaluation.evaluate_entry_values`, reads it for ``relmse_corrected``). The pixels of a block are independent estimates (their samples are), so
     the variance of the block mean m = (1/f²) Σ r_i over the f² pixels (f = ``downscale``) is
 
         Var[m] = (1/f⁴) Σ v_i = block_average(v, f) / f²,

@@ -111,7 +111,7 @@ def write_viewer(metrics_csv: str, case_dirs: list[str], output_dir: str, *, cas
 
 def assemble_viewer_case(entry_dirs: dict[str, str], case_dir: str, *, scene: str, spp: int) -> dict:
     """One case's viewer folder from its entries' folders (``entry_dirs``: {entry: folder written
-    by :func:`mcbench.pipeline.metrics.evaluate_entry_values`}, the noisy entry first): every entry's
+    by :func:`mcbench.pipeline.evaluation.evaluate_entry_values`}, the noisy entry first): every entry's
     images hard-linked (or copied) into ``case_dir`` after checking them against their record's
     CRC-32s, and the merged fragment with the checksums as ``case.json`` (what
     :func:`write_viewer` reads). Refused, naming the record, when an entry's folder holds another
@@ -119,7 +119,7 @@ def assemble_viewer_case(entry_dirs: dict[str, str], case_dir: str, *, scene: st
     import shutil
 
     from mcbench.analysis.viewer_images import CASE_RECORD, case_files, merge_fragments
-    from mcbench.pipeline.metrics import ENTRY_RECORD
+    from mcbench.pipeline.evaluation import ENTRY_RECORD
 
     fragments, checksums = [], {}
     case_path = Path(case_dir)

@@ -100,7 +100,7 @@ def test_gather_refuses_a_case_csv_cut_mid_row(tmp_path):
     """A per-case CSV cut in the middle of a row (an empty value, rows dropped) stops the gather
     with the file named, instead of moving scores."""
     from mcbench import BenchError
-    from mcbench.pipeline.metrics import gather_tables
+    from mcbench.pipeline.evaluation import gather_tables
 
     kwargs = dict(entries=["noisy", "a", "b"], metric_names=["relmse", "dssim"])
     good = _write_case(tmp_path / "x.csv", _full_case("x"))

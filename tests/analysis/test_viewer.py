@@ -174,12 +174,12 @@ def test_weight_map_is_the_rgb_mean_clamped_to_the_simplex():
 
 
 def test_error_maps_are_relmse_and_hdr_flip_of_the_pair():
-    """The case job's error maps (mcbench.pipeline.metrics.entry_metrics): one per metric that
+    """The case job's error maps (mcbench.pipeline.evaluation.entry_metrics): one per metric that
     declares a map, on its scale, in the config's order; relMSE's closed form and NVIDIA's
     flip_evaluator called directly."""
     import flip_evaluator
 
-    from mcbench.pipeline.metrics import entry_metrics
+    from mcbench.pipeline.evaluation import entry_metrics
     from mcbench.pipeline.registry import load_metrics
 
     reference = radiance(24, 24, seed=1)

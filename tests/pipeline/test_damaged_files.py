@@ -70,7 +70,7 @@ def _benchmark_record(path: Path, cpu_time: float) -> None:
 def build_case(tree: Path) -> None:
     """The finished case every damage starts from (see the module docstring)."""
     from mcbench.pipeline.method_runs import run_methods
-    from mcbench.pipeline.metrics import gather_tables
+    from mcbench.pipeline.evaluation import gather_tables
 
     render = build_render_buffers(height=HEIGHT, width=WIDTH, spp=SPP, bins=True, seed=3)
     write_layers(tree / "render.exr", render.layers,
@@ -134,14 +134,14 @@ def _run_case(tree: Path, out: Path, *, cache: Path | None = None) -> None:
 
 
 def _run_gather(tree: Path, out: Path) -> None:
-    from mcbench.pipeline.metrics import gather_tables
+    from mcbench.pipeline.evaluation import gather_tables
 
     gather_tables([str(tree / "case.csv")], str(out / "metrics.csv"), entries=ENTRIES,
                   metric_names=METRICS, cases=[(SCENE, SPP)])
 
 
 def _run_timings(tree: Path, out: Path) -> None:
-    from mcbench.pipeline.metrics import gather_timings
+    from mcbench.pipeline.evaluation import gather_timings
 
     gather_timings([str(tree / "timings" / f"{name}.json") for name in CANDIDATES], str(out / "timings.csv"))
 

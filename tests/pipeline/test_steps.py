@@ -11,7 +11,7 @@ import pytest
 
 from mcbench import NOISY, BenchError
 
-from mcbench.pipeline import method_runs, metrics, rankings, rendering
+from mcbench.pipeline import evaluation, method_runs, rankings, rendering
 from mcbench.pipeline.cases import run_case
 from mcbench.pipeline.registry import load_metric
 from mcbench.io.buffers import Denoised, RenderBuffers
@@ -167,7 +167,7 @@ def test_gather_tables_concatenates_the_cases(case_files, tmp_path):
     first, csv_a, _ = case_metrics(render, reference, tmp_path, scene="box", spp=8)
     second, csv_b, _ = case_metrics(render, reference, tmp_path, scene="room", spp=16)
     out = tmp_path / "metrics.csv"
-    frame = metrics.gather_tables([str(csv_a), str(csv_b)], str(out), entries=[NOISY, "jbf"],
+    frame = evaluation.gather_tables([str(csv_a), str(csv_b)], str(out), entries=[NOISY, "jbf"],
                                 metric_names=METRICS, cases=[("box", 8), ("room", 16)])
     expected = pd.concat([first, second], ignore_index=True)
     pd.testing.assert_frame_equal(frame.reset_index(drop=True), expected)
@@ -195,7 +195,7 @@ def test_gather_timings_collects_and_sorts_the_records(tmp_path):
         path.write_text(json.dumps(record))
         paths.append(str(path))
     out = tmp_path / "timings.csv"
-    frame = metrics.gather_timings(paths, str(out))
+    frame = evaluation.gather_timings(paths, str(out))
     assert list(frame.columns) == ["scene", "spp", "method", "module", "kind", "seconds", "width",
                                    "height", "threads", "machine"]
     assert list(zip(frame["method"], frame["scene"], frame["seconds"])) == [
@@ -281,13 +281,13 @@ def test_an_added_metric_is_the_only_one_computed_and_a_changed_file_recomputes_
     values = tmp_path / "values" / "jbf.json"
 
     def evaluate(metric_list, folder):
-        return metrics.evaluate_entry(SCENE, SPP, "jbf", str(output), str(reference), metric_list,
+        return evaluation.evaluate_entry(SCENE, SPP, "jbf", str(output), str(reference), metric_list,
                                       metrics_path=str(tmp_path / folder / "jbf.csv"), values_path=str(values))
 
     first = evaluate(["relmse"], "one")
     second = evaluate(["relmse", "smape", "dssim"], "two")
     assert calls == ["relmse", "smape", "dssim"]                 # relMSE not computed again
-    scratch = metrics.evaluate_entry(SCENE, SPP, "jbf", str(output), str(reference), ["relmse", "smape", "dssim"],
+    scratch = evaluation.evaluate_entry(SCENE, SPP, "jbf", str(output), str(reference), ["relmse", "smape", "dssim"],
                                      metrics_path=str(tmp_path / "scratch.csv"))
     pd.testing.assert_frame_equal(second, scratch)
     assert second.value.iloc[0] == first.value.iloc[0]
@@ -303,13 +303,13 @@ def test_an_added_metric_is_the_only_one_computed_and_a_changed_file_recomputes_
     assert changed.value.iloc[0] != second.value.iloc[0]
 
     calls.clear()
-    monkeypatch.setattr(metrics, "metric_code_digest", lambda name: "other metric code")
+    monkeypatch.setattr(evaluation, "metric_code_digest", lambda name: "other metric code")
     evaluate(["relmse"], "five")
     assert calls == ["relmse"]
     monkeypatch.undo()
     calls.clear()
     values.write_text("{damaged")
-    frame = metrics.evaluate_entry(SCENE, SPP, "jbf", str(output), str(reference), ["relmse"],
+    frame = evaluation.evaluate_entry(SCENE, SPP, "jbf", str(output), str(reference), ["relmse"],
                                    metrics_path=str(tmp_path / "six.csv"), values_path=str(values))
     assert frame.value.iloc[0] == changed.value.iloc[0]
 

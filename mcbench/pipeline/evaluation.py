@@ -87,7 +87,7 @@ def gather_timings(paths: list[str], output_path: str) -> pd.DataFrame:
     return frame
 
 
-#: An entry's viewer fragment in its folder (mcbench.pipeline.metrics.evaluate_entry_values).
+#: An entry's viewer fragment in its folder (mcbench.pipeline.evaluation.evaluate_entry_values).
 ENTRY_RECORD = "entry.json"
 
 
