@@ -15,7 +15,7 @@ from typing import Callable, Literal
 
 from mcbench import BenchError
 
-__all__ = ["SpecError", "checked", "field_names", "suggestion", "fits"]
+__all__ = ["SpecError", "checked", "field_names", "suggestion", "fits", "declaration"]
 
 
 class SpecError(BenchError):
@@ -107,3 +107,18 @@ def fits(value, hint) -> bool:
 def _type_name(hint) -> str:
     """``hint`` as written in the dataclass: ``bool``, ``Optional[tuple[str, ...]]``, ..."""
     return hint.__name__ if isinstance(hint, type) else re.sub(r"\b(?:[a-z_]\w*\.)+(?=\w)", "", str(hint))
+
+
+def declaration(module, attribute: str, cls: type, folder: str):
+    """The declaration ``attribute`` (an instance of ``cls``) of plugin module ``module``; a
+    :class:`mcbench.BenchError` naming ``<folder>/<name>.py`` when it has none or something else
+    under that name."""
+    from mcbench import BenchError
+
+    spec = getattr(module, attribute, None)
+    if not isinstance(spec, cls):
+        name = module.__name__.rsplit(".", 1)[-1]
+        found = "none" if spec is None else f"a {type(spec).__name__}"
+        raise BenchError(f"{folder}/{name}.py: {attribute} must be a {cls.__module__}.{cls.__name__} "
+                         f"(the {folder[:-1]}'s declaration), found {found}")
+    return spec

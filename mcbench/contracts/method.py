@@ -19,7 +19,7 @@ from types import ModuleType
 from typing import Callable, Literal, NewType, Optional
 
 from mcbench import BenchError
-from mcbench.contracts.fields import SpecError, checked, field_names
+from mcbench.contracts.fields import SpecError, checked, declaration, field_names
 
 __all__ = ["KINDS", "SPEC_ATTRIBUTE", "WEIGHTS_ARGUMENT", "COMPARISON_ROLES", "SingleImageDenoiser", "MethodSpec",
            "LearnedSpec", "SpecError", "method_spec", "stray_hooks"]
@@ -192,10 +192,4 @@ def _carried(value, declared) -> bool:
 def method_spec(module: ModuleType) -> MethodSpec:
     """The declaration ``METHOD`` of method module ``module``; a :class:`BenchError` naming
     ``methods/<name>.py`` when it has none or something else under that name."""
-    spec = getattr(module, SPEC_ATTRIBUTE, None)
-    if not isinstance(spec, MethodSpec):
-        name = module.__name__.rsplit(".", 1)[-1]
-        found = "none" if spec is None else f"a {type(spec).__name__}"
-        raise BenchError(f"methods/{name}.py: {SPEC_ATTRIBUTE} must be a mcbench.contracts.method.MethodSpec "
-                         f"(the method's declaration), found {found}")
-    return spec
+    return declaration(module, SPEC_ATTRIBUTE, MethodSpec, "methods")

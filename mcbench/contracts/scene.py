@@ -14,7 +14,7 @@ from types import ModuleType
 from typing import Callable, Optional, Union
 
 from mcbench import BenchError
-from mcbench.contracts.fields import SpecError, checked
+from mcbench.contracts.fields import SpecError, checked, declaration
 
 __all__ = ["SPEC_ATTRIBUTE", "SceneSpec", "SpecError", "scene_spec"]
 
@@ -63,10 +63,4 @@ class SceneSpec:
 def scene_spec(module: ModuleType) -> SceneSpec:
     """The declaration ``SCENE`` of scene module ``module``; a :class:`BenchError` naming
     ``scenes/<name>.py`` when it has none or something else under that name."""
-    spec = getattr(module, SPEC_ATTRIBUTE, None)
-    if not isinstance(spec, SceneSpec):
-        name = module.__name__.rsplit(".", 1)[-1]
-        found = "none" if spec is None else f"a {type(spec).__name__}"
-        raise BenchError(f"scenes/{name}.py: {SPEC_ATTRIBUTE} must be a mcbench.contracts.scene.SceneSpec "
-                         f"(the scene's declaration), found {found}")
-    return spec
+    return declaration(module, SPEC_ATTRIBUTE, SceneSpec, "scenes")

@@ -205,19 +205,13 @@ def store_reference_chunks(scene: str, chunk_paths: list[str], record_path: str,
     and put the result into the store whose record is ``record_path`` (``<store>/<W>x<H>/<scene>.json``),
     with its identity and provenance (commit, Mitsuba and Dr.Jit versions, variant, CPU, spp,
     seeds, render seconds, feature convention, the scene's files)."""
-    from mcbench.io.exr import check_finite, check_resolution, read_layers, read_metadata
+    from mcbench.io.exr import read_metadata
     from mcbench.io.reference_store import write_stored_reference
     from mcbench.pipeline.provenance import cpu_info, git_state, package_versions
     from mcbench.pipeline.registry import load_scene
-    from mcbench.render.renderer import merge_reference_chunks
+    from mcbench.pipeline.rendering import merged_chunks
 
-    chunks = []
-    for path in chunk_paths:
-        layers = read_layers(path)
-        check_finite(path, layers)
-        check_resolution(path, layers["color"].shape)
-        chunks.append((layers, read_metadata(path)))
-    layers, metadata = merge_reference_chunks(chunks)
+    layers, metadata = merged_chunks(chunk_paths)
     height, width = layers["color"].shape[:2]
     module = load_scene(scene)
     identity = reference_identity(scene, module, (width, height))

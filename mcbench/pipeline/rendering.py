@@ -9,7 +9,7 @@ from mcbench.contracts.scene import scene_spec
 from mcbench.io.exr import check_finite, check_resolution, read_layers, read_metadata, write_layers
 from mcbench.io.render_folders import RenderFolder, case_files, read_case, read_reference, reference_files
 
-__all__ = ["render_noisy", "render_reference_chunk", "merge_reference", "folder_case_files",
+__all__ = ["render_noisy", "render_reference_chunk", "merge_reference", "merged_chunks", "folder_case_files",
            "folder_reference_files", "resolution_pair"]
 
 
@@ -75,8 +75,6 @@ def merge_reference(chunk_paths: list[str], output_path: str, *, scene: str | No
     """Merge reference chunks (spp-weighted, float64) into the reference with its own variance; for
     a ``scene`` of renders made elsewhere, import its reference (``chunk_paths`` are then the
     folder's files, read again by :func:`mcbench.io.render_folders.read_reference`)."""
-    from mcbench.render.renderer import merge_reference_chunks
-
     if scene is not None:
         from mcbench.pipeline.registry import load_scene
 
@@ -89,14 +87,22 @@ def merge_reference(chunk_paths: list[str], output_path: str, *, scene: str | No
                                                         "layers": ",".join(sorted(layers))})
             return
 
+    layers, metadata = merged_chunks(chunk_paths)
+    write_layers(output_path, layers, metadata=metadata)
+
+
+def merged_chunks(chunk_paths: list[str]) -> tuple[dict, dict]:
+    """The reference chunks at ``chunk_paths`` (each checked: finite, the harness's size) merged
+    spp-weighted in float64 (:func:`mcbench.render.renderer.merge_reference_chunks`): layers and metadata."""
+    from mcbench.render.renderer import merge_reference_chunks
+
     chunks = []
     for path in chunk_paths:
         layers = read_layers(path)
         check_finite(path, layers)
         check_resolution(path, layers["color"].shape)
         chunks.append((layers, read_metadata(path)))
-    layers, metadata = merge_reference_chunks(chunks)
-    write_layers(output_path, layers, metadata=metadata)
+    return merge_reference_chunks(chunks)
 
 
 def resolution_pair(resolution):
