@@ -18,7 +18,7 @@ from mcbench.io.exr import read_layers, read_metadata
 from mcbench.io.reference_store import read_store_record, write_stored_reference
 from tests.conftest import run_snakemake as snakemake
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.extended]     # five runs of a one-scene study (4 min): the extended tier
 
 SCENE, SIZE = "cornell_box", 32
 CONFIG = {"variant": "auto", "seed": 0, "render_threads": 1, "resolution": [SIZE, SIZE], "scenes": [SCENE],
