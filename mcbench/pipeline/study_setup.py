@@ -166,7 +166,7 @@ class StudySetup:
         cases = self.plan.cases
         source = cases.reference_source(scene)
         if source == "render":
-            return [chunk.format(scene=scene, chunk=k) for k in range(cases.reference_chunks)]
+            return self.reference_inputs_rendered(scene, chunk)
         if source == "store":
             record = Path(cases.stored_references[scene])
             return [str(record.with_suffix(".exr")), str(record)]
