@@ -130,6 +130,20 @@ class StudySetup:
             return ()
         return tuple(method_spec(load_method(network)).learned.correlated_bases or ())
 
+    def trained_networks(self, *, combiners: bool) -> tuple[str, ...]:
+        """The config's trained networks that are learned combiners (``combiners=True``: they
+        train on their bases' results) or denoisers. Two rules train them: a rule may not depend
+        on itself in Snakemake, and a combiner's inputs need a learned base's weights."""
+        return tuple(name for name in self.plan.training.networks if bool(self.combiner_bases(name)) == combiners)
+
+    def base_weights(self, base: str) -> list[str]:
+        """The weights file that a combiner's base ``base`` (``<name>`` or ``<name>+sure``) makes its
+        correlated training inputs with: an input of those inputs, so that a base retrained first
+        (``train_<base>`` in the same run) is what the combiner learns from, and new weights
+        remake them; nothing for a base that learns nothing."""
+        name = base.removesuffix("+sure")
+        return [self.weights_file(name)] if is_learned_method(load_method(name)) else []
+
     def training_crops(self, patterns: list[str]) -> list[str]:
         """The training crops of every training seed (``patterns``: the crop files of one seed)."""
         return [pattern.format(seed=seed) for pattern in patterns for seed in self.plan.training.seeds]

@@ -5,6 +5,7 @@
 from __future__ import annotations
 
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -12,7 +13,7 @@ from mcbench import BenchError
 from mcbench.contracts.method import method_spec
 from mcbench.io.buffers import RenderBuffers
 from mcbench.io.exr import check_finite, read_layers, read_metadata, write_layers
-from mcbench.io.weights import record_path, weights_folder, weights_path
+from mcbench.io.weights import file_sha256, is_learned_method, record_path, weights_folder, weights_path
 from mcbench.pipeline.method_runs import method_function
 from mcbench.pipeline.rendering import resolution_pair
 
@@ -34,6 +35,45 @@ def write_training_example(seed: int, output_paths: list[str], *, spp_levels, ta
 
 
 SURE_SUFFIX = "+sure"   # a training base "<name>+sure" also writes SURE's divergence term
+
+#: Metadata key of a base's results on a training crop: the SHA-256 of the weights it ran with
+#: ("" for a base that learns nothing), checked against the base's weights when a combiner trains.
+BASE_WEIGHTS_KEY = "base_weights_sha256"
+
+
+def base_weights_sha256(base: str, weights_dir: str | None) -> str:
+    """The SHA-256 of the weights that training base ``base`` (``<name>`` or ``<name>+sure``) runs
+    with, from weights folder ``weights_dir`` (default the committed ones); "" for a base that
+    learns nothing."""
+    from mcbench.pipeline.registry import load_method
+
+    name = base.removesuffix(SURE_SUFFIX)
+    if not is_learned_method(load_method(name, kind="denoiser", config_key=f"base '{base}'")):
+        return ""
+    path = weights_path(weights_folder(weights_dir), name)
+    if not path.exists():
+        raise BenchError(f"{path}: weights of base '{name}' are missing; train them first "
+                         f"(`snakemake --cores 2 train_{name}`) or fix weights_dir")
+    return file_sha256(path)
+
+
+def check_base_results(correlated_files: dict[str, list[str]], *, weights_dir: str | None) -> None:
+    """Refuse base results on training crops that a base made with other weights than the ones in
+    ``weights_dir`` (a retrained base, or results made before weights were recorded): a combiner
+    trained on them would learn from a base it never sees in a study. The error names the file and
+    the folder to delete."""
+    for base, files in correlated_files.items():
+        expected = base_weights_sha256(base, weights_dir)
+        if not expected:
+            continue
+        for path in files:
+            made_with = read_metadata(path).get(BASE_WEIGHTS_KEY)
+            if made_with != expected:
+                raise BenchError(
+                    f"{path}: results of base '{base}' made with "
+                    f"{'unrecorded weights' if made_with is None else 'weights ' + made_with[:12]}, not its "
+                    f"weights in {weights_folder(weights_dir)} ({expected[:12]}); delete "
+                    f"{Path(path).parent} and run the combiner's training again")
 
 
 def write_correlated_training_inputs(base: str, crop_paths: list[str], output_paths: list[str], *,
@@ -61,6 +101,7 @@ def write_correlated_training_inputs(base: str, crop_paths: list[str], output_pa
     name, with_sure = (base[:-len(SURE_SUFFIX)], True) if base.endswith(SURE_SUFFIX) else (base, False)
     folder = weights_folder(weights_dir)
     denoise = method_function(load_method(name, kind="denoiser", config_key=f"base '{base}'"), weights_dir=folder)
+    made_with = base_weights_sha256(base, weights_dir)
     if with_sure:
         from mcbench.filters.sure import divergence_map
         from mcbench.io.buffers import IMAGE_INDEX
@@ -93,6 +134,7 @@ def write_correlated_training_inputs(base: str, crop_paths: list[str], output_pa
         check_finite(f"{output_path} (results of '{base}' on {crop_path})", out)
         write_layers(output_path, out, metadata={"base": base, "seed": meta.get("seed", ""),
                                                  "crop": meta.get("crop", ""), "spp_levels": meta["spp_levels"],
+                                                 BASE_WEIGHTS_KEY: made_with,
                                                  "seconds": f"{time.perf_counter() - start:.3f}"})
 
 
@@ -115,10 +157,12 @@ def learned_method(name: str):
     return check_learned_method(load_method(name, config_key=f"network '{name}'"))
 
 
-def training_data(name: str, crop_files: list[str], correlated_files: dict[str, list[str]] | None = None):
+def training_data(name: str, crop_files: list[str], correlated_files: dict[str, list[str]] | None = None, *,
+                  weights_dir: str | None = None):
     """The training data of learned method ``name``: its crops (a denoiser: the crop paths
     themselves) or, for a combiner, :func:`mcbench.nn.crops.load_combiner_crops` over the results
-    of its ``correlated_bases`` (``correlated_files``: {base: files, one per crop})."""
+    of its ``correlated_bases`` (``correlated_files``: {base: files, one per crop}), each made
+    with its base's weights in ``weights_dir`` (:func:`check_base_results`)."""
     spec = method_spec(learned_method(name))
     if spec.kind != "combiner":
         return list(crop_files)
@@ -129,17 +173,21 @@ def training_data(name: str, crop_files: list[str], correlated_files: dict[str, 
     missing = [b for b in spec.correlated_bases if b not in correlated_files]
     if missing:
         raise BenchError(f"{name}: no results of base(s) {missing} for its training")
+    check_base_results({b: correlated_files[b] for b in spec.correlated_bases}, weights_dir=weights_dir)
     return load_combiner_crops(crop_files, {b: correlated_files[b] for b in spec.correlated_bases},
                                spec.training_keys)
 
 
-def train_learned_method(name: str, crop_files: list[str], *args, correlated_files=None, **kwargs):
+def train_learned_method(name: str, crop_files: list[str], *args, correlated_files=None, weights_dir=None,
+                         **kwargs):
     """Train ``methods/<name>.py`` (:func:`mcbench.nn.train.train_network`) on
-    :func:`training_data` (the step resolves the name, core never imports methods)."""
+    :func:`training_data` (the step resolves the name, core never imports methods); a combiner's
+    bases ran with the weights in ``weights_dir``."""
     from mcbench.nn.train import train_network
 
     kwargs.setdefault("provenance", training_provenance())
-    return train_network(learned_method(name), training_data(name, crop_files, correlated_files), *args, **kwargs)
+    data = training_data(name, crop_files, correlated_files, weights_dir=weights_dir)
+    return train_network(learned_method(name), data, *args, **kwargs)
 
 
 def training_provenance() -> dict:
@@ -169,7 +217,7 @@ def train_progressive_variant(variant: str, data: str = "results/training", step
     module = progressive if variant == "full" else progressive.variant_module(variant)
     files, correlated = correlated_paths(data, method_spec(progressive).learned.correlated_bases, crop_paths(data))
     crops = training_data("progressive", [str(f) for f in files],
-                          {b: [str(f) for f in fs] for b, fs in correlated.items()})
+                          {b: [str(f) for f in fs] for b, fs in correlated.items()}, weights_dir=weights_dir)
     name = "progressive" if variant == "full" else f"progressive_{variant}"
     folder = weights_folder(weights_dir)
     return train_network(module, crops, weights_path(folder, name), record_path(folder, name),

@@ -101,6 +101,40 @@ def test_correlated_inputs_and_combiner_crops(tmp_path, make_render_buffers):
         load_combiner_crops(crop_paths, {"jbf": outputs["jbf"][:1]}, {"correlated": 3})
 
 
+def test_a_combiner_trains_only_on_results_made_with_its_bases_current_weights(tmp_path, make_render_buffers):
+    """Each base result records the SHA-256 of the weights its base ran with; a combiner's
+    training refuses results of other weights (a base retrained since) or of unrecorded ones."""
+    import shutil
+
+    from mcbench.io.exr import read_metadata
+    from mcbench.io.weights import file_sha256
+    from mcbench.pipeline.training import BASE_WEIGHTS_KEY, training_data
+
+    crops = [tmp_path / f"example_{seed}_0.exr" for seed in (0, 7)]
+    for seed, path in zip((0, 7), crops):
+        write_crop(path, make_render_buffers, seed=seed)
+    results = [str(tmp_path / "correlated" / "kpcn" / p.name) for p in crops]
+    write_correlated_training_inputs("kpcn", [str(p) for p in crops], results)
+    assert read_metadata(results[0])[BASE_WEIGHTS_KEY] == file_sha256(COMMITTED_WEIGHTS / "kpcn.pt")
+    assert len(training_data("deep_combiner_mb", [str(p) for p in crops], {"kpcn": results})) == 2
+
+    retrained = tmp_path / "weights"
+    retrained.mkdir()
+    shutil.copy(COMMITTED_WEIGHTS / "kpcn.pt", retrained / "kpcn.pt")
+    with open(retrained / "kpcn.pt", "ab") as handle:       # other bytes: other weights
+        handle.write(b"\0")
+    with pytest.raises(BenchError, match=r"example_0_0.exr: results of base 'kpcn' made with weights .* delete"):
+        training_data("deep_combiner_mb", [str(p) for p in crops], {"kpcn": results}, weights_dir=str(retrained))
+    layers = read_layers(results[1])
+    write_layers(results[1], layers, metadata={"base": "kpcn", "spp_levels": "4,8"})
+    with pytest.raises(BenchError, match="example_7_0.exr: results of base 'kpcn' made with unrecorded weights"):
+        training_data("deep_combiner_mb", [str(p) for p in crops], {"kpcn": results})
+    # a base that learns nothing records no weights and is not checked
+    jbf = [str(tmp_path / "correlated" / "jbf" / p.name) for p in crops]
+    write_correlated_training_inputs("jbf", [str(p) for p in crops], jbf)
+    assert read_metadata(jbf[0])[BASE_WEIGHTS_KEY] == ""
+
+
 def test_denoised_load_reads_extras_only_when_asked(tmp_path):
     image = np.random.default_rng(0).random((4, 5, 3)).astype(np.float32)
     extras = {name: image * (i + 2) for i, name in enumerate(SUB_OUTPUTS["a"])}

@@ -29,7 +29,8 @@ rule training_example:
 
 rule training_correlated:
     input:
-        list(rules.training_example.output)[: PLAN.training.combiner_settings["crops"]],
+        crops=list(rules.training_example.output)[: PLAN.training.combiner_settings["crops"]],
+        weights=lambda wildcards: STUDY.base_weights(wildcards.base),
     output:
         [f"results/training/correlated/{{base}}/example_{{seed}}_{k}.exr" for k in range(PLAN.training.combiner_settings["crops"])],
     params:
@@ -66,7 +67,7 @@ rule train_network:
         checkpoint="results/training/checkpoints/{network}.ckpt",
         weights_dir=lambda wildcards, output: os.path.dirname(output.weights),
     wildcard_constraints:
-        network="|".join(PLAN.training.networks),
+        network="|".join(STUDY.trained_networks(combiners=False)) or "^$",
     # the networks train with 2 torch threads (mcbench.nn.train's default "threads")
     threads: 2
     resources:
@@ -79,6 +80,13 @@ rule train_network:
         "results/benchmarks/training/train_{network}.tsv"
     script:
         "../scripts/train_network.py"
+
+
+# A learned combiner trains on its bases' results, made with a learned base's weights, which
+# train_network makes: a rule of its own (a Snakemake rule may not depend on itself).
+use rule train_network as train_combiner with:
+    wildcard_constraints:
+        network="|".join(STUDY.trained_networks(combiners=True)) or "^$",
 
 
 for _network in PLAN.training.networks:

@@ -10,4 +10,5 @@ correlated = {name[len("correlated_"):]: list(files) for name, files in snakemak
 run_logged(snakemake.log[0], train_learned_method, snakemake.wildcards.network, list(snakemake.input.crops),
            snakemake.output.weights, snakemake.output.record, snakemake.params.checkpoint,
            {**snakemake.params.overrides, "threads": snakemake.threads},
-           log=lambda message: print(message, flush=True), correlated_files=correlated or None)
+           log=lambda message: print(message, flush=True), correlated_files=correlated or None,
+           weights_dir=snakemake.params.weights_dir)

@@ -5,5 +5,5 @@ limit_threads(snakemake.threads)  # before any heavy import (numba, torch, OpenB
 from mcbench.pipeline.logs import run_logged  # noqa: E402
 from mcbench.pipeline.training import write_correlated_training_inputs  # noqa: E402
 
-run_logged(snakemake.log[0], write_correlated_training_inputs, snakemake.wildcards.base, list(snakemake.input),
+run_logged(snakemake.log[0], write_correlated_training_inputs, snakemake.wildcards.base, list(snakemake.input.crops),
            list(snakemake.output), weights_dir=snakemake.params.weights_dir, threads=snakemake.threads)
