@@ -199,12 +199,14 @@ def training_provenance() -> dict:
 
 
 def train_progressive_variant(variant: str, data: str = "results/training", steps: int | None = None,
-                              threads: int | None = None, weights_dir: str | None = None) -> dict:
+                              threads: int | None = None, weights_dir: str | None = None, *,
+                              rounds: int | None = None, plateau: float | None = None) -> dict:
     """Train progressive denoising's h_NN (``methods/progressive.py``): ``full`` (the committed
     ``progressive.pt``) or an ablation of its ``VARIANTS`` (``no_sure``, ``no_fact``; Firmino et al.
     2022 Table 4), on the crops with results of its declared ``correlated_bases`` under
     ``<data>/correlated/``; weights and record in ``weights_dir`` (default ``methods/weights/``), checkpoint
-    ``results/training/checkpoints/<name>.ckpt`` (a run resumes from it)."""
+    ``results/training/checkpoints/<name>.ckpt`` (a run resumes from it); ``rounds`` and
+    ``plateau``: the stopping rule (:mod:`mcbench.nn.train`)."""
     import sys
 
     from mcbench.nn.crops import crop_paths
@@ -222,13 +224,16 @@ def train_progressive_variant(variant: str, data: str = "results/training", step
     folder = weights_folder(weights_dir)
     return train_network(module, crops, weights_path(folder, name), record_path(folder, name),
                          f"results/training/checkpoints/{name}.ckpt",
-                         {**({"steps": steps} if steps else {}), **({"threads": threads} if threads else {})},
+                         {key: value for key, value in
+                          {"steps": steps, "threads": threads, "rounds": rounds, "plateau": plateau}.items()
+                          if value is not None},
                          log=lambda message: print(message, file=sys.stderr, flush=True),
                          provenance=training_provenance())
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m mcbench.pipeline.training progressive full|no_sure|no_fact [--steps N] [--threads N]``
+    """``python -m mcbench.pipeline.training progressive full|no_sure|no_fact [--steps N] [--threads N]
+    [--weights-dir D] [--rounds N] [--plateau F]``
     trains progressive denoising's network or an ablation; ``python -m mcbench.pipeline.training
     evaluate|train <name> ...`` is :func:`mcbench.nn.train.main` with the methods registry (e.g. to
     re-evaluate committed weights on the validation crops)."""
@@ -244,9 +249,13 @@ def main(argv: list[str] | None = None) -> int:
         parser.add_argument("--steps", type=int, default=None, help="training steps (default TRAINING['steps'])")
         parser.add_argument("--threads", type=int, default=None, help="torch threads (default 2)")
         parser.add_argument("--weights-dir", default=None, help="folder of the weights (default: methods/weights)")
+        parser.add_argument("--rounds", type=int, default=None,
+                            help="at most this many rounds of its steps (stopping rule of mcbench.nn.train; default 1)")
+        parser.add_argument("--plateau", type=float, default=None,
+                            help="stop after a round improving the validation loss by less than this (default 0.02)")
         arguments = parser.parse_args(argv[1:])
         train_progressive_variant(arguments.variant, arguments.data, arguments.steps, arguments.threads,
-                                  arguments.weights_dir)
+                                  arguments.weights_dir, rounds=arguments.rounds, plateau=arguments.plateau)
         return 0
     from mcbench.nn.train import main as train_main
 
