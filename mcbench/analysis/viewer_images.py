@@ -150,10 +150,14 @@ def scale_ticks(scale: ColourScale) -> list[dict]:
 
 def weight_map(layer) -> np.ndarray:
     """(H, W) float64 weight of one ensemble input: the mean over RGB of a ``weights_filtered_{i}``
-    layer (H, W, 3), clamped to [0, 1] (the simplex; float32 rounding may leave it by 1e-7)."""
+    layer (H, W, 3), or that mean as a stored output keeps it (H, W)
+    (:func:`mcbench.io.buffers.stored_layers`), clamped to [0, 1] (the simplex; float32 rounding
+    may leave it by 1e-7)."""
     layer = np.asarray(layer, dtype=np.float64)
+    if layer.ndim == 2:
+        return np.clip(layer, 0.0, 1.0)
     if layer.ndim != 3 or layer.shape[2] != 3:
-        raise ValueError(f"a weight layer must have shape (H, W, 3), got {layer.shape}")
+        raise ValueError(f"a weight layer must have shape (H, W, 3) or (H, W), got {layer.shape}")
     return np.clip(layer.mean(axis=2), 0.0, 1.0)
 
 

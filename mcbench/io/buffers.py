@@ -235,6 +235,29 @@ class Denoised:
                    source=str(path))
 
 
+#: Prefixes of a combiner's weight-map extras: ``weights_raw_{i}`` (before the weights' filter)
+#: and ``weights_filtered_{i}`` (what it applied), each (H, W, 3) per input i.
+RAW_WEIGHTS_PREFIX = "weights_raw_"
+FILTERED_WEIGHTS_PREFIX = "weights_filtered_"
+
+
+def stored_layers(result: Denoised) -> dict[str, np.ndarray]:
+    """The layers of method result ``result`` that its output EXR keeps: what a later step reads
+    (issue 46, a tenth of the disk). Colour, halves and extras as they are, except the weight maps:
+    ``weights_raw_{i}`` is left out (no step reads it from a file: the oracle study and the tests
+    take it from the result in memory), and ``weights_filtered_{i}`` is kept as its mean over RGB,
+    (H, W), the one thing the viewer shows of it (:func:`mcbench.analysis.viewer_images.weight_map`).
+    A weight map is 2/3 of an ensemble's file for three inputs, more for more."""
+    out = {}
+    for name, layer in result.layers().items():
+        if name.startswith(RAW_WEIGHTS_PREFIX):
+            continue
+        if name.startswith(FILTERED_WEIGHTS_PREFIX) and np.ndim(layer) == 3:
+            layer = np.asarray(layer, dtype=np.float64).mean(axis=2)
+        out[name] = layer
+    return out
+
+
 def denoise_each_buffer(buffers: RenderBuffers,
                         denoise_image: Callable[[ImageBuffers], np.ndarray]) -> Denoised:
     """Run a single-image denoiser on the full buffer and on each half buffer.

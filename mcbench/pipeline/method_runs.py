@@ -15,7 +15,7 @@ from typing import Callable
 import numpy as np
 
 from mcbench import BenchError
-from mcbench.io.buffers import Denoised, RenderBuffers
+from mcbench.io.buffers import Denoised, RenderBuffers, stored_layers
 from mcbench.io.exr import check_finite, read_metadata, write_layers
 from mcbench.io.file_cache import cached_read
 from mcbench.contracts.method import WEIGHTS_ARGUMENT, method_spec
@@ -115,7 +115,7 @@ def run_methods(entries: list[dict], render_path: str, *, scene: str = "", spp: 
         if bad:
             check_finite(f"{entry['exr']} (output of method '{method}')", bad)
         key = {"key": entry["key"]} if entry.get("key") else {}
-        write_layers(entry["exr"], layers, metadata={"method": method, "scene": scene, "spp": spp,
+        write_layers(entry["exr"], stored_layers(result), metadata={"method": method, "scene": scene, "spp": spp,
                                                      "seconds": f"{seconds:.6f}", **key})
         write_json(entry["timing"], {"scene": scene, "spp": spp, "method": method, "module": module_name,
                                      "kind": spec.kind, "seconds": seconds, "width": width,

@@ -169,8 +169,36 @@ def test_weight_map_is_the_rgb_mean_clamped_to_the_simplex():
     expected = np.zeros((2, 3))
     expected[0, 0], expected[0, 1] = 0.5, 1.0
     np.testing.assert_allclose(viewer.weight_map(layer), expected, atol=1e-15)
-    with pytest.raises(ValueError, match=r"\(H, W, 3\)"):
-        viewer.weight_map(np.zeros((2, 3)))
+    # a stored output keeps the mean itself (mcbench.io.buffers.stored_layers): the same map
+    np.testing.assert_allclose(viewer.weight_map(layer.mean(axis=2)), expected, atol=1e-15)
+    with pytest.raises(ValueError, match=r"\(H, W, 3\) or \(H, W\)"):
+        viewer.weight_map(np.zeros((2, 3, 2)))
+
+
+def test_a_stored_output_keeps_what_later_steps_read(tmp_path):
+    """Stored layers of a combiner result: colour and halves bit for bit, the filtered weights as
+    their RGB mean (what the viewer shows), the raw weights left out; the file written from them
+    loads back as the same output and the same weight maps."""
+    from mcbench.io.buffers import Denoised, stored_layers
+    from mcbench.io.exr import write_layers
+
+    rng = np.random.default_rng(3)
+    images = [rng.random((4, 5, 3)).astype(np.float32) for _ in range(3)]
+    filtered = rng.dirichlet([1, 1], size=(4, 5, 3)).astype(np.float32)    # (4, 5, 3, 2) on the simplex
+    extras = {**{f"weights_raw_{i}": filtered[..., i] * 2 for i in range(2)},
+              **{f"weights_filtered_{i}": filtered[..., i] for i in range(2)},
+              "color_sub0": images[0] * 0.5}
+    result = Denoised(full=images[0], a=images[1], b=images[2], extras=extras)
+    kept = stored_layers(result)
+    assert sorted(kept) == ["color", "color_a", "color_b", "color_sub0", "weights_filtered_0", "weights_filtered_1"]
+    for name in ("color", "color_a", "color_b", "color_sub0"):
+        assert np.array_equal(kept[name], result.layers()[name])
+    write_layers(tmp_path / "out.exr", kept)
+    loaded = Denoised.load(tmp_path / "out.exr", extras=True)
+    assert np.array_equal(loaded.full, images[0]) and np.array_equal(loaded.b, images[2])
+    for i in range(2):
+        np.testing.assert_allclose(viewer.weight_map(loaded.extras[f"weights_filtered_{i}"]),
+                                   viewer.weight_map(filtered[..., i]), atol=1e-7)
 
 
 def test_error_maps_are_relmse_and_hdr_flip_of_the_pair():
