@@ -1,0 +1,138 @@
+"""The learned networks' validation curves, from their training records (issue 45: each trained
+until its validation loss stops improving, its curve in docs/).
+
+    python -m mcbench.analysis.training_curves WEIGHTS_DIR [--out docs/training.md]
+
+A record (``<name>.json`` beside ``<name>.pt``, written by :func:`mcbench.nn.train.train_network`)
+holds ``history``: one entry per validation, ``{"step", "round", "train_loss",
+"validation_loss", "validation_relmse", "seconds"}``. The page gives, per network, the machine
+(the CPU model of ``cpu``, the torch threads), the stopping rule's outcome (``steps_run``,
+``rounds_run``, ``stopped_by``), the round kept (lowest validation loss at a round's end) and the
+table of validations; with ``--out`` it writes the page and one PNG per network beside it
+(``<out stem>/<name>.png``: validation loss and relMSE against the step, rounds marked).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from pathlib import Path
+
+from mcbench.io.tables import read_json
+
+__all__ = ["kept_round", "network_section", "training_page", "write_curve"]
+
+
+def kept_round(history: list[dict], steps: int) -> dict | None:
+    """The validation at the end of the round whose weights were kept: the lowest validation loss
+    among the entries at a multiple of ``steps`` (the first of equals, as the trainer keeps it);
+    None when no round ended."""
+    ends = [entry for entry in history if steps and entry["step"] % steps == 0]
+    return min(ends, key=lambda entry: entry["validation_loss"]) if ends else None
+
+
+def _cpu(record: dict) -> str:
+    cpu = record.get("cpu") or {}
+    model = cpu.get("model") if isinstance(cpu, dict) else None
+    return model or f"not recorded ({record.get('machine', 'unknown machine')})"
+
+
+def _number(value, digits: int = 5) -> str:
+    if value is None or (isinstance(value, float) and not math.isfinite(value)):
+        return "—"
+    return f"{value:.{digits}g}"
+
+
+def network_section(name: str, record: dict, *, image: str | None = None) -> list[str]:
+    """Markdown lines of one network's record: what it was trained on and how long, the stopping
+    rule's outcome and its validation table (``image``: the curve's path relative to the page)."""
+    settings = record.get("settings", {})
+    steps = int(settings.get("steps", 0))
+    history = record.get("history", [])
+    kept = kept_round(history, steps)
+    lines = [f"## {record.get('label', name)} (`{name}`)", ""]
+    features = record.get("data", {}).get("features", "first_hit (not recorded)")
+    lines.append(f"- features: {features}; loss {record.get('loss')}; {settings.get('rounds', 1)} round(s) at most "
+                 f"of {steps} steps, plateau {settings.get('plateau', '—')}")
+    lines.append(f"- ran {record.get('steps_run', steps)} steps in {record.get('rounds_run', 1)} round(s), stopped by "
+                 f"{record.get('stopped_by', 'its fixed step count')}; kept: "
+                 + (f"round {kept['step'] // steps} (validation loss {_number(kept['validation_loss'])})" if kept else "—"))
+    lines.append(f"- {record.get('seconds', float('nan')) / 60:.1f} minutes on {record.get('threads', '?')} torch "
+                 f"thread(s) of {_cpu(record)}")
+    if image:
+        lines += ["", f"![{name}]({image})"]
+    lines += ["", "| step | round | training loss | validation loss | validation relMSE |",
+              "|---:|---:|---:|---:|---:|"]
+    for entry in history:
+        mark = " (kept)" if entry is kept else ""
+        lines.append(f"| {entry['step']} | {entry.get('round', '—')} | {_number(entry.get('train_loss'))} | "
+                     f"{_number(entry['validation_loss'])}{mark} | {_number(entry.get('validation_relmse'))} |")
+    return lines + [""]
+
+
+def write_curve(path: str | Path, name: str, record: dict) -> None:
+    """A PNG of ``record``'s validation loss and relMSE against the step, the rounds' ends dashed."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    history = record.get("history", [])
+    steps = int(record.get("settings", {}).get("steps", 0))
+    figure, loss_axis = plt.subplots(figsize=(6, 3.2))
+    x = [entry["step"] for entry in history]
+    loss_axis.plot(x, [entry["validation_loss"] for entry in history], "o-", label=f"validation {record.get('loss')}")
+    loss_axis.set_xlabel("step")
+    loss_axis.set_ylabel(f"validation {record.get('loss')}")
+    relmse_axis = loss_axis.twinx()
+    relmse_axis.plot(x, [entry.get("validation_relmse", float("nan")) for entry in history], "s--", color="tab:orange",
+                     label="validation relMSE")
+    relmse_axis.set_ylabel("validation relMSE")
+    for end in range(steps, (max(x) if x else 0) + 1, steps or 1):
+        loss_axis.axvline(end, color="grey", linestyle=":", linewidth=1)
+    loss_axis.set_title(record.get("label", name), fontsize=9)
+    figure.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    figure.savefig(path, dpi=100)
+    plt.close(figure)
+
+
+def training_page(weights_dir: str | Path, *, images: Path | None = None, relative_to: Path | None = None) -> str:
+    """The Markdown page of every training record in ``weights_dir`` (sorted by name), with a curve
+    per network written into ``images`` (linked relative to ``relative_to``) when given."""
+    folder = Path(weights_dir)
+    records = sorted(folder.glob("*.json"))
+    if not records:
+        raise ValueError(f"{folder}: no training records (<name>.json); train the networks first")
+    lines = ["# Training records and validation curves", "",
+             f"Generated from the records in `{folder}` by `python -m mcbench.analysis.training_curves {folder}"
+             + (f" --out {relative_to / 'training.md'}`" if relative_to else "`") + ".", ""]
+    for path in records:
+        record = read_json(path)
+        image = None
+        if images is not None:
+            write_curve(images / f"{path.stem}.png", path.stem, record)
+            image = str((images / f"{path.stem}.png").relative_to(relative_to)) if relative_to else str(images)
+        lines += network_section(path.stem, record, image=image)
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m mcbench.analysis.training_curves",
+                                     description="Validation curves of the training records in a weights folder.")
+    parser.add_argument("weights_dir")
+    parser.add_argument("--out", default=None, help="write the page here, its curves in <out stem>/ (default: print)")
+    args = parser.parse_args(argv)
+    if args.out is None:
+        print(training_page(args.weights_dir))
+        return 0
+    out = Path(args.out)
+    text = training_page(args.weights_dir, images=out.parent / out.stem, relative_to=out.parent)
+    out.write_text(text + "\n")
+    print(f"wrote {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
