@@ -235,26 +235,27 @@ class Denoised:
                    source=str(path))
 
 
-#: Prefixes of a combiner's weight-map extras: ``weights_raw_{i}`` (before the weights' filter)
-#: and ``weights_filtered_{i}`` (what it applied), each (H, W, 3) per input i.
-RAW_WEIGHTS_PREFIX = "weights_raw_"
+#: Prefix of a combiner's weight maps as its filter applied them, ``weights_filtered_{i}``, (H, W, 3)
+#: per input i (its raw weights, ``weights_raw_{i}``, are in memory only).
 FILTERED_WEIGHTS_PREFIX = "weights_filtered_"
 
 
 def stored_layers(result: Denoised) -> dict[str, np.ndarray]:
     """The layers of method result ``result`` that its output EXR keeps: what a later step reads
-    (issue 46, a tenth of the disk). Colour, halves and extras as they are, except the weight maps:
-    ``weights_raw_{i}`` is left out (no step reads it from a file: the oracle study and the tests
-    take it from the result in memory), and ``weights_filtered_{i}`` is kept as its mean over RGB,
-    (H, W), the one thing the viewer shows of it (:func:`mcbench.analysis.viewer_images.weight_map`).
-    A weight map is 2/3 of an ensemble's file for three inputs, more for more."""
+    (issue 46, a tenth of the disk). The colour and the halves; of the extras, the sub-buffer
+    results (:data:`SUB_OUTPUTS`: a multi-buffer combiner's inputs) and each
+    ``weights_filtered_{i}`` as its mean over RGB, (H, W), the one thing the viewer shows of a
+    weight map (:func:`mcbench.analysis.viewer_images.weight_map`). Left out, as no step reads them
+    from a file (the oracle study and the tests take them from the result in memory): the raw
+    weights ``weights_raw_{i}`` and every other extra (e.g. progressive denoising's α′ maps, NFOR's
+    selection map)."""
+    kept_extras = {name for names in SUB_OUTPUTS.values() for name in names}
     out = {}
     for name, layer in result.layers().items():
-        if name.startswith(RAW_WEIGHTS_PREFIX):
-            continue
-        if name.startswith(FILTERED_WEIGHTS_PREFIX) and np.ndim(layer) == 3:
-            layer = np.asarray(layer, dtype=np.float64).mean(axis=2)
-        out[name] = layer
+        if name.startswith(FILTERED_WEIGHTS_PREFIX):
+            out[name] = np.asarray(layer, dtype=np.float64).mean(axis=2) if np.ndim(layer) == 3 else layer
+        elif name in ("color", "color_a", "color_b") or name in kept_extras:
+            out[name] = layer
     return out
 
 

@@ -176,9 +176,10 @@ def test_weight_map_is_the_rgb_mean_clamped_to_the_simplex():
 
 
 def test_a_stored_output_keeps_what_later_steps_read(tmp_path):
-    """Stored layers of a combiner result: colour and halves bit for bit, the filtered weights as
-    their RGB mean (what the viewer shows), the raw weights left out; the file written from them
-    loads back as the same output and the same weight maps."""
+    """Stored layers of a combiner result: colour, halves and sub-buffer results bit for bit, the
+    filtered weights as their RGB mean (what the viewer shows), the raw weights and the other
+    extras (read by no step) left out; the file written from them loads back as the same output
+    and the same weight maps."""
     from mcbench.io.buffers import Denoised, stored_layers
     from mcbench.io.exr import write_layers
 
@@ -187,7 +188,7 @@ def test_a_stored_output_keeps_what_later_steps_read(tmp_path):
     filtered = rng.dirichlet([1, 1], size=(4, 5, 3)).astype(np.float32)    # (4, 5, 3, 2) on the simplex
     extras = {**{f"weights_raw_{i}": filtered[..., i] * 2 for i in range(2)},
               **{f"weights_filtered_{i}": filtered[..., i] for i in range(2)},
-              "color_sub0": images[0] * 0.5}
+              "color_sub0": images[0] * 0.5, "alpha": images[1][..., 0], "selection": images[2]}
     result = Denoised(full=images[0], a=images[1], b=images[2], extras=extras)
     kept = stored_layers(result)
     assert sorted(kept) == ["color", "color_a", "color_b", "color_sub0", "weights_filtered_0", "weights_filtered_1"]
