@@ -7,7 +7,8 @@ Prints Markdown: the bytes of each top-level folder of ``results/``, then the me
 method (base denoiser or combiner, from the output's timing record ``<method>.json``), and the
 renders (``renders/``) by layer. A layer's share is its uncompressed size (height x width x
 channels x bytes of its pixel type, from the EXR header, the pixels not read); a file's header
-is the rest. Reads headers only.
+is the rest. A hard-linked file counts once, in the first folder (by name) that holds it. Reads
+headers only.
 """
 
 from __future__ import annotations
@@ -57,7 +58,16 @@ def _table(title: str, rows: dict[str, float], total: float) -> list[str]:
 
 def report(results: Path) -> str:
     """The Markdown report of ``results`` (see the module docstring)."""
-    folders = {p.name: sum(f.stat().st_size for f in p.rglob("*") if f.is_file()) for p in results.iterdir()
+    seen: set[tuple[int, int]] = set()       # a hard-linked file (the viewer's) counts once
+
+    def once(path: Path) -> int:
+        stat = path.stat()
+        if (stat.st_dev, stat.st_ino) in seen:
+            return 0
+        seen.add((stat.st_dev, stat.st_ino))
+        return stat.st_size
+
+    folders = {p.name: sum(once(f) for f in sorted(p.rglob("*")) if f.is_file()) for p in sorted(results.iterdir())
                if p.is_dir()}
     files = sum(f.stat().st_size for f in results.iterdir() if f.is_file())
     total = sum(folders.values()) + files
