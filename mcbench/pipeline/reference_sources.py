@@ -201,17 +201,30 @@ def check_stored_reference(scene: str, reference_path: str, render_path: str, ou
 
 
 def store_reference_chunks(scene: str, chunk_paths: list[str], record_path: str, *, features: str) -> StoredReference:
-    """Merge this run's reference chunks of ``scene`` (spp-weighted, as the run's own reference)
-    and put the result into the store whose record is ``record_path`` (``<store>/<W>x<H>/<scene>.json``),
-    with its identity and provenance (commit, Mitsuba and Dr.Jit versions, variant, CPU, spp,
-    seeds, render seconds, feature convention, the scene's files)."""
-    from mcbench.io.exr import read_metadata
+    """Put the reference of ``scene`` into the store whose record is ``record_path``
+    (``<store>/<W>x<H>/<scene>.json``), with its identity and provenance (commit, Mitsuba and
+    Dr.Jit versions, variant, CPU of the storing machine, spp, seeds, chunks, render seconds,
+    feature convention, the scene's files). ``chunk_paths``: this run's reference chunks of the
+    scene (merged spp-weighted, as the run's own reference), or the one reference a run merged from
+    them (``results/references/<scene>.exr``, whose metadata holds ``chunks``, ``spp``, ``seeds``
+    and the chunks' ``seconds``): a finished run's references are stored without rendering them
+    again (its chunks are temporary files)."""
+    from mcbench.io.exr import check_finite, read_layers, read_metadata
     from mcbench.io.reference_store import write_stored_reference
     from mcbench.pipeline.provenance import cpu_info, git_state, package_versions
     from mcbench.pipeline.registry import load_scene
     from mcbench.pipeline.rendering import merged_chunks
 
-    layers, metadata = merged_chunks(chunk_paths)
+    merged = len(chunk_paths) == 1 and "chunks" in read_metadata(chunk_paths[0])
+    if merged:
+        metadata = read_metadata(chunk_paths[0])
+        layers = read_layers(chunk_paths[0], ["color", "variance"])
+        check_finite(chunk_paths[0], layers)
+        chunks, seconds = int(metadata["chunks"]), float(metadata.get("seconds", 0))
+    else:
+        layers, metadata = merged_chunks(chunk_paths)
+        chunks = len(chunk_paths)
+        seconds = sum(float(read_metadata(p).get("seconds", 0)) for p in chunk_paths)
     height, width = layers["color"].shape[:2]
     module = load_scene(scene)
     identity = reference_identity(scene, module, (width, height))
@@ -219,8 +232,7 @@ def store_reference_chunks(scene: str, chunk_paths: list[str], record_path: str,
     provenance = {"commit": git_state(STORE_FOLDER.parent)["commit"], "mitsuba": versions.get("mitsuba"),
                   "drjit": versions.get("drjit"), "variant": metadata.get("variant"), "cpu": cpu_info(),
                   "spp": int(metadata["spp"]), "seeds": metadata.get("seeds"), "seed": metadata.get("seed"),
-                  "chunks": len(chunk_paths), "render_seconds": sum(float(read_metadata(p).get("seconds", 0))
-                                                                    for p in chunk_paths),
+                  "chunks": chunks, "render_seconds": seconds,
                   "features": features, "scene_files": sorted(scene_files(module))}
     stored = write_stored_reference(Path(record_path).parent.parent, scene, layers, identity=identity,
                                     provenance=provenance)

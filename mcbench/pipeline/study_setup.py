@@ -186,6 +186,15 @@ class StudySetup:
             return [str(record.with_suffix(".exr")), str(record)]
         return folder_reference_files(cases.render_folders[scene])
 
+    def store_inputs(self, scene: str, chunk: str, merged: str) -> list[str]:
+        """What rule store_reference stores of ``scene``: the reference this run merges from its
+        chunks (``merged``: its pattern) where this run renders it, so that a finished run's
+        references are stored without rendering them again; else (a scene whose reference this
+        run takes from the store) its chunks (``chunk``: their pattern), rendered afresh."""
+        if self.plan.cases.reference_source(scene) == "render":
+            return [merged.format(scene=scene)]
+        return self.reference_inputs_rendered(scene, chunk)
+
     def reference_inputs_rendered(self, scene: str, chunk: str) -> list[str]:
         """The chunks (``chunk``: their pattern) of ``scene``'s reference as this config renders
         them, whatever the reference's source (the store's input, rule store_reference)."""

@@ -120,3 +120,35 @@ def test_a_consistent_stored_reference_passes_and_a_biased_one_stops_the_run(tmp
     with pytest.raises(BenchError, match=r"scene 'box'.*max \|z\|"):
         check_stored_reference("box", str(reference_path), str(tmp_path / "biased.exr"), str(tmp_path / "c2.json"))
     assert not (tmp_path / "c2.json").exists()
+
+
+def test_a_finished_runs_merged_reference_is_stored_as_its_chunks_would_be(tmp_path):
+    """store_references on a finished run stores the reference it merged (its chunks, temporary,
+    are gone) with the same pixels and provenance as storing the chunks themselves."""
+    from mcbench.pipeline.reference_sources import store_reference_chunks
+    from mcbench.pipeline.rendering import merge_reference
+    from mcbench.io.reference_store import read_store_record
+
+    rng = np.random.default_rng(5)
+    chunks = []
+    for k, (spp, seconds) in enumerate([(16, 2.5), (48, 7.0)]):
+        color = rng.random((8, 8, 3))
+        layers = {"color": color, "color_m2": color ** 2 + 0.1, "albedo": rng.random((8, 8, 3)),
+                  "normal": rng.random((8, 8, 3)), "depth": rng.random((8, 8))}
+        meta = {"scene": "cornell_box", "spp": spp, "chunk": k, "seeds": f"{100 + k}", "seed": 0,
+                "variant": "llvm_ad_rgb", "resolution": "8x8", "mitsuba": "3.9.1", "seconds": seconds}
+        chunks.append(str(tmp_path / f"chunk{k}.exr"))
+        write_layers(chunks[-1], layers, metadata=meta)
+    merged = str(tmp_path / "cornell_box.exr")
+    merge_reference(chunks, merged)
+    records = {}
+    for name, inputs in (("from_chunks", chunks), ("from_merged", [merged])):
+        record = tmp_path / name / "8x8" / "cornell_box.json"
+        store_reference_chunks("cornell_box", inputs, str(record), features="first_hit")
+        records[name] = read_store_record(tmp_path / name, "cornell_box", (8, 8))
+    a, b = records["from_chunks"], records["from_merged"]
+    for layer in ("color", "variance"):
+        np.testing.assert_array_equal(read_layers(a.exr_path, [layer])[layer], read_layers(b.exr_path, [layer])[layer])
+    for key in ("spp", "chunks", "seeds", "render_seconds", "variant"):
+        assert a.provenance[key] == b.provenance[key], key
+    assert b.provenance["spp"] == 64 and b.provenance["chunks"] == 2 and b.provenance["render_seconds"] == 9.5

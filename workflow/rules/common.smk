@@ -88,8 +88,8 @@ def get_reference_check(wildcards):
     return STUDY.reference_checks(wildcards.scene, rules.check_reference.output[0])
 
 
-def get_store_chunks(wildcards):
-    return STUDY.reference_inputs_rendered(wildcards.scene, rules.render_reference_chunk.output[0])
+def get_store_inputs(wildcards):
+    return STUDY.store_inputs(wildcards.scene, rules.render_reference_chunk.output[0], rules.merge_reference.output[0])
 
 
 def get_store_records(wildcards):

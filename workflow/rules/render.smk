@@ -72,7 +72,8 @@ rule merge_reference:
 # A reference from the reference store (reference.source: store, mcbench.pipeline.reference_sources):
 # read and checked against its record, then tested against this run's highest-spp render before a
 # case uses it (check_reference); `snakemake --cores 2 store_references` fills the store from this
-# config's reference settings (`--forcerun store_reference` to render it again).
+# config's reference settings: the references this run renders, stored from their merge (a finished
+# run's are not rendered again), and a scene the store already holds rendered afresh.
 
 
 rule stored_reference:
@@ -114,7 +115,7 @@ rule check_reference:
 
 rule store_reference:
     input:
-        get_store_chunks,
+        get_store_inputs,
     output:
         f"{STUDY.store_folder}/{{resolution}}/{{scene}}.json",
     params:
