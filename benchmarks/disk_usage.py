@@ -1,4 +1,4 @@
-"""Where a finished study's disk goes (issue 46: a tenth of the disk).
+"""Where a finished study's disk goes: which layers and which methods fill it.
 
     python benchmarks/disk_usage.py --results results
 

@@ -1,4 +1,4 @@
-"""The learned networks' validation curves, from their training records (issue 45: each trained
+"""The learned networks' validation curves, from their training records (each trained
 until its validation loss stops improving, its curve in docs/).
 
     python -m mcbench.analysis.training_curves WEIGHTS_DIR [--out docs/training.md]

@@ -242,7 +242,7 @@ FILTERED_WEIGHTS_PREFIX = "weights_filtered_"
 
 def stored_layers(result: Denoised) -> dict[str, np.ndarray]:
     """The layers of method result ``result`` that its output EXR keeps: what a later step reads
-    (issue 46, a tenth of the disk). The colour and the halves; of the extras, the sub-buffer
+    (so that a finished study stays small enough to move). The colour and the halves; of the extras, the sub-buffer
     results (:data:`SUB_OUTPUTS`: a multi-buffer combiner's inputs) and each
     ``weights_filtered_{i}`` as its mean over RGB, (H, W), the one thing the viewer shows of a
     weight map (:func:`mcbench.analysis.viewer_images.weight_map`). Left out, as no step reads them

@@ -215,9 +215,9 @@ def store_reference_chunks(scene: str, chunk_paths: list[str], record_path: str,
     from mcbench.pipeline.registry import load_scene
     from mcbench.pipeline.rendering import merged_chunks
 
-    merged = len(chunk_paths) == 1 and "chunks" in read_metadata(chunk_paths[0])
-    if merged:
-        metadata = read_metadata(chunk_paths[0])
+    first = read_metadata(chunk_paths[0]) if chunk_paths else {}
+    if len(chunk_paths) == 1 and "chunks" in first:       # a merged reference
+        metadata = first
         layers = read_layers(chunk_paths[0], ["color", "variance"])
         check_finite(chunk_paths[0], layers)
         chunks, seconds = int(metadata["chunks"]), float(metadata.get("seconds", 0))

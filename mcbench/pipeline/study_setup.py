@@ -29,6 +29,7 @@ from mcbench.pipeline.registry import available_metrics, load_method, load_metri
 from mcbench.pipeline.rendering import folder_case_files, folder_reference_files
 from mcbench.pipeline.resources import StudyRequests, load_job_costs
 from mcbench.pipeline.study_plan import StudyPlan
+from mcbench.pipeline.training import SURE_SUFFIX
 
 __all__ = ["METRIC_PATTERN", "STUDY_FIGURES", "StudySetup", "setup_study"]
 
@@ -141,7 +142,7 @@ class StudySetup:
         correlated training inputs with: an input of those inputs, so that a base retrained first
         (``train_<base>`` in the same run) is what the combiner learns from, and new weights
         remake them; nothing for a base that learns nothing."""
-        name = base.removesuffix("+sure")
+        name = base.removesuffix(SURE_SUFFIX)
         return [self.weights_file(name)] if is_learned_method(load_method(name)) else []
 
     def training_crops(self, patterns: list[str]) -> list[str]:

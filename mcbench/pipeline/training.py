@@ -173,9 +173,9 @@ def training_data(name: str, crop_files: list[str], correlated_files: dict[str, 
     missing = [b for b in spec.correlated_bases if b not in correlated_files]
     if missing:
         raise BenchError(f"{name}: no results of base(s) {missing} for its training")
-    check_base_results({b: correlated_files[b] for b in spec.correlated_bases}, weights_dir=weights_dir)
-    return load_combiner_crops(crop_files, {b: correlated_files[b] for b in spec.correlated_bases},
-                               spec.training_keys)
+    results = {b: correlated_files[b] for b in spec.correlated_bases}
+    check_base_results(results, weights_dir=weights_dir)
+    return load_combiner_crops(crop_files, results, spec.training_keys)
 
 
 def train_learned_method(name: str, crop_files: list[str], *args, correlated_files=None, weights_dir=None,

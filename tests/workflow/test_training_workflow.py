@@ -1,7 +1,7 @@
 """The training DAG of a learned combiner whose base is learned too (the deep combiner over KPCN):
 the combiner's training inputs are its bases' results on the training crops, made with the base's
 weights, so a base retrained in the same run comes first and its new weights remake those results
-(issue 45: the Tungsten-feature retraining). Dry runs of a one-crop training config; the crops and
+(as when every network is retrained on new features). Dry runs of a one-crop training config; the crops and
 the bases' results exist and are older than any weights, as after a finished crop stage. (Where a
 learned base's weights are missing but stale results of it exist, Snakemake keeps those results:
 an output is not remade for a missing input; the combiner's training then refuses them by the
@@ -65,7 +65,7 @@ def test_new_base_weights_remake_only_that_base_results(workdir):
     weights = workdir / "weights" / "kpcn.pt"
     weights.touch()                      # newer than the crop's KPCN results
     counts, text = _planned(workdir, "train_deep_combiner")
-    # the combiner is planned too: with its inputs marked ancient() (before issue 45) Snakemake 9
+    # the combiner is planned too: with its inputs marked ancient() Snakemake 9
     # left it out of the DAG here and remade only KPCN's results
     assert "train_network" not in counts
     assert counts.get("training_correlated") == 1 and "base=kpcn" in text
