@@ -174,10 +174,23 @@ def copy_stored_reference(stored: StoredReference, output_path: str) -> None:
         "stored_sha256": stored.sha256})
 
 
+def _header_spp(path: str) -> int:
+    """The samples per pixel an EXR's header records (``spp``); ``BenchError`` naming the file when
+    it records none (the check's variance floor needs it)."""
+    from mcbench.io.exr import read_metadata
+
+    value = str(read_metadata(path).get("spp", ""))
+    if not value.isdigit() or int(value) <= 0:
+        raise BenchError(f"{path}: its header records no samples per pixel (spp = {value!r}); the reference "
+                         "check needs it. Render or store the file again with this version")
+    return int(value)
+
+
 def check_stored_reference(scene: str, reference_path: str, render_path: str, output_path: str) -> None:
     """Test the reference at ``reference_path`` against this run's render at ``render_path`` (both
     with their variance; :func:`mcbench.analysis.reference_check.reference_agreement`), write the
-    test's numbers to ``output_path`` (JSON), and stop the run when they disagree."""
+    test's numbers to ``output_path`` (JSON), and stop the run when they disagree. The samples per
+    pixel behind each (their headers' ``spp``) set the render's variance floor of the test."""
     from mcbench.analysis.reference_check import reference_agreement
     from mcbench.io.exr import check_finite, read_layers
     from mcbench.io.tables import write_json
@@ -189,7 +202,8 @@ def check_stored_reference(scene: str, reference_path: str, render_path: str, ou
     if reference["color"].shape != render["color"].shape:
         raise BenchError(f"{reference_path}: reference is {reference['color'].shape}, the render "
                          f"{render_path} is {render['color'].shape}")
-    agreement = reference_agreement(reference["color"], reference["variance"], render["color"], render["variance"])
+    agreement = reference_agreement(reference["color"], reference["variance"], render["color"], render["variance"],
+                                    reference_spp=_header_spp(reference_path), render_spp=_header_spp(render_path))
     if not agreement.passed:
         raise BenchError(f"scene '{scene}': the stored reference {reference_path} disagrees with this run's "
                          f"render {render_path}: {agreement.describe()}. Its scene or the renderer differs "

@@ -96,8 +96,8 @@ def test_a_misspelt_source_names_the_key(tmp_path):
         reference_source("box", _python_scene(tmp_path), RESOLUTION, requested="stored")
 
 
-def _render(path, color, variance):
-    write_layers(path, {"color": color, "variance": variance})
+def _render(path, color, variance, *, spp="64"):
+    write_layers(path, {"color": color, "variance": variance}, metadata={"spp": spp})
 
 
 def test_a_consistent_stored_reference_passes_and_a_biased_one_stops_the_run(tmp_path):
@@ -120,6 +120,9 @@ def test_a_consistent_stored_reference_passes_and_a_biased_one_stops_the_run(tmp
     with pytest.raises(BenchError, match=r"scene 'box'.*max \|z\|"):
         check_stored_reference("box", str(reference_path), str(tmp_path / "biased.exr"), str(tmp_path / "c2.json"))
     assert not (tmp_path / "c2.json").exists()
+    _render(tmp_path / "no_spp.exr", noisy, variance, spp="")
+    with pytest.raises(BenchError, match=r"no_spp.exr: its header records no samples per pixel"):
+        check_stored_reference("box", str(reference_path), str(tmp_path / "no_spp.exr"), str(tmp_path / "c3.json"))
 
 
 def test_a_finished_runs_merged_reference_is_stored_as_its_chunks_would_be(tmp_path):
