@@ -52,8 +52,12 @@ __all__ = ["BUNDLE_VERSION", "MANIFEST_NAME", "CASE_KEYS", "MTIME_STEP_NS", "is_
            "snakemake_record_path", "read_snakemake_records", "export_study", "verify_bundle",
            "check_case_keys", "relocate_records", "import_mtimes", "import_study", "main"]
 
-#: The bundle format's version; a bundle of another version is refused.
-BUNDLE_VERSION = 1
+#: The bundle format's version. Version 2 stores a file whose content (size and SHA-256) equals an
+#: earlier member's as a tar hard link to it (the viewer's images are linked into three folders:
+#: each stored once, with one header); version 1 stores every file whole. Both are read; a bundle of
+#: another version is refused.
+BUNDLE_VERSION = 2
+READ_VERSIONS = (1, 2)
 #: The archive's first member: what the bundle holds.
 MANIFEST_NAME = "bundle.json"
 #: The config keys that define the study's cases (the renders and references every result was
@@ -220,9 +224,15 @@ def export_study(results_dir, bundle_path, *, config: dict, workdir=".", checkou
     data = json.dumps(manifest, indent=1, sort_keys=True).encode()
 
     def write_tar(tmp):
+        first_with = {}                      # (size, sha256) -> the first member of that content
         with open(tmp, "wb") as raw, tarfile.open(fileobj=raw, mode="w", format=tarfile.PAX_FORMAT) as tar:
             tar.addfile(_tar_info(MANIFEST_NAME, len(data), time.time_ns()), io.BytesIO(data))
             for entry in entries:
+                content = (entry["size"], entry["sha256"])
+                if content in first_with:
+                    tar.addfile(_link_info(entry["path"], first_with[content], entry["mtime_ns"]))
+                    continue
+                first_with[content] = entry["path"]
                 with open(Path(workdir) / entry["path"], "rb") as handle:
                     reader = _HashingReader(handle)
                     tar.addfile(_tar_info(entry["path"], entry["size"], entry["mtime_ns"]), reader)
@@ -243,6 +253,12 @@ def _roots(checkout_dir, workdir) -> dict:
 def _tar_info(name: str, size: int, mtime_ns: int) -> tarfile.TarInfo:
     info = tarfile.TarInfo(name)
     info.size, info.mode, info.mtime, info.type = size, 0o644, mtime_ns // 1_000_000_000, tarfile.REGTYPE
+    return info
+
+
+def _link_info(name: str, target: str, mtime_ns: int) -> tarfile.TarInfo:
+    info = tarfile.TarInfo(name)
+    info.mode, info.mtime, info.type, info.linkname = 0o644, mtime_ns // 1_000_000_000, tarfile.LNKTYPE, target
     return info
 
 
@@ -289,10 +305,11 @@ def _read_manifest(tar: tarfile.TarFile, *, bundle) -> dict:
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise BenchError(f"{bundle}: {MANIFEST_NAME} is not valid JSON ({exc}); export the study again") from exc
     version = manifest.get("bundle_version") if isinstance(manifest, dict) else None
-    if version != BUNDLE_VERSION:
+    if version not in READ_VERSIONS:
         raise BenchError(f"{bundle}: {MANIFEST_NAME}: bundle_version {version!r}: made by an incompatible version "
                          f"of mcbench ({manifest.get('mcbench') if isinstance(manifest, dict) else '?'}; this one "
-                         f"reads version {BUNDLE_VERSION}); export it with this version or import it with that one")
+                         f"reads versions {', '.join(map(str, READ_VERSIONS))}); export it with this version or import "
+                         "it with that one")
     files = manifest.get("files")
     if not isinstance(files, list) or not all(isinstance(e, dict) and {"path", "size", "sha256", "mtime_ns"} <= set(e)
                                               for e in files):
@@ -341,10 +358,13 @@ def _scan(bundle_path, *, prepare=None) -> dict:
                                      f"altered; export the study again")
                 if name in found:
                     raise BenchError(f"{bundle}: member {name} appears twice; export the study again")
-                if not member.isfile():
+                if member.islnk():
+                    _check_link(member, listed, found, bundle=bundle, write_to=write_to)
+                elif not member.isfile():
                     raise BenchError(f"{bundle}: member {name} is not a regular file; export the study again")
+                else:
+                    _check_member(tar, member, listed[name], bundle=bundle, write_to=write_to)
                 found.add(name)
-                _check_member(tar, member, listed[name], bundle=bundle, write_to=write_to)
         except (tarfile.TarError, EOFError, OSError) as exc:
             raise BenchError(f"{bundle}: truncated or unreadable archive ({exc}); copy it again "
                              f"(compare its size with the original) or export it again") from exc
@@ -353,6 +373,25 @@ def _scan(bundle_path, *, prepare=None) -> dict:
         raise BenchError(f"{bundle}: {len(missing)} listed file(s) missing from the archive, first {missing[0]}: "
                          f"truncated or altered; copy it again or export it again")
     return manifest
+
+
+def _check_link(member, listed: dict, found: set, *, bundle, write_to: Path | None) -> None:
+    """A hard-link member (bundle version 2): it must name an earlier member whose listed size and
+    SHA-256 are its own; with ``write_to`` its file is made as a hard link to that member's
+    (a copy where the file system has none)."""
+    target = member.linkname
+    if target not in found or (listed[target]["size"], listed[target]["sha256"]) != \
+            (listed[member.name]["size"], listed[member.name]["sha256"]):
+        raise BenchError(f"{bundle}: member {member.name} links to {target!r}, which is not an earlier member of "
+                         f"the same content: the archive was altered; export the study again")
+    if write_to is not None:
+        source, copy = write_to / target, write_to / member.name
+        copy.parent.mkdir(parents=True, exist_ok=True)
+        copy.unlink(missing_ok=True)
+        try:
+            os.link(source, copy)
+        except OSError:
+            shutil.copyfile(source, copy)
 
 
 def _check_member(tar, member, entry: dict, *, bundle, write_to: Path | None) -> None:

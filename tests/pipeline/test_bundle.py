@@ -147,7 +147,7 @@ def test_export_holds_every_study_file_with_checksums_and_bundle_json_first(stud
         assert entry["size"] == len(data)
         assert entry["sha256"] == hashlib.sha256(data).hexdigest()
         assert entry["mtime_ns"] == TREE[entry["path"]][1] * 10**9
-    assert manifest["bundle_version"] == B.BUNDLE_VERSION == 1
+    assert manifest["bundle_version"] == B.BUNDLE_VERSION == 2
     assert manifest["config"] == CONFIG
     from mcbench.pipeline.config import config_digest
     assert manifest["config_digest"] == config_digest(CONFIG)
@@ -284,8 +284,8 @@ def test_a_traversal_member_alone_is_refused(bundle, clone, tmp_path):
 
 
 def test_another_bundle_version_is_refused(bundle, clone, tmp_path):
-    bad = rewrite_bundle(bundle, tmp_path / "bad.tar", manifest=lambda m: {**m, "bundle_version": 2})
-    refused(bad, clone, match=r"bundle_version 2: made by an incompatible version")
+    bad = rewrite_bundle(bundle, tmp_path / "bad.tar", manifest=lambda m: {**m, "bundle_version": 3})
+    refused(bad, clone, match=r"bundle_version 3: made by an incompatible version")
 
 
 @pytest.mark.parametrize("key, change, named", [
@@ -339,3 +339,46 @@ def test_an_import_interrupted_while_moving_completes_when_run_again(bundle, clo
     monkeypatch.setattr(B.os, "replace", real_replace)
     import_into(bundle, clone)
     assert listing(clone) == listing(reference_clone)
+
+
+def test_files_of_equal_content_are_stored_once_as_links_and_imported_whole(study, clone, tmp_path):
+    """A viewer image linked into three folders (and any file equal to an earlier one) is one
+    member and two hard-link members; the import makes all three files with that content."""
+    image = study / "results/viewer_entries/cornell_box/spp4/oidn/oidn_ev0.jpg"
+    image.parent.mkdir(parents=True)
+    image.write_bytes(b"jpeg bytes" * 1000)
+    for rel in ("results/viewer_cases/cornell_box/spp4/oidn_ev0.jpg", "results/viewer/cases/cornell_box/spp4/oidn_ev0.jpg"):
+        (study / rel).parent.mkdir(parents=True, exist_ok=True)
+        os.link(image, study / rel)
+    path = tmp_path / "linked.tar"
+    B.export_study(study / "results", path, config=CONFIG, workdir=study, checkout_dir=EXPORT_CHECKOUT)
+    with tarfile.open(path) as tar:
+        members = {m.name: m for m in tar.getmembers()}
+    jpegs = sorted(name for name in members if name.endswith("oidn_ev0.jpg"))
+    assert [members[name].isfile() for name in jpegs] == [True, False, False]   # the first in path order
+    assert {members[name].linkname for name in jpegs[1:]} == {jpegs[0]}
+    assert path.stat().st_size < 2 * 10_000 + 30_000                       # the image's bytes once
+    import_into(path, clone)
+    for name in jpegs:
+        assert (clone / name).read_bytes() == b"jpeg bytes" * 1000
+    assert B.verify_bundle(path)["bundle_version"] == 2
+
+
+def test_a_link_to_a_member_of_other_content_is_refused(bundle, clone, tmp_path):
+    with tarfile.open(bundle, "r:") as tar:
+        items = [(m, tar.extractfile(m).read() if m.isfile() else None) for m in tar.getmembers()]
+    manifest = json.loads(items[0][1])
+    manifest["files"].append({"path": "results/extra.exr", "size": 6, "sha256": hashlib.sha256(b"xxxxxx").hexdigest(),
+                              "mtime_ns": 10**9})
+    bad = tmp_path / "bad_link.tar"
+    with tarfile.open(bad, "w", format=tarfile.PAX_FORMAT) as tar:
+        data = json.dumps(manifest).encode()
+        info = tarfile.TarInfo("bundle.json")
+        info.size = len(data)
+        tar.addfile(info, io.BytesIO(data))
+        for member, content in items[1:]:
+            tar.addfile(member, io.BytesIO(content))
+        link = tarfile.TarInfo("results/extra.exr")
+        link.type, link.linkname = tarfile.LNKTYPE, "results/renders/cornell_box/spp4.exr"
+        tar.addfile(link)
+    refused(bad, clone, match=r"member results/extra.exr links to .*not an earlier member of the same content")
