@@ -42,6 +42,7 @@ import importlib
 import inspect
 import math
 import pkgutil
+import re
 import types
 import typing
 from types import ModuleType
@@ -183,6 +184,12 @@ def _type_hints(function: Callable) -> dict:
     return typing.get_type_hints(function)
 
 
+def _key_text(key) -> str:
+    """``.name`` for a plain key, ``['spp ']`` as Python writes it for any other (a space, a dot),
+    so that a key in an error reads as the config wrote it."""
+    return f".{key}" if re.fullmatch(r"[A-Za-z_][A-Za-z0-9_-]*", str(key)) else f"[{str(key)!r}]"
+
+
 def check_params(module: ModuleType, params: dict, *, config_key: str) -> None:
     """Refuse params that ``module``'s ``denoise``/``combine`` does not take, values outside the
     annotated type or ``Literal`` choices, and missing required parameters. Errors name the key,
@@ -199,11 +206,11 @@ def check_params(module: ModuleType, params: dict, *, config_key: str) -> None:
         raise BenchError(f"methods/{name}.py: cannot read the annotations of {function.__name__}() ({exc})") from exc
     for key, value in params.items():
         if key not in known:
-            raise BenchError(f"{config_key}.{key}: {name} has no parameter '{key}'; it takes "
+            raise BenchError(f"{config_key}{_key_text(key)}: {name} has no parameter '{key}'; it takes "
                              f"{', '.join(known) or 'no parameters'}")
         hint = hints.get(key)
         if hint is not None and not _allowed(value, hint):
-            raise BenchError(f"{config_key}.{key}: {value!r} is not allowed for {name}; expected {_describe(hint)}")
+            raise BenchError(f"{config_key}{_key_text(key)}: {value!r} is not allowed for {name}; expected {_describe(hint)}")
     missing = [key for key, p in known.items() if p.default is p.empty and key not in params]
     if missing:
         raise BenchError(f"{config_key}: {name} needs parameter(s) {', '.join(missing)}")
