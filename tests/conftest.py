@@ -144,7 +144,7 @@ def make_render_buffers():
 # --- the smoke run shared by the slow end-to-end tests ----------------------------------------
 
 def case_job(folder, *, scene: str, spp: int, render, reference, metrics, methods=(), images=None,
-             weight_inputs=None, cache=None) -> dict:
+             weight_inputs=None, cache=None, keep="all") -> dict:
     """The job description of one case that ``workflow/rules/common.smk`` builds for
     :func:`mcbench.pipeline.cases.run_case`, so a test runs the code the rules run.
 
@@ -153,7 +153,8 @@ def case_job(folder, *, scene: str, spp: int, render, reference, metrics, method
     are (``weight_inputs`` {entry: input names} whose weight maps the viewer draws). The noisy
     input comes first, then the methods, then ``images``. The case's products go in ``folder``
     (``case.csv``, ``viewer_case/``, ``case_record.json``); the kept per-entry values and viewer
-    images under ``cache`` (default ``folder/cache``).
+    images under ``cache`` (default ``folder/cache``). ``keep``: the job's ``keep_outputs``
+    (``all`` here, so that a test can read every output; the config's default is ``read``).
     """
     from mcbench import NOISY
 
@@ -173,7 +174,7 @@ def case_job(folder, *, scene: str, spp: int, render, reference, metrics, method
     return {"scene": scene, "spp": int(spp), "render": str(render), "reference": str(reference),
             "metrics": list(metrics), "methods": method_rows, "entries": entries,
             "outputs": {"metrics": str(folder / "case.csv"), "viewer": str(folder / "viewer_case"),
-                        "record": str(folder / "case_record.json")}}
+                        "record": str(folder / "case_record.json")}, "keep_outputs": keep}
 
 
 REPO = Path(__file__).resolve().parents[1]

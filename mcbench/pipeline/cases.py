@@ -16,6 +16,13 @@ whatever exists under ``results/``; the job itself decides, item by item, what i
   is the only one computed.
 * an entry's viewer images (``viewer_entries/<scene>/spp<N>/<entry>/``) are kept when their record
   names the same image, reference, weight inputs and error maps (:func:`viewer_key`).
+* which outputs stay on disk (the case's ``keep_outputs``, config ``keep_outputs``): with ``read``
+  only those another method reads (:func:`kept_methods`: the bases, and a combiner another
+  combiner reads). Any other output is evaluated and removed; its timing record stays, and its
+  entry's image is then identified by its method key (``key:<key>``) instead of its content
+  checksum, so its metric values and viewer images stay valid while its key does. It is made
+  again only when its entry needs an evaluation it lacks (an added metric, a changed error map)
+  or its key changes. With ``all`` every output stays.
 
 Snakemake reruns a case's job when its plan changes (the rule's params: the case's methods and
 their settings, the entries, the metrics), when its render, reference or a learned method's
@@ -39,7 +46,8 @@ from mcbench import METRICS_COLUMNS, BenchError
 from mcbench.io.exr import content_checksum
 from mcbench.io.tables import read_json, write_csv, write_json
 
-__all__ = ["CASE_RECORD_VERSION", "method_key", "viewer_key", "run_case", "case_timing_paths", "gather_case_timings"]
+__all__ = ["CASE_RECORD_VERSION", "method_key", "viewer_key", "kept_methods", "run_case", "ensure_case_outputs",
+           "case_timing_paths", "gather_case_timings"]
 
 CASE_RECORD_VERSION = 1
 
@@ -90,6 +98,69 @@ def _stored_viewer_key(folder: str) -> str | None:
         return None
 
 
+def kept_methods(methods: list[dict], keep: str) -> set[str]:
+    """The names of the ``methods`` (a case job's, each with ``name`` and ``inputs``) whose outputs
+    the case keeps on disk: every one with ``keep`` ``"all"``, with ``"read"`` those that another
+    method takes as an input."""
+    if keep not in ("read", "all"):
+        raise BenchError(f"keep_outputs is {keep!r}; expected 'read' or 'all'")
+    if keep == "all":
+        return {method["name"] for method in methods}
+    return {name for method in methods for name in method["inputs"]}
+
+
+def _method_keys(case: dict, render: str) -> dict[str, str]:
+    """Each method's key (:func:`method_key`), in the case's dependency order."""
+    from mcbench.io.weights import file_sha256
+    from mcbench.pipeline.study_plan import weights_digest
+
+    keys: dict[str, str] = {}
+    for method in case["methods"]:
+        unknown = [name for name in method["inputs"] if name not in keys]
+        if unknown:
+            raise BenchError(f"method '{method['name']}' of case ({case['scene']}, {case['spp']}) reads {unknown}, "
+                             "which the case does not make before it (the plan's dependency order is broken)")
+        read = method.get("weights_read", [method["weights"]] if method.get("weights") else [])
+        weights = weights_digest(read, {path: file_sha256(path) for path in read})
+        keys[method["name"]] = method_key(module=method["module"], params=method["params"],
+                                          input_keys=[keys[name] for name in method["inputs"]],
+                                          weights_sha256=weights, render=render)
+    return keys
+
+
+def _recorded_key(timing: str) -> str | None:
+    """The key a method's timing record holds, or None (missing or unreadable)."""
+    try:
+        return read_json(timing).get("key") if Path(timing).exists() else None
+    except (OSError, ValueError, BenchError):
+        return None
+
+
+def _run_stale(case: dict, keys: dict[str, str], names: list[str], *, threads: int) -> None:
+    """Run the case's methods ``names`` (in the case's dependency order) into their files."""
+    from mcbench.pipeline.method_runs import run_methods
+
+    by_name = {method["name"]: method for method in case["methods"]}
+    chosen = [m for m in case["methods"] if m["name"] in set(names)]
+    if chosen:
+        run_methods([{"name": m["name"], "module": m["module"], "params": m["params"], "key": keys[m["name"]],
+                      "weights": m.get("weights"), "input_paths": [by_name[i]["exr"] for i in m["inputs"]],
+                      "exr": m["exr"], "timing": m["timing"]}
+                     for m in chosen], case["render"], scene=case["scene"], spp=int(case["spp"]), threads=threads)
+
+
+def _remake_outputs(case: dict, keys: dict[str, str], names: list[str], *, threads: int) -> None:
+    """Make again the outputs of ``names`` whose timing records hold their current keys (outputs a
+    case removed), keeping those records as they are: the timing measured when the output was
+    first made stays the one the tables read."""
+    by_name = {method["name"]: method for method in case["methods"]}
+    records = {name: read_json(by_name[name]["timing"]) for name in names
+               if _recorded_key(by_name[name]["timing"]) == keys[name]}
+    _run_stale(case, keys, names, threads=threads)
+    for name, record in records.items():
+        write_json(by_name[name]["timing"], record)
+
+
 def run_case(case: dict, *, threads: int = 1) -> dict:
     """Make what one case lacks and assemble it; return the case record.
 
@@ -99,59 +170,103 @@ def run_case(case: dict, *, threads: int = 1) -> dict:
     dependency order (``inputs``: method names; ``weights``: the weights file a learned method is
     handed, else None; ``weights_read``: the weights files it reads, which its key's digest covers),
     ``entries``: ``[{entry, image, values, viewer, weight_inputs}]`` (the noisy input first),
-    ``outputs``: ``{metrics, viewer, record}`` (the case's metrics CSV, viewer folder, record).
+    ``outputs``: ``{metrics, viewer, record}`` (the case's metrics CSV, viewer folder, record),
+    ``keep_outputs``: ``read`` (default) or ``all`` (module docstring).
     """
-    from mcbench.io.weights import file_sha256
-    from mcbench.pipeline.method_runs import run_methods
-    from mcbench.pipeline.study_plan import weights_digest
-
     scene, spp = case["scene"], int(case["spp"])
-    render = content_checksum(case["render"])
-    keys, stale = {}, []
+    keys = _method_keys(case, content_checksum(case["render"]))
+    kept = kept_methods(case["methods"], case.get("keep_outputs", "read"))
+    current = {m["name"] for m in case["methods"] if _stored_method_key(m["exr"], m["timing"]) == keys[m["name"]]}
+    stale = [m["name"] for m in case["methods"] if m["name"] in kept and m["name"] not in current]
+    recorded = {m["name"] for m in case["methods"] if _recorded_key(m["timing"]) == keys[m["name"]]}
+    stale += [m["name"] for m in case["methods"] if m["name"] not in kept and m["name"] not in recorded]
+    _run_stale(case, keys, stale, threads=threads)
+    identities = _entry_identities(case, keys, kept)
+    wanted = [name for name in _entries_to_evaluate(case, identities)
+              if name in keys and name not in kept and name not in current and name not in stale]
+    _remake_outputs(case, keys, wanted, threads=threads)     # removed outputs an evaluation needs again
+    evaluated = _evaluate_case(case, identities)
     for method in case["methods"]:
-        unknown = [name for name in method["inputs"] if name not in keys]
-        if unknown:
-            raise BenchError(f"method '{method['name']}' of case ({scene}, {spp}) reads {unknown}, which the case "
-                             "does not make before it (the plan's dependency order is broken)")
-        read = method.get("weights_read", [method["weights"]] if method.get("weights") else [])
-        weights = weights_digest(read, {path: file_sha256(path) for path in read})
-        keys[method["name"]] = method_key(module=method["module"], params=method["params"],
-                                          input_keys=[keys[name] for name in method["inputs"]],
-                                          weights_sha256=weights, render=render)
-        if _stored_method_key(method["exr"], method["timing"]) != keys[method["name"]]:
-            stale.append(method)
-    by_name = {method["name"]: method for method in case["methods"]}
-    if stale:
-        run_methods([{"name": m["name"], "module": m["module"], "params": m["params"], "key": keys[m["name"]],
-                      "weights": m.get("weights"), "input_paths": [by_name[i]["exr"] for i in m["inputs"]],
-                      "exr": m["exr"], "timing": m["timing"]}
-                     for m in stale], case["render"], scene=scene, spp=spp, threads=threads)
-    evaluated = _evaluate_case(case)
+        if method["name"] not in kept:
+            Path(method["exr"]).unlink(missing_ok=True)
     _assemble_case(case, evaluated)
+    made = [m["name"] for m in case["methods"] if m["name"] in set(stale) | set(wanted)]
     record = {"version": CASE_RECORD_VERSION, "scene": scene, "spp": spp,
-              "made": {"methods": [m["name"] for m in stale],
-                       "metrics": [e for e, made in evaluated.items() if made["metrics"]],
-                       "viewer": [e for e, made in evaluated.items() if made["viewer"]]},
-              "methods": {m["name"]: {"key": keys[m["name"]], "exr": m["exr"], "timing": m["timing"]}
+              "made": {"methods": made,
+                       "metrics": [e for e, done in evaluated.items() if done["metrics"]],
+                       "viewer": [e for e, done in evaluated.items() if done["viewer"]]},
+              "methods": {m["name"]: {"key": keys[m["name"]], "exr": m["exr"], "timing": m["timing"],
+                                      "kept": m["name"] in kept}
                           for m in case["methods"]}}
     write_json(case["outputs"]["record"], record)
     return record
 
 
-def _evaluate_case(case: dict) -> dict[str, dict]:
-    """Each entry's metric values and viewer images, made where not kept; per entry, which it
-    made (``{"metrics": [names computed], "viewer": bool}``) and its metric values
-    (``"values"``, in the order of the case's metrics)."""
-    from mcbench.pipeline.evaluation import evaluate_entry_values, metric_code_digest
+def ensure_case_outputs(case: dict, names: list[str], *, threads: int = 1) -> list[str]:
+    """Make the outputs of the case's methods ``names`` that are not on disk with their current
+    key (and the inputs they read), and keep them; return the names made. For readers of
+    outputs a case removed (``keep_outputs: read``), e.g. the export of a case for programs
+    outside the harness. Evaluations and the timing records of outputs made again are not touched."""
+    keys = _method_keys(case, content_checksum(case["render"]))
+    by_name = {method["name"]: method for method in case["methods"]}
+    unknown = [name for name in names if name not in by_name]
+    if unknown:
+        raise BenchError(f"case ({case['scene']}, {case['spp']}) has no method(s) {unknown}")
+    needed, todo = set(), list(names)
+    while todo:
+        name = todo.pop()
+        if name not in needed:
+            needed.add(name)
+            todo.extend(by_name[name]["inputs"])
+    made = [m["name"] for m in case["methods"]
+            if m["name"] in needed and _stored_method_key(m["exr"], m["timing"]) != keys[m["name"]]]
+    _remake_outputs(case, keys, made, threads=threads)
+    return made
+
+
+def _entry_identities(case: dict, keys: dict[str, str], kept: set[str]) -> dict[str, str]:
+    """What identifies each entry's image in its evaluations' keys: the content checksum of the
+    render or of a kept output, ``key:<method key>`` for an output the case does not keep."""
+    return {item["entry"]: (f"key:{keys[item['entry']]}" if item["entry"] in keys and item["entry"] not in kept
+                            else content_checksum(item["image"]))
+            for item in case["entries"]}
+
+
+def _maps(case: dict) -> list[str]:
+    from mcbench.pipeline.evaluation import metric_code_digest
     from mcbench.pipeline.registry import load_metrics
 
-    scene, spp = case["scene"], int(case["spp"])
-    reference = content_checksum(case["reference"])
-    maps = [f"{name}:{metric_code_digest(name)}" for name, spec in load_metrics(case["metrics"]).items()
+    return [f"{name}:{metric_code_digest(name)}" for name, spec in load_metrics(case["metrics"]).items()
             if spec.error_map is not None]
+
+
+def _entries_to_evaluate(case: dict, identities: dict[str, str]) -> list[str]:
+    """The entries whose metric values or viewer images are not all kept for their image."""
+    from mcbench.pipeline.evaluation import metric_code_digest, read_metric_values
+
+    reference, maps = content_checksum(case["reference"]), _maps(case)
+    codes = {name: metric_code_digest(name) for name in case["metrics"]}
+    wanted = []
+    for item in case["entries"]:
+        image = identities[item["entry"]]
+        key = viewer_key(image=image, reference=reference, weight_inputs=item.get("weight_inputs") or [], maps=maps)
+        known = read_metric_values(item["values"], {"image": image, "reference": reference}, codes)
+        if _stored_viewer_key(item["viewer"]) != key or any(metric not in known for metric in case["metrics"]):
+            wanted.append(item["entry"])
+    return wanted
+
+
+def _evaluate_case(case: dict, identities: dict[str, str]) -> dict[str, dict]:
+    """Each entry's metric values and viewer images, made where not kept; per entry, which it
+    made (``{"metrics": [names computed], "viewer": bool}``) and its metric values
+    (``"values"``, in the order of the case's metrics). ``identities``: :func:`_entry_identities`."""
+    from mcbench.pipeline.evaluation import evaluate_entry_values
+
+    scene, spp = case["scene"], int(case["spp"])
+    reference, maps = content_checksum(case["reference"]), _maps(case)
     done = {}
     for item in case["entries"]:
-        image = content_checksum(item["image"])
+        image = identities[item["entry"]]
         key = viewer_key(image=image, reference=reference, weight_inputs=item.get("weight_inputs") or [], maps=maps)
         make_viewer = _stored_viewer_key(item["viewer"]) != key
         values, computed = evaluate_entry_values(

@@ -131,7 +131,8 @@ def _case_plan(config: dict, scenes: list[str], spps: list[int], reference_spp: 
                     reference_sources=frozen_mapping({scene: source.kind for scene, source in sources.items()}),
                     stored_references=frozen_mapping({scene: str(source.stored.record_path)
                                                       for scene, source in sources.items() if source.stored}),
-                    reference_notes=_reference_notes(sources, store) if config["reference"]["source"] == "store" else ())
+                    reference_notes=_reference_notes(sources, store) if config["reference"]["source"] == "store" else (),
+                    keep_outputs=config["keep_outputs"])
 
 
 def _reference_notes(sources: dict, store) -> tuple[str, ...]:

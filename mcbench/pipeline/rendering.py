@@ -12,6 +12,13 @@ from mcbench.io.render_folders import RenderFolder, case_files, read_case, read_
 __all__ = ["render_noisy", "render_reference_chunk", "merge_reference", "merged_chunks", "folder_case_files",
            "folder_reference_files", "resolution_pair"]
 
+#: Renders are stored ZIP-compressed (lossless): with their feature layers (albedo, normal, depth,
+#: position, visibility, each with its variance and halves) they take 42 % less space, for one read
+#: per case job of some tens of milliseconds more at 128 x 128. Method outputs stay uncompressed:
+#: denoised floats shrink by 7 % only, each read costing several times more
+#: (`benchmarks/exr_compression.py`, numbers in docs/measurements.md).
+RENDER_COMPRESSION = "zip"
+
 
 def folder_case_files(folder: RenderFolder, spp: int) -> list[str]:
     """The files of an imported case (the render job's inputs), sorted."""
@@ -34,7 +41,8 @@ def _import_case(scene: str, folder: RenderFolder, spp: int, output_path: str, r
                          f"resolution {list(size)}; they are not resized (set resolution: null)")
     write_layers(output_path, layers, metadata={"scene": scene, "spp": str(spp), "resolution": f"{width}x{height}",
                                                 "imported_from": str(folder.path), "layout": folder.layout,
-                                                "layers": ",".join(sorted(layers))})
+                                                "layers": ",".join(sorted(layers))},
+                 compression=RENDER_COMPRESSION)
 
 
 def render_noisy(scene: str, spp: int, output_path: str, *, resolution=None, variant: str = "auto",
@@ -54,7 +62,7 @@ def render_noisy(scene: str, spp: int, output_path: str, *, resolution=None, var
     layers, metadata = render_buffers(module, spp, resolution=resolution_pair(resolution),
                                       variant=variant, seed=seed, threads=threads, features=features)
     check_finite(f"{output_path} (render of scene '{scene}' at {spp} spp)", layers)
-    write_layers(output_path, layers, metadata=metadata)
+    write_layers(output_path, layers, metadata=metadata, compression=RENDER_COMPRESSION)
 
 
 def render_reference_chunk(scene: str, spp: int, chunk: int, output_path: str, *, resolution=None,

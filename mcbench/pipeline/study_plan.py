@@ -70,6 +70,7 @@ class CasePlan:
     reference_sources: Mapping = field(default_factory=lambda: frozen_mapping({}))   # scene -> store|render|folder
     stored_references: Mapping = field(default_factory=lambda: frozen_mapping({}))   # scene -> store record path
     reference_notes: tuple = ()                                       # why each reference comes from where
+    keep_outputs: str = "read"                                        # read | all (config keep_outputs)
 
     def reference_source(self, scene: str) -> str:
         """Where the reference of ``scene`` comes from: ``store``, ``render`` or ``folder``."""
@@ -235,7 +236,7 @@ class StudyPlan:
                              **({"weights_sha256": weights_digest(m.weights, weights_sha256)} if m.learned else {})}
                             for m in self.methods.values()],
                 "entries": self.ranking.entries, "metrics": list(self.ranking.metrics),
-                "table_columns": list(METRICS_COLUMNS)}
+                "table_columns": list(METRICS_COLUMNS), "keep_outputs": self.cases.keep_outputs}
 
     def case_job(self, scene: str, spp: int, *, outputs: Mapping) -> dict:
         """The description of one case's job (:func:`mcbench.pipeline.cases.run_case`): its
@@ -254,6 +255,7 @@ class StudyPlan:
                    for entry in self.ranking.entries]
         return {"scene": scene, "spp": spp, "render": paths.render(scene, spp), "reference": paths.reference(scene),
                 "metrics": list(self.ranking.metrics), "methods": methods, "entries": entries,
+                "keep_outputs": self.cases.keep_outputs,
                 "outputs": {key: str(outputs[key]) for key in ("metrics", "viewer", "record")}}
 
     @property

@@ -57,8 +57,8 @@ def case_dir(tmp_path, make_render_buffers):
     return tmp_path
 
 
-def make_case(folder, *, methods=METHODS, metrics=("relmse", "smape")) -> dict:
-    """The job description common.smk builds for one case, in ``folder``."""
+def make_case(folder, *, methods=METHODS, metrics=("relmse", "smape"), keep="all") -> dict:
+    """The job description common.smk builds for one case, in ``folder`` (``keep``: its keep_outputs)."""
     out = folder / "results"
     names = [name for name, *_ in methods]
     return {"scene": SCENE, "spp": SPP, "render": str(folder / "render.exr"), "reference": str(folder / "reference.exr"),
@@ -71,7 +71,7 @@ def make_case(folder, *, methods=METHODS, metrics=("relmse", "smape")) -> dict:
                          "weight_inputs": next((inputs for name, _, _, inputs in methods if name == entry), [])}
                         for entry in [NOISY, *names]],
             "outputs": {"metrics": str(out / "case.csv"), "viewer": str(out / "viewer_case"),
-                        "record": str(out / "case.json")}}
+                        "record": str(out / "case.json")}, "keep_outputs": keep}
 
 
 def mtimes(folder) -> dict[str, int]:
@@ -109,6 +109,62 @@ def test_a_case_job_makes_what_is_missing_or_stale_and_keeps_the_rest(case_dir):
     rows = pd.read_csv(case_dir / "results/case.csv")
     assert list(rows.entry.unique()) == [NOISY, *names] and list(rows.metric[:3]) == ["relmse", "smape", "dssim"]
     assert rows[rows.metric != "dssim"].reset_index(drop=True).equals(table)
+
+
+def test_outputs_no_method_reads_are_evaluated_then_removed_and_made_again_only_when_needed(case_dir):
+    """keep_outputs read: the output of 'avg' (no method reads it) is evaluated and removed, its
+    timing record kept; the bases and 'ens' (read by 'avg') stay. Run again, nothing is made; an
+    added metric makes 'avg' again for its evaluation (and removes it again), computing only that
+    metric; every case table equals the one of a job that keeps every output; a new method added
+    runs alone, reading the kept outputs."""
+    names = [name for name, *_ in METHODS]
+    out = case_dir / "results/outputs"
+    first = run_case(make_case(case_dir, keep="read"))
+    assert first["made"]["methods"] == names
+    assert sorted(p.stem for p in out.glob("*.exr")) == ["ens", "jbf", "oidn"]
+    assert sorted(p.stem for p in out.glob("*.json")) == sorted(names)
+    assert {name: m["kept"] for name, m in first["methods"].items()} == {"jbf": True, "oidn": True, "ens": True,
+                                                                          "avg": False}
+    before = mtimes(case_dir / "results")
+    assert run_case(make_case(case_dir, keep="read"))["made"] == {"methods": [], "metrics": [], "viewer": []}
+    assert mtimes(case_dir / "results") == before
+    timing = json.loads((out / "avg.json").read_text())
+    added = run_case(make_case(case_dir, keep="read", metrics=("relmse", "smape", "dssim")))
+    assert added["made"] == {"methods": ["avg"], "metrics": [NOISY, *names], "viewer": []}
+    assert json.loads((out / "avg.json").read_text()) == timing       # remade for its evaluation only
+    assert not (out / "avg.exr").exists()
+    values = json.loads((case_dir / "results/values/avg.json").read_text())
+    assert values["image"].startswith("key:") and set(values["values"]) == {"relmse", "smape", "dssim"}
+    every = case_dir / "every"
+    every.mkdir()
+    for name in ("render.exr", "reference.exr"):
+        shutil.copy(case_dir / name, every / name)
+    run_case(make_case(every, keep="all", metrics=("relmse", "smape", "dssim")))
+    pd.testing.assert_frame_equal(pd.read_csv(case_dir / "results/case.csv"), pd.read_csv(every / "results/case.csv"))
+    grown = [*METHODS, ("avg2", "naive_average", {}, ["jbf", "oidn"])]
+    assert run_case(make_case(case_dir, methods=grown, keep="read",
+                              metrics=("relmse", "smape", "dssim")))["made"]["methods"] == ["avg2"]
+
+
+def test_ensure_case_outputs_makes_removed_outputs_for_their_readers(case_dir):
+    """An export of a case reads every candidate's output: the ones a case removed are made again
+    (with their keys, so the case job keeps its evaluations) and kept; pixels equal a kept run's."""
+    from mcbench.pipeline.cases import ensure_case_outputs
+
+    run_case(make_case(case_dir, keep="read"))
+    timing = json.loads((case_dir / "results/outputs/avg.json").read_text())
+    assert ensure_case_outputs(make_case(case_dir, keep="read"), ["avg", "jbf"]) == ["avg"]
+    assert json.loads((case_dir / "results/outputs/avg.json").read_text()) == timing   # its first timing kept
+    assert ensure_case_outputs(make_case(case_dir, keep="read"), ["avg"]) == []
+    every = case_dir / "every"
+    every.mkdir()
+    for name in ("render.exr", "reference.exr"):
+        shutil.copy(case_dir / name, every / name)
+    run_case(make_case(every, keep="all"))
+    np.testing.assert_array_equal(read_layers(case_dir / "results/outputs/avg.exr")["color"],
+                                  read_layers(every / "results/outputs/avg.exr")["color"])
+    with pytest.raises(BenchError, match="no method"):
+        ensure_case_outputs(make_case(case_dir), ["nope"])
 
 
 def test_a_half_written_or_foreign_output_is_made_again(case_dir):

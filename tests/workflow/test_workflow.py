@@ -570,13 +570,36 @@ def test_corrupt_render_stops_with_file_name_and_keeps_outputs(smoke_run, tmp_pa
     shutil.copytree(smoke_run[0], workdir, ignore=shutil.ignore_patterns(".snakemake"))
     render = workdir / "results/renders/cornell_box/spp4.exr"
     render.write_bytes(render.read_bytes()[:200])
-    kept = workdir / "results/outputs/glass_caustics/spp64/ensemble.exr"
+    kept = sorted((workdir / "results/outputs/glass_caustics/spp64").glob("*.exr"))[0]   # an output a method reads
     kept_mtime = kept.stat().st_mtime_ns
     # the case whose render is newer than its outputs runs again and reads the corrupt render
     result = snakemake(workdir, "results/cases/cornell_box/spp4.json", check=False)
     assert result.returncode != 0
     assert "renders/cornell_box/spp4.exr" in result.stdout + result.stderr
     assert kept.stat().st_mtime_ns == kept_mtime
+
+
+def test_the_export_of_a_case_makes_the_outputs_its_job_removed(smoke_run, tmp_path):
+    """keep_outputs read: the case job removed the outputs no method reads (the ensemble's); the
+    export of that case (rule export_case) makes them again, with the pixels a kept output has,
+    and the study is still finished after it."""
+    from mcbench.io.exr import read_layers
+
+    workdir = tmp_path / "export"
+    shutil.copytree(smoke_run[0], workdir, symlinks=True)
+    outputs = workdir / "results/outputs/glass_caustics/spp64"
+    assert not (outputs / "ensemble.exr").exists() and (outputs / "ensemble.json").exists()
+    snakemake(workdir, "results/export/glass_caustics/spp64")
+    exported = workdir / "results/export/glass_caustics/spp64"
+    assert (outputs / "ensemble.exr").exists() and any(exported.rglob("*ensemble*"))
+    kept = workdir / "kept"
+    shutil.copytree(smoke_run[0], kept, symlinks=True)
+    config = yaml.safe_load((kept / "config.yaml").read_text())
+    (kept / "config.yaml").write_text(yaml.safe_dump({**config, "keep_outputs": "all"}))
+    snakemake(kept, "results/cases/glass_caustics/spp64.json")
+    np.testing.assert_array_equal(read_layers(outputs / "ensemble.exr")["color"],
+                                  read_layers(kept / "results/outputs/glass_caustics/spp64/ensemble.exr")["color"])
+    assert "Nothing to be done" in snakemake(workdir, "-n").stdout + snakemake(workdir, "-n").stderr
 
 
 def test_nan_render_is_refused_naming_file_and_count(smoke_run, tmp_path):

@@ -67,6 +67,12 @@ def get_case_outputs(wildcards):
     return [PLAN.paths.method_output(wildcards.scene, wildcards.spp, name) for name in PLAN.ranking.candidates]
 
 
+def get_case_job(wildcards):
+    """A case's job description (rule run_case's), for rules that read the outputs it may remove."""
+    outputs = {key: getattr(rules.run_case.output, key).format(**wildcards) for key in ("metrics", "viewer", "record")}
+    return STUDY.case_job(wildcards.scene, wildcards.spp, outputs)
+
+
 def get_case_files(key):
     """Output ``key`` of rule run_case in every case."""
     return expand(getattr(rules.run_case.output, key), scene=PLAN.cases.scenes, spp=PLAN.cases.spps)

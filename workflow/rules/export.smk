@@ -13,6 +13,7 @@ rule export_case:
     params:
         candidates=list(PLAN.ranking.candidates),
         candidate_paths=get_case_outputs,
+        case=get_case_job,  # the outputs the case job removed (keep_outputs: read) are made again
     threads: 1
     resources:
         **STUDY.resources("export_case"),
