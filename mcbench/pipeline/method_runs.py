@@ -151,8 +151,9 @@ def reads_rows(modules) -> bool:
     """Whether a job of these method modules reads its render and inputs by rows: every module
     declares ``reads_rows`` (:class:`mcbench.contracts.method.MethodSpec`; the ensemble), so no layer is held whole
     (``benchmarks/bench_ensemble.py`` measures the peak memory saved). Such a method reads the
-    rows it needs inside its own call, so its recorded seconds include those reads (uncompressed
-    scanlines, cheap next to its compute); a batch with any other
+    rows it needs inside its own call, so its recorded seconds include those reads (scanlines of
+    uncompressed outputs; a render's ZIP blocks of 16 rows are decoded as they are reached: cheap
+    next to its compute); a batch with any other
     method reads every file whole, before the timed call."""
     modules = list(modules)
     return bool(modules) and all(method_spec(module).reads_rows for module in modules)
