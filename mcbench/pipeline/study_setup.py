@@ -177,14 +177,16 @@ class StudySetup:
 
     def reference_inputs(self, scene: str, chunk: str) -> list[str]:
         """A reference's inputs: its chunks (``chunk``: their pattern) for a rendered reference, the
-        store's EXR and record for a stored one, the folder's reference files for an imported one."""
+        store's EXR for a stored one (its record, read through the rule's params, is not an input:
+        it is rule store_reference's output, and as an input it would make the run's DAG render the
+        reference again to store it, with ``--forceall`` or from a folder where the store's path
+        reads alike), the folder's reference files for an imported one."""
         cases = self.plan.cases
         source = cases.reference_source(scene)
         if source == "render":
             return self.reference_inputs_rendered(scene, chunk)
         if source == "store":
-            record = Path(cases.stored_references[scene])
-            return [str(record.with_suffix(".exr")), str(record)]
+            return [str(Path(cases.stored_references[scene]).with_suffix(".exr"))]
         return folder_reference_files(cases.render_folders[scene])
 
     def store_inputs(self, scene: str, chunk: str, merged: str) -> list[str]:
