@@ -10,6 +10,7 @@ import sys
 from pathlib import Path
 
 import pytest
+import yaml
 
 from tests.conftest import REPO
 from mcbench import BenchError
@@ -115,9 +116,17 @@ def test_every_job_declares_memory_and_runtime_within_the_job_limit(configfile, 
 
 
 @pytest.mark.slow
+def _smoke_rendering_its_references(path: Path, **changes) -> Path:
+    """The smoke config with ``changes``, its references rendered (not taken from the repository's
+    store), so that every render rule is planned."""
+    config = yaml.safe_load((REPO / "workflow/configs/smoke.yaml").read_text())
+    config["reference"] = {**config["reference"], "source": "render"}
+    path.write_text(yaml.safe_dump({**config, **changes}))
+    return path
+
+
 def test_gpu_jobs_are_the_renders_when_the_config_asks(tmp_path):
-    config = tmp_path / "gpu.yaml"
-    config.write_text((REPO / "workflow/configs/smoke.yaml").read_text() + "gpus: 1\ngpu_model: a100\n")
+    config = _smoke_rendering_its_references(tmp_path / "gpu.yaml", gpus=1, gpu_model="a100")
     jobs = _planned_resources(config, workdir=tmp_path / "plan")
     with_gpu = {rule for rule, resources in jobs if resources.get("gpu") == "1" and resources.get("gpu_model") == "a100"}
     assert with_gpu == {"render_noisy", "render_reference_chunk", "oracle_study"}
@@ -145,7 +154,7 @@ def test_paper_config_plans_under_the_slurm_profile(tmp_path):
 
 @pytest.mark.slow
 def test_the_gpu_profile_gives_the_renders_a_gpu(tmp_path):
-    jobs = _planned_resources(REPO / "workflow/configs/smoke.yaml", "--profile", str(REPO / "profiles/slurm-gpu"),
-                              workdir=tmp_path / "plan")
+    jobs = _planned_resources(_smoke_rendering_its_references(tmp_path / "smoke.yaml"), "--profile",
+                              str(REPO / "profiles/slurm-gpu"), workdir=tmp_path / "plan")
     assert {rule for rule, resources in jobs if resources.get("gpu") == "1"} == \
         {"render_noisy", "render_reference_chunk", "oracle_study"}
