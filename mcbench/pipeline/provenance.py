@@ -178,6 +178,28 @@ def collect_provenance(*, repo_dir, config: dict) -> dict:
     return dict(sorted(record.items()))
 
 
+def reference_sources(reference_paths) -> dict:
+    """Where each reference of a run came from, read from its header (``reference_paths``: the
+    run's ``results/references/<scene>.exr``): ``{scene: {"source": "store", "record", "sha256",
+    "spp"}}`` for a reference copied from the store (:func:`mcbench.pipeline.reference_sources.
+    copy_stored_reference` writes those), ``{"source": "folder", "from"}`` for one imported from a
+    folder of renders, else ``{"source": "render", "spp", "chunks"}`` (merged here from its chunks)."""
+    from mcbench.io.exr import read_metadata
+
+    sources = {}
+    for path in sorted(Path(p) for p in reference_paths):
+        header = read_metadata(str(path))
+        if "stored_reference" in header:
+            entry = {"source": "store", "record": header["stored_reference"], "sha256": header.get("stored_sha256", ""),
+                     "spp": header.get("spp", "")}
+        elif "imported_from" in header:
+            entry = {"source": "folder", "from": header["imported_from"]}
+        else:
+            entry = {"source": "render", "spp": header.get("spp", ""), "chunks": header.get("chunks", "")}
+        sources[path.stem] = entry
+    return sources
+
+
 def manifest_markdown(manifest: dict) -> str:
     """``manifest.md``: a heading and one line per field of ``manifest`` (:func:`collect_provenance`),
     the short block of the study's summary first."""
@@ -185,14 +207,26 @@ def manifest_markdown(manifest: dict) -> str:
 
     lines = ["# Provenance of this run", "", *provenance_markdown(manifest), "", "## Every library version", ""]
     lines += [f"- {name}: {version}" for name, version in sorted(manifest.get("versions", {}).items())]
+    if manifest.get("references"):
+        lines += ["", "## Where each reference came from", ""]
+        for scene, entry in manifest["references"].items():
+            detail = {"store": f"the store's `{entry.get('record')}` (SHA-256 `{str(entry.get('sha256'))[:16]}`…, "
+                               f"{entry.get('spp')} spp), checked against this run's render",
+                      "folder": f"the folder `{entry.get('from')}`",
+                      "render": f"rendered by this run ({entry.get('spp')} spp in {entry.get('chunks')} chunks)"}
+            lines.append(f"- {scene}: {detail.get(entry.get('source'), entry.get('source'))}")
     lines += ["", f"Platform: {manifest.get('platform', UNKNOWN)}."]
     return "\n".join(lines) + "\n"
 
 
-def write_manifest(json_path: str, md_path: str, *, repo_dir, config: dict) -> dict:
-    """Collect the manifest (:func:`collect_provenance`) and write it atomically as JSON (sorted
-    keys, with its checksum side file) to ``json_path`` and as Markdown to ``md_path``; returns it."""
+def write_manifest(json_path: str, md_path: str, *, repo_dir, config: dict, references=()) -> dict:
+    """Collect the manifest (:func:`collect_provenance`; with ``references``, the run's reference
+    files, also ``references``: :func:`reference_sources`, so that a study and its bundle say which
+    references came from the store) and write it atomically as JSON (sorted keys, with its
+    checksum side file) to ``json_path`` and as Markdown to ``md_path``; returns it."""
     manifest = collect_provenance(repo_dir=repo_dir, config=config)
+    if references:
+        manifest = dict(sorted({**manifest, "references": reference_sources(references)}.items()))
     write_json(json_path, manifest)
     write_text(md_path, manifest_markdown(manifest))
     return manifest

@@ -195,3 +195,28 @@ def test_the_study_step_ends_summary_md_with_the_manifests_block(tmp_path, smoke
     for path in (tmp_path / "without").iterdir():
         if "summary.md" not in path.name:           # and its checksum side file
             assert (tmp_path / "with" / path.name).read_bytes() == path.read_bytes(), path.name
+
+
+def test_the_manifest_says_where_each_reference_came_from(tmp_path, smoke_config):
+    """From each reference's header: a copy of the store's (record, SHA-256, spp), one this run
+    merged from its chunks, one imported from a folder; in manifest.json and manifest.md."""
+    import numpy as np
+
+    from mcbench.io.exr import write_layers
+
+    layers = {"color": np.ones((4, 4, 3), np.float32)}
+    write_layers(tmp_path / "a.exr", layers, metadata={"stored_reference": "a.json", "stored_sha256": "f" * 64,
+                                                         "spp": "65536"})
+    write_layers(tmp_path / "b.exr", layers, metadata={"spp": "1024", "chunks": "2"})
+    write_layers(tmp_path / "c.exr", layers, metadata={"imported_from": "/data/kitchen"})
+    manifest = write_manifest(str(tmp_path / "manifest.json"), str(tmp_path / "manifest.md"), repo_dir=REPO,
+                              config=smoke_config, references=[tmp_path / n for n in ("c.exr", "a.exr", "b.exr")])
+    assert manifest["references"] == {
+        "a": {"source": "store", "record": "a.json", "sha256": "f" * 64, "spp": "65536"},
+        "b": {"source": "render", "spp": "1024", "chunks": "2"},
+        "c": {"source": "folder", "from": "/data/kitchen"}}
+    assert read_json(tmp_path / "manifest.json") == manifest
+    md = (tmp_path / "manifest.md").read_text()
+    assert "- a: the store's `a.json`" in md and "- b: rendered by this run (1024 spp in 2 chunks)" in md
+    assert "references" not in write_manifest(str(tmp_path / "m2.json"), str(tmp_path / "m2.md"), repo_dir=REPO,
+                                              config=smoke_config)

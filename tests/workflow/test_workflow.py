@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import base64
 import io
+import json
 import os
 import re
 import shutil
@@ -539,7 +540,7 @@ def test_manifest_describes_the_run_and_is_newer_than_its_tables(smoke_run, resu
 
     _, config = smoke_run
     manifest = read_json(results / "manifest.json")
-    assert list(manifest) == ["config_digest", "cpu", "git", "manifest_version", "platform", "versions"]
+    assert list(manifest) == ["config_digest", "cpu", "git", "manifest_version", "platform", "references", "versions"]
     assert manifest["config_digest"] == config_digest(resolve_config(config))
     assert set(manifest["versions"]) == {"mitsuba", "drjit", "oidn", "torch", "numpy", "flip_evaluator",
                                          "snakemake", "python", "mcbench"}
@@ -557,6 +558,17 @@ def test_manifest_describes_the_run_and_is_newer_than_its_tables(smoke_run, resu
     summary = (results / "tables/study/summary.md").read_text()
     block = summary.split(f"\n{PROVENANCE_HEADING}\n\n")[1]
     assert f"- Commit: `{manifest['git']['commit']}`" in block and manifest["config_digest"] in block
+
+
+def test_the_smoke_study_takes_its_references_from_the_store_and_says_so(results):
+    """The repository's store holds the smoke study's references: the run copied and checked them
+    (no reference chunk rendered), and its manifest (and so its bundle) says where each came from."""
+    manifest = json.loads((results / "manifest.json").read_text())
+    assert {scene: entry["source"] for scene, entry in manifest["references"].items()} == {
+        "cornell_box": "store", "envmap_objects": "store", "glass_caustics": "store"}
+    for scene in manifest["references"]:
+        assert json.loads((results / "references" / f"{scene}.check.json").read_text())["passed"] is True
+    assert not list((results / "references").glob("*/chunk*.exr"))
 
 
 def test_rerun_has_nothing_to_do(smoke_run):

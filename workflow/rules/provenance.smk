@@ -1,5 +1,6 @@
 # The run's provenance manifest (mcbench.pipeline.provenance): git commit and clean tree, the
-# config digest, library versions, CPU and cores, as results/manifest.json and manifest.md.
+# config digest, library versions, CPU and cores, where each reference came from (the store or
+# this run), as results/manifest.json and manifest.md.
 #
 # When it reruns: its inputs are the tables it describes (gathered metrics and timings, the
 # ranking and extras tables), so it runs again whenever they are regenerated and is always newer
@@ -16,6 +17,8 @@ rule provenance_manifest:
         timings=rules.gather_timings.output[0],
         rankings=expand(rules.ranking_table.output.csv, metric=list(PLAN.ranking.metrics)),
         extras=expand(rules.extras_table.output.csv, metric=list(PLAN.ranking.metrics)),
+        # each reference's header says where it came from (the store, this run, a folder)
+        references=expand(rules.merge_reference.output[0], scene=PLAN.cases.scenes),
     output:
         json=report(
             "results/manifest.json",
