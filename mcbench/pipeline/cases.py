@@ -182,8 +182,8 @@ def run_case(case: dict, *, threads: int = 1) -> dict:
     stale += [m["name"] for m in case["methods"] if m["name"] not in kept and m["name"] not in recorded]
     _run_stale(case, keys, stale, threads=threads)
     identities = _entry_identities(case, keys, kept)
-    wanted = [name for name in _entries_to_evaluate(case, identities)
-              if name in keys and name not in kept and name not in current and name not in stale]
+    removed = {name for name in keys if name not in kept and name not in current and name not in stale}
+    wanted = _entries_to_evaluate(case, identities, removed) if removed else []
     _remake_outputs(case, keys, wanted, threads=threads)     # removed outputs an evaluation needs again
     evaluated = _evaluate_case(case, identities)
     for method in case["methods"]:
@@ -240,14 +240,14 @@ def _maps(case: dict) -> list[str]:
             if spec.error_map is not None]
 
 
-def _entries_to_evaluate(case: dict, identities: dict[str, str]) -> list[str]:
-    """The entries whose metric values or viewer images are not all kept for their image."""
+def _entries_to_evaluate(case: dict, identities: dict[str, str], names: set[str]) -> list[str]:
+    """The entries among ``names`` whose metric values or viewer images are not all kept for their image."""
     from mcbench.pipeline.evaluation import metric_code_digest, read_metric_values
 
     reference, maps = content_checksum(case["reference"]), _maps(case)
     codes = {name: metric_code_digest(name) for name in case["metrics"]}
     wanted = []
-    for item in case["entries"]:
+    for item in (item for item in case["entries"] if item["entry"] in names):
         image = identities[item["entry"]]
         key = viewer_key(image=image, reference=reference, weight_inputs=item.get("weight_inputs") or [], maps=maps)
         known = read_metric_values(item["values"], {"image": image, "reference": reference}, codes)
