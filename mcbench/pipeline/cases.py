@@ -11,18 +11,21 @@ whatever exists under ``results/``; the job itself decides, item by item, what i
   its inputs' keys, its weights' SHA-256 and the render's content checksum. An edit of one
   method's parameters changes its key and those of the combiners that read it, nothing else.
 * an entry's metric values (``metrics/<scene>/spp<N>/values/<entry>.json``) are kept per metric
-  when the image's and the reference's content checksums and the metric code's digest are those
-  they were computed from (:func:`mcbench.pipeline.evaluation.read_metric_values`): an added metric
+  when the image's identity, the reference's content checksum and the metric code's digest are
+  those they were computed from. A method's image is identified by its method key
+  (``key:<key>``: the same output whether or not it is on disk, and whenever it is made again),
+  the noisy input by the render's content checksum (:func:`mcbench.pipeline.evaluation.read_metric_values`): an added metric
   is the only one computed.
 * an entry's viewer images (``viewer_entries/<scene>/spp<N>/<entry>/``) are kept when their record
   names the same image, reference, weight inputs and error maps (:func:`viewer_key`).
 * which outputs stay on disk (the case's ``keep_outputs``, config ``keep_outputs``): with ``read``
   only those another method reads (:func:`kept_methods`: the bases, and a combiner another
-  combiner reads). Any other output is evaluated and removed; its timing record stays, and its
-  entry's image is then identified by its method key (``key:<key>``) instead of its content
-  checksum, so its metric values and viewer images stay valid while its key does. It is made
-  again only when its entry needs an evaluation it lacks (an added metric, a changed error map)
-  or its key changes. With ``all`` every output stays.
+  combiner reads). Any other output is evaluated and removed; its timing record stays, and so
+  do its metric values and viewer images while its key does (an edit that stops a combiner
+  reading it, or starts one reading it, changes nothing of its evaluation). It is made again
+  only when its entry needs an evaluation it lacks (an added metric, a changed error map), a
+  method comes to read it, or its key changes; an output made again with its recorded key keeps
+  its first timing record. With ``all`` every output stays.
 
 Snakemake reruns a case's job when its plan changes (the rule's params: the case's methods and
 their settings, the entries, the metrics), when its render, reference or a learned method's
@@ -180,8 +183,8 @@ def run_case(case: dict, *, threads: int = 1) -> dict:
     stale = [m["name"] for m in case["methods"] if m["name"] in kept and m["name"] not in current]
     recorded = {m["name"] for m in case["methods"] if _recorded_key(m["timing"]) == keys[m["name"]]}
     stale += [m["name"] for m in case["methods"] if m["name"] not in kept and m["name"] not in recorded]
-    _run_stale(case, keys, stale, threads=threads)
-    identities = _entry_identities(case, keys, kept)
+    _remake_outputs(case, keys, stale, threads=threads)
+    identities = _entry_identities(case, keys)
     removed = {name for name in keys if name not in kept and name not in current and name not in stale}
     wanted = _entries_to_evaluate(case, identities, removed) if removed else []
     _remake_outputs(case, keys, wanted, threads=threads)     # removed outputs an evaluation needs again
@@ -224,10 +227,13 @@ def ensure_case_outputs(case: dict, names: list[str], *, threads: int = 1) -> li
     return made
 
 
-def _entry_identities(case: dict, keys: dict[str, str], kept: set[str]) -> dict[str, str]:
-    """What identifies each entry's image in its evaluations' keys: the content checksum of the
-    render or of a kept output, ``key:<method key>`` for an output the case does not keep."""
-    return {item["entry"]: (f"key:{keys[item['entry']]}" if item["entry"] in keys and item["entry"] not in kept
+def _entry_identities(case: dict, keys: dict[str, str]) -> dict[str, str]:
+    """What identifies each entry's image in its evaluations' keys: ``key:<method key>`` for a
+    method's output (whether the case keeps it or not: a method made again with its key computes
+    its image again from the same code, parameters, inputs, weights and render, while its file's
+    checksum also covers the seconds it recorded), the content
+    checksum of the image otherwise (the render)."""
+    return {item["entry"]: (f"key:{keys[item['entry']]}" if item["entry"] in keys
                             else content_checksum(item["image"]))
             for item in case["entries"]}
 

@@ -167,6 +167,22 @@ def test_ensure_case_outputs_makes_removed_outputs_for_their_readers(case_dir):
         ensure_case_outputs(make_case(case_dir), ["nope"])
 
 
+
+def test_an_output_that_a_method_stops_or_starts_reading_keeps_its_evaluation(case_dir):
+    """keep_outputs read: when 'avg' is removed, 'ens' is no longer read (its output goes, its
+    evaluation stays); when a method reading 'ens' comes back, 'ens' is made again with its first
+    timing record, and its evaluation still stays. Only the added method is evaluated."""
+    out = case_dir / "results/outputs"
+    run_case(make_case(case_dir, keep="read"))
+    timing = json.loads((out / "ens.json").read_text())
+    shrunk = run_case(make_case(case_dir, methods=METHODS[:3], keep="read"))
+    assert shrunk["made"] == {"methods": [], "metrics": [], "viewer": []}
+    assert not (out / "ens.exr").exists() and shrunk["methods"]["ens"]["kept"] is False
+    regrown = run_case(make_case(case_dir, methods=[*METHODS[:3], ("avg3", "naive_average", {}, ["ens", "jbf"])],
+                                 keep="read"))
+    assert regrown["made"] == {"methods": ["ens", "avg3"], "metrics": ["avg3"], "viewer": ["avg3"]}
+    assert (out / "ens.exr").exists() and json.loads((out / "ens.json").read_text()) == timing
+
 def test_a_half_written_or_foreign_output_is_made_again(case_dir):
     """A method whose timing record is missing (killed between its two files), or whose files
     record another key (written by other settings), is made again; nothing else."""
@@ -178,9 +194,8 @@ def test_a_half_written_or_foreign_output_is_made_again(case_dir):
     (out / "jbf.json.crc32").unlink(missing_ok=True)
     remade = run_case(make_case(case_dir))
     # the bases are made again with the keys they had, so the combiners (keyed by their inputs'
-    # keys) are kept; the bases' new files (another recorded time: another content checksum)
-    # are evaluated again
-    assert remade["made"] == {"methods": ["jbf", "oidn"], "metrics": ["jbf", "oidn"], "viewer": ["jbf", "oidn"]}
+    # keys) and every entry's evaluation (identified by the method keys) are kept
+    assert remade["made"] == {"methods": ["jbf", "oidn"], "metrics": [], "viewer": []}
 
 
 def test_a_case_whose_methods_are_out_of_dependency_order_is_refused(case_dir):
