@@ -139,11 +139,16 @@ class StudySetup:
 
     def base_weights(self, base: str) -> list[str]:
         """The weights file that a combiner's base ``base`` (``<name>`` or ``<name>+sure``) makes its
-        correlated training inputs with: an input of those inputs, so that a base retrained first
-        (``train_<base>`` in the same run) is what the combiner learns from, and new weights
-        remake them; nothing for a base that learns nothing."""
+        correlated training inputs with, while it is missing: an input of those inputs, so that a
+        base trained in the same run (``train_<base>``) comes first and is what the combiner learns
+        from. Nothing once the weights exist (weights made by another run, e.g. ``train_<base>``
+        before ``train_<combiner>``, remake the inputs through their digest, a parameter of the
+        rule): as an input, existing weights would put their training job in the DAG, and under
+        Snakemake's ``input`` rerun trigger that job (whose planned inputs are none once its weights
+        exist, :meth:`train_inputs`) runs again, deleting the weights first. Nothing for a base
+        that learns nothing."""
         name = base.removesuffix(SURE_SUFFIX)
-        return [self.weights_file(name)] if is_learned_method(load_method(name)) else []
+        return self.missing_weights(name) if is_learned_method(load_method(name)) else []
 
     def training_crops(self, patterns: list[str]) -> list[str]:
         """The training crops of every training seed (``patterns``: the crop files of one seed)."""

@@ -791,6 +791,41 @@ def test_train_rule_trains_missing_weights_and_the_main_job_never_retrains(tmp_p
     assert "train_network" in snakemake(workdir, "-n", "train_wskpn").stdout
 
 
+
+def test_a_base_trained_here_is_not_trained_again_for_its_combiners_training(tmp_path):
+    """The documented retraining order: train_kpcn, then train_deep_combiner (which learns from
+    KPCN's results). The second run takes the weights the first made as they are, under the
+    project's profile and under Snakemake's own default rerun triggers too (``--workflow-profile
+    none``, or a command line naming them): with the ``input`` trigger, a training job whose
+    recorded inputs differ from the planned ones would run again, and Snakemake deletes a job's
+    outputs (hours of training) before it runs."""
+    weights = tmp_path / "weights"
+    training = {"first_seed": 6, "count": 2, "fibre_count": 0, "resolution": [32, 24], "crop": 16, "crops": 2,
+                "spp": [4, 16], "target_spp": 64, "combiners": {"count": 2, "fibre_count": 0, "crops": 2},
+                "networks": {name: {"steps": 2, "batch_size": 2, "patch": 16, "validate_every": 2,
+                                    "checkpoint_every": 2} for name in ("kpcn", "deep_combiner")}}
+    workdir = tmp_path / "train"
+    write_config(workdir, training=training, weights_dir=str(weights), denoisers=["nfor", "oidn", "kpcn"],
+                 combiners=[{"name": "kpcn_dc", "method": "deep_combiner", "inputs": ["kpcn"]}],
+                 study={"pool": False})
+    snakemake(workdir, "train_kpcn")
+    trained = (weights / "kpcn.pt").read_bytes()
+    for triggers in ([], ["--rerun-triggers", "mtime", "params", "input", "software-env", "code"]):
+        text = snakemake(workdir, "-n", *triggers, "--", "train_deep_combiner").stdout
+        assert "train_network" not in text, text[-3000:]
+        assert "training_correlated" in text and "train_combiner" in text
+        assert "train_network" not in snakemake(workdir, "-n", *triggers, "--", "train_kpcn").stdout
+    snakemake(workdir, "train_deep_combiner")
+    assert (weights / "kpcn.pt").read_bytes() == trained and (weights / "deep_combiner.pt").exists()
+    # KPCN retrained (new weights), the combiner's weights deleted to train it again: only KPCN's
+    # results on the crops are made again (the weights' digest is their parameter), then the combiner
+    (weights / "kpcn.pt").write_bytes(trained + b"retrained")
+    (weights / "deep_combiner.pt").unlink()
+    text = snakemake(workdir, "-n", "train_deep_combiner").stdout
+    planned = {rule: int(n) for rule, n in re.findall(r"^(\w+)\s+(\d+)$", text, flags=re.MULTILINE)}
+    assert "train_network" not in planned and planned.get("train_combiner") == 1, text[-3000:]
+    assert planned.get("training_correlated") == 2 and "base=nfor" not in text and "base=oidn" not in text
+
 # --- the DAG is parsed the same way from anywhere, and mistakes stop before any job ----------
 
 def _dry_run(cwd: Path, *args: str) -> subprocess.CompletedProcess:
