@@ -11,7 +11,9 @@ Reads, from a finished run:
 * compute, i.e. the seconds a method, render or metric spends on its own work:
   ``results/timings.csv`` (each method's compute, I/O and warm-up excluded), the ``seconds``
   metadata of the noisy renders and of the merged references (the sum of their chunks' render
-  time) and of the per-case FLIP-map EXRs (the metrics step, reading included).
+  time), and the CPU seconds of the case jobs' evaluation phase (``results/cases/*/spp*.json``,
+  ``seconds.evaluation``: every entry's metrics and viewer images, reading included; runs whose
+  case records lack it count it as overhead).
 
 Prints per stage: jobs, summed job wall, summed job CPU, summed compute; and for the run: the
 **overhead share** 1 - compute / (cores x wall), the share of the cores' time in which no
@@ -23,6 +25,7 @@ machine's load averages at the time of the report.
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import re
 import sys
@@ -87,8 +90,9 @@ def compute_seconds(results: Path) -> dict[str, float]:
         compute["render (noisy)"] += float(read_metadata(path).get("seconds", 0.0))
     for path in (results / "references").glob("*.exr"):
         compute["render (reference chunks)"] += float(read_metadata(path).get("seconds", 0.0))
-    for path in (results / "metrics").rglob("*_flip.exr"):
-        compute["metrics"] += float(read_metadata(path).get("seconds", 0.0))
+    for path in (results / "cases").glob("*/spp*.json"):
+        phases = json.loads(path.read_text()).get("seconds") or {}
+        compute["evaluation (case jobs)"] += float(phases.get("evaluation", {}).get("cpu", 0.0))
     return dict(compute)
 
 
@@ -112,7 +116,8 @@ def main(argv=None) -> None:
         own = compute.get(stage)
         own_text = f"{own / 60:12.2f}" if own is not None else f"{'(below)':>12s}"
         print(f"{stage:32s} {int(row.jobs):6d} {row.wall / 60:13.2f} {row.cpu / 60:12.2f} {own_text}")
-    print(f"{'methods (all), compute':32s} {'':6s} {'':13s} {'':12s} {compute['methods (all)'] / 60:12.2f}")
+    for stage in ("methods (all)", "evaluation (case jobs)"):
+        print(f"{stage + ', compute':32s} {'':6s} {'':13s} {'':12s} {compute.get(stage, 0.0) / 60:12.2f}")
     total_compute = sum(compute.values())
     capacity = args.cores * wall
     print(f"compute {total_compute / 60:.1f} min of {capacity / 60:.1f} core-min: "

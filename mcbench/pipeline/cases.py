@@ -32,7 +32,9 @@ their settings, the entries, the metrics), when its render, reference or a learn
 weights are newer than its outputs, or when an output is missing; the job then makes only what
 is out of date, so a method added to a finished study costs that method's work and the case's
 assembly. The case record (``cases/<scene>/spp<N>.json``) says what the job made and what it
-kept, and lists the timing records of the case's methods (rule ``gather_timings`` reads them).
+kept, and lists the timing records of the case's methods (rule ``gather_timings`` reads them)
+and the wall and CPU seconds of the job's phases (``seconds``: making methods' outputs, evaluating
+the entries, assembling; ``benchmarks/dag_overhead.py`` counts the evaluation as compute).
 
 A content checksum is the ``mcbench.crc32`` header attribute every EXR of the harness carries
 (:mod:`mcbench.io.exr`; read from the header, without decoding pixels), or the file's SHA-256
@@ -177,6 +179,7 @@ def run_case(case: dict, *, threads: int = 1) -> dict:
     ``keep_outputs``: ``read`` (default) or ``all`` (module docstring).
     """
     scene, spp = case["scene"], int(case["spp"])
+    clock = _PhaseClock()
     keys = _method_keys(case, content_checksum(case["render"]))
     kept = kept_methods(case["methods"], case.get("keep_outputs", "read"))
     current = {m["name"] for m in case["methods"] if _stored_method_key(m["exr"], m["timing"]) == keys[m["name"]]}
@@ -188,11 +191,14 @@ def run_case(case: dict, *, threads: int = 1) -> dict:
     removed = {name for name in keys if name not in kept and name not in current and name not in stale}
     wanted = _entries_to_evaluate(case, identities, removed) if removed else []
     _remake_outputs(case, keys, wanted, threads=threads)     # removed outputs an evaluation needs again
+    clock.lap("methods")
     evaluated = _evaluate_case(case, identities)
+    clock.lap("evaluation")
     for method in case["methods"]:
         if method["name"] not in kept:
             Path(method["exr"]).unlink(missing_ok=True)
     _assemble_case(case, evaluated)
+    clock.lap("assembly")
     made = [m["name"] for m in case["methods"] if m["name"] in set(stale) | set(wanted)]
     record = {"version": CASE_RECORD_VERSION, "scene": scene, "spp": spp,
               "made": {"methods": made,
@@ -200,9 +206,27 @@ def run_case(case: dict, *, threads: int = 1) -> dict:
                        "viewer": [e for e, done in evaluated.items() if done["viewer"]]},
               "methods": {m["name"]: {"key": keys[m["name"]], "exr": m["exr"], "timing": m["timing"],
                                       "kept": m["name"] in kept}
-                          for m in case["methods"]}}
+                          for m in case["methods"]},
+              "seconds": clock.laps}
     write_json(case["outputs"]["record"], record)
     return record
+
+
+class _PhaseClock:
+    """Wall and CPU seconds of a job's phases, in ``laps``: ``{phase: {"wall", "cpu"}}`` (CPU:
+    the process's, all its threads)."""
+
+    def __init__(self):
+        import time
+
+        self._time = time
+        self._wall, self._cpu = time.perf_counter(), time.process_time()
+        self.laps: dict[str, dict[str, float]] = {}
+
+    def lap(self, phase: str) -> None:
+        wall, cpu = self._time.perf_counter(), self._time.process_time()
+        self.laps[phase] = {"wall": wall - self._wall, "cpu": cpu - self._cpu}
+        self._wall, self._cpu = wall, cpu
 
 
 def ensure_case_outputs(case: dict, names: list[str], *, threads: int = 1) -> list[str]:

@@ -87,6 +87,9 @@ def test_a_case_job_makes_what_is_missing_or_stale_and_keeps_the_rest(case_dir):
     first = run_case(make_case(case_dir))
     names = [name for name, *_ in METHODS]
     assert first["made"] == {"methods": names, "metrics": [NOISY, *names], "viewer": [NOISY, *names]}
+    assert list(first["seconds"]) == ["methods", "evaluation", "assembly"]       # the job's phases, in order
+    assert first["seconds"]["evaluation"]["cpu"] > 0 and all(
+        lap["wall"] >= 0 and lap["cpu"] >= 0 for lap in first["seconds"].values())
     before = mtimes(case_dir / "results")
     again = run_case(make_case(case_dir))
     assert again["made"] == {"methods": [], "metrics": [], "viewer": []}
