@@ -210,11 +210,11 @@ MAX_FUNCTION_LINES = 60
 
 
 def long_functions(root: Path = ROOT) -> list[str]:
-    """Functions of ``mcbench``, ``methods`` and ``scenes`` with more than
+    """Functions of ``mcbench``, ``methods``, ``scenes`` and ``metrics`` with more than
     :data:`MAX_FUNCTION_LINES` lines besides their docstring, numba kernels (a decorator naming
     ``jit``) and Dr.Jit-traced functions (``dr.syntax``) aside."""
     found = []
-    for package in ("mcbench", "methods", "scenes"):
+    for package in ("mcbench", "methods", "scenes", "metrics"):
         for path in sorted((root / package).rglob("*.py")):
             for node in ast.walk(ast.parse(path.read_text())):
                 if not isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):

@@ -164,7 +164,7 @@ def test_a_study_ranks_renders_from_another_renderer_end_to_end(tmp_path):
     copy.mkdir()
     for name in ("Snakefile", "config.yaml", "pyproject.toml"):
         shutil.copy(REPO / name, copy / name)
-    for name in ("workflow", "mcbench", "methods", "scenes"):
+    for name in ("workflow", "mcbench", "methods", "scenes", "metrics"):
         shutil.copytree(REPO / name, copy / name, ignore=shutil.ignore_patterns("__pycache__"))
     global H, W
     H, W = 32, 32
