@@ -45,6 +45,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import time
 from pathlib import Path
 
 from mcbench import METRICS_COLUMNS, BenchError
@@ -217,14 +218,11 @@ class _PhaseClock:
     the process's, all its threads)."""
 
     def __init__(self):
-        import time
-
-        self._time = time
         self._wall, self._cpu = time.perf_counter(), time.process_time()
         self.laps: dict[str, dict[str, float]] = {}
 
     def lap(self, phase: str) -> None:
-        wall, cpu = self._time.perf_counter(), self._time.process_time()
+        wall, cpu = time.perf_counter(), time.process_time()
         self.laps[phase] = {"wall": wall - self._wall, "cpu": cpu - self._cpu}
         self._wall, self._cpu = wall, cpu
 
