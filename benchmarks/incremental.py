@@ -122,7 +122,7 @@ def _add_metric(workdir: Path, configfile: Path, base: dict, metric: str, cores:
 
 def _bundle_round_trip(workdir: Path, configfile: Path, row) -> None:
     """The study exported, imported into a fresh clone, and dry-run there."""
-    archive = workdir / "results/bundle/study.tar"
+    archive = workdir / "results/bundle/study.tar.gz"
     wall, cpu, _ = timed(snakemake(workdir, configfile, "--cores", "1", "export_study", "-f"), cwd=workdir)
     row("export_study", wall, cpu, extra=f"{archive.stat().st_size / 2**20:.1f} MiB")
     with tempfile.TemporaryDirectory(dir=workdir.parent) as tmp:

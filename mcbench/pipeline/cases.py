@@ -25,7 +25,9 @@ whatever exists under ``results/``; the job itself decides, item by item, what i
   reading it, or starts one reading it, changes nothing of its evaluation). It is made again
   only when its entry needs an evaluation it lacks (an added metric, a changed error map), a
   method comes to read it, or its key changes; an output made again with its recorded key keeps
-  its first timing record. With ``all`` every output stays.
+  its first timing record. With ``all`` every output stays. A kept output is written
+  Zstandard-compressed (lossless, :data:`KEPT_OUTPUT_COMPRESSION`), one the case removes
+  uncompressed (it is read once, by its evaluation).
 
 Snakemake reruns a case's job when its plan changes (the rule's params: the case's methods and
 their settings, the entries, the metrics), when its render, reference or a learned method's
@@ -52,10 +54,16 @@ from mcbench import METRICS_COLUMNS, BenchError
 from mcbench.io.exr import content_checksum
 from mcbench.io.tables import read_json, write_csv, write_json
 
-__all__ = ["CASE_RECORD_VERSION", "method_key", "viewer_key", "kept_methods", "run_case", "ensure_case_outputs",
+__all__ = ["CASE_RECORD_VERSION", "KEPT_OUTPUT_COMPRESSION", "method_key", "viewer_key", "kept_methods", "run_case", "ensure_case_outputs",
            "case_timing_paths", "gather_case_timings"]
 
 CASE_RECORD_VERSION = 1
+
+#: The compression of the method outputs a case keeps (:func:`kept_methods`): lossless Zstandard,
+#: 0.79 of a denoised image's uncompressed bytes, read in 1.6x the time (ZIP: 0.97 and 2.7x;
+#: ``benchmarks/exr_compression.py``, docs/measurements.md). A removed output is read once, by its
+#: evaluation, and is written uncompressed.
+KEPT_OUTPUT_COMPRESSION = "zstd"
 
 
 def _digest(value) -> str:
@@ -143,15 +151,19 @@ def _recorded_key(timing: str) -> str | None:
 
 
 def _run_stale(case: dict, keys: dict[str, str], names: list[str], *, threads: int) -> None:
-    """Run the case's methods ``names`` (in the case's dependency order) into their files."""
+    """Run the case's methods ``names`` (in the case's dependency order) into their files: those
+    the case keeps (:func:`kept_methods`) compressed with :data:`KEPT_OUTPUT_COMPRESSION`, the
+    others uncompressed."""
     from mcbench.pipeline.method_runs import run_methods
 
     by_name = {method["name"]: method for method in case["methods"]}
+    kept = kept_methods(case["methods"], case.get("keep_outputs", "read"))
     chosen = [m for m in case["methods"] if m["name"] in set(names)]
     if chosen:
         run_methods([{"name": m["name"], "module": m["module"], "params": m["params"], "key": keys[m["name"]],
                       "weights": m.get("weights"), "input_paths": [by_name[i]["exr"] for i in m["inputs"]],
-                      "exr": m["exr"], "timing": m["timing"]}
+                      "exr": m["exr"], "timing": m["timing"],
+                      "compression": KEPT_OUTPUT_COMPRESSION if m["name"] in kept else "none"}
                      for m in chosen], case["render"], scene=case["scene"], spp=int(case["spp"]), threads=threads)
 
 

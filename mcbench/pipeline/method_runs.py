@@ -48,7 +48,8 @@ def run_methods(entries: list[dict], render_path: str, *, scene: str = "", spp: 
     ``entries``: dicts with ``name``, ``module``, ``params``, ``input_paths`` (the output EXRs
     of the method's inputs), ``exr``, ``timing`` (where its output and timing record go),
     ``weights`` (a learned method's weights file, handed to its ``run`` as ``weights_file``) and
-    optionally ``key`` (:func:`mcbench.pipeline.cases.method_key`, recorded in both),
+    optionally ``key`` (:func:`mcbench.pipeline.cases.method_key`, recorded in both) and
+    ``compression`` (of the output EXR, :data:`mcbench.io.exr.COMPRESSIONS`; default ``"none"``),
     in dependency order: an entry may take an earlier entry's output as an input. The render and
     every input EXR are read once; an input made earlier in the same call is read back from the
     file just written, so each method sees exactly what a job of its own would see (results
@@ -116,7 +117,8 @@ def run_methods(entries: list[dict], render_path: str, *, scene: str = "", spp: 
             check_finite(f"{entry['exr']} (output of method '{method}')", bad)
         key = {"key": entry["key"]} if entry.get("key") else {}
         write_layers(entry["exr"], stored_layers(result), metadata={"method": method, "scene": scene, "spp": spp,
-                                                     "seconds": f"{seconds:.6f}", **key})
+                                                     "seconds": f"{seconds:.6f}", **key},
+                     compression=entry.get("compression", "none"))
         write_json(entry["timing"], {"scene": scene, "spp": spp, "method": method, "module": module_name,
                                      "kind": spec.kind, "seconds": seconds, "width": width,
                                      "height": height, "threads": threads, "machine": _machine(), **key})

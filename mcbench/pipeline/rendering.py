@@ -12,12 +12,11 @@ from mcbench.io.render_folders import RenderFolder, case_files, read_case, read_
 __all__ = ["render_noisy", "render_reference_chunk", "merge_reference", "merged_chunks", "folder_case_files",
            "folder_reference_files", "resolution_pair"]
 
-#: Renders are stored ZIP-compressed (lossless): with their feature layers (albedo, normal, depth,
-#: position, visibility, each with its variance and halves) they take 42 % less space, for one read
-#: per case job of some tens of milliseconds more at 128 x 128. Method outputs stay uncompressed:
-#: denoised floats shrink by 7 % only, each read costing several times more
-#: (`benchmarks/exr_compression.py`, numbers in docs/measurements.md).
-RENDER_COMPRESSION = "zip"
+#: Renders are stored Zstandard-compressed (lossless; :data:`mcbench.io.exr.COMPRESSIONS`): with
+#: their feature layers (albedo, normal, depth, position, visibility, each with its variance and
+#: halves) they take 0.49 of their uncompressed bytes (ZIP: 0.60), for one read per case job of
+#: some milliseconds more at 128 x 128 (`benchmarks/exr_compression.py`, docs/measurements.md).
+RENDER_COMPRESSION = "zstd"
 
 
 def folder_case_files(folder: RenderFolder, spp: int) -> list[str]:

@@ -91,6 +91,12 @@ def test_jpeg_holds_the_tone_mapped_image(tmp_path):
     assert pixels.shape == (32, 48, 3)
     assert np.abs(pixels - expected).mean() < 1.5
     assert np.abs(pixels - expected).max() <= 8
+    from PIL import Image
+
+    rgb = viewer.display_bytes(viewer.exposed_display(image, ev=1))
+    Image.fromarray(rgb).save(tmp_path / "standard.jpg", format="JPEG", quality=viewer.JPEG_QUALITY, subsampling=0)
+    assert np.array_equal(pixels, decoded(tmp_path / "standard.jpg"))     # optimised tables: the same pixels
+    assert (tmp_path / "a.jpg").stat().st_size < (tmp_path / "standard.jpg").stat().st_size
 
 
 def test_exposure_tags_are_distinct_file_name_safe():

@@ -15,7 +15,7 @@ def render_layers(make_render_buffers):
     return layers
 
 
-@pytest.mark.parametrize("compression", ["none", "zip"])
+@pytest.mark.parametrize("compression", ["none", "zip", "zstd"])
 def test_round_trip_preserves_layers_and_metadata(tmp_path, render_layers, compression):
     path = tmp_path / "r.exr"
     layers = render_layers
@@ -34,7 +34,7 @@ def test_missing_file_names_the_path(tmp_path):
         read_layers(tmp_path / "nope.exr")
 
 
-@pytest.mark.parametrize("compression", ["none", "zip"])
+@pytest.mark.parametrize("compression", ["none", "zip", "zstd"])
 def test_corrupt_file_names_the_path(tmp_path, render_layers, compression):
     path = tmp_path / "corrupt.exr"
     write_layers(path, render_layers, compression=compression)
@@ -82,7 +82,7 @@ def test_half_buffer_view_uses_its_own_features(render_layers):
     np.testing.assert_array_equal(buffers.image("b").albedo, layers["albedo"])  # falls back to full
 
 
-@pytest.mark.parametrize("compression", ["none", "zip"])
+@pytest.mark.parametrize("compression", ["none", "zip", "zstd"])
 def test_layer_rows_read_what_read_layers_reads(tmp_path, render_layers, compression):
     """mcbench.io.exr.layer_rows: every layer (3-channel and the 1-channel depth), indexed by rows,
     single rows (negative too), rows and columns, or whole, equals read_layers bit for bit; the

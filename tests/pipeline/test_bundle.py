@@ -9,6 +9,7 @@ import hashlib
 import io
 import json
 import os
+import gzip
 import re
 import tarfile
 from base64 import urlsafe_b64decode
@@ -135,7 +136,7 @@ def test_record_path_is_snakemakes_own(tmp_path, key):
 
 
 def test_export_holds_every_study_file_with_checksums_and_bundle_json_first(study, bundle):
-    with tarfile.open(bundle, "r:") as tar:
+    with tarfile.open(bundle, "r:*") as tar:
         members = tar.getmembers()
         assert members[0].name == "bundle.json"
         manifest = json.load(tar.extractfile(members[0]))
@@ -147,7 +148,7 @@ def test_export_holds_every_study_file_with_checksums_and_bundle_json_first(stud
         assert entry["size"] == len(data)
         assert entry["sha256"] == hashlib.sha256(data).hexdigest()
         assert entry["mtime_ns"] == TREE[entry["path"]][1] * 10**9
-    assert manifest["bundle_version"] == B.BUNDLE_VERSION == 2
+    assert manifest["bundle_version"] == B.BUNDLE_VERSION == 3
     assert manifest["config"] == CONFIG
     from mcbench.pipeline.config import config_digest
     assert manifest["config_digest"] == config_digest(CONFIG)
@@ -209,7 +210,7 @@ def test_second_import_changes_no_content(bundle, clone):
 def rewrite_bundle(source: Path, target: Path, *, manifest=None, members=None) -> Path:
     """A copy of bundle ``source`` with ``manifest(dict) -> dict`` applied to bundle.json and
     ``members(list of (name, bytes)) -> list`` to the other members."""
-    with tarfile.open(source, "r:") as tar:
+    with tarfile.open(source, "r:*") as tar:
         items = [(m.name, tar.extractfile(m).read()) for m in tar.getmembers()]
     data = json.loads(items[0][1])
     if manifest:
@@ -231,27 +232,66 @@ def refused(bundle: Path, clone: Path, *, match: str, config=CONFIG):
     assert listing(clone) == before
 
 
-def test_a_flipped_byte_is_refused_naming_the_member(bundle, clone, tmp_path):
-    data = bytearray(bundle.read_bytes())
+def test_the_archive_is_gzip_compressed(bundle):
+    assert bundle.read_bytes()[:2] == b"\x1f\x8b"
+    with tarfile.open(bundle, "r:gz") as tar:
+        assert tar.getmembers()[0].name == "bundle.json"
+
+
+@pytest.mark.parametrize("compressed", [True, False])
+def test_a_flipped_byte_is_refused_naming_the_member(bundle, clone, tmp_path, compressed):
+    """A byte of a member's content flipped inside the archive (the tar stream, then
+    gzip-compressed again as an export writes it; or left uncompressed, as versions 1 and 2 were)."""
+    data = bytearray(gzip.decompress(bundle.read_bytes()))
     offset = data.find(b"oidn output")
     data[offset] ^= 0x01
-    bundle.write_bytes(bytes(data))
+    bundle.write_bytes(gzip.compress(bytes(data), compresslevel=1) if compressed else bytes(data))
     refused(bundle, clone, match=r"member results/outputs/cornell_box/spp4/oidn.exr: checksum mismatch")
     with pytest.raises(BenchError, match="oidn.exr: checksum mismatch"):
         B.verify_bundle(bundle)
 
 
+@pytest.mark.parametrize("where", [0.1, 0.3, 0.5, 0.7, 0.9, 0.98])
+def test_a_flipped_byte_of_the_compressed_stream_is_refused_or_changes_nothing(bundle, clone, where):
+    """Anywhere, the tar's padding and end blocks included (gzip's CRC covers them): the import is
+    refused and writes nothing, or, where the flip falls in bits that deflate does not read (a
+    block's unused bits, gzip's header time), the stream decodes to the same bytes and imports."""
+    original = bundle.read_bytes()
+    data = bytearray(original)
+    data[int(len(data) * where)] ^= 0x10
+    bundle.write_bytes(bytes(data))
+    before = listing(clone)
+    try:
+        import_into(bundle, clone)
+    except BenchError as exc:
+        # gzip's CRC is checked at the stream's end: the garbage before it is refused by whatever
+        # check it reaches first (bundle.json's parse, a member's header or checksum)
+        assert re.search(r"checksum mismatch|unreadable|truncated|damaged|not valid JSON|export the study again",
+                         str(exc))
+        assert listing(clone) == before
+    else:
+        assert gzip.decompress(bytes(data)) == gzip.decompress(original)
+
+
 @pytest.mark.parametrize("where", ["inside bundle.json", "after bundle.json", "inside the last member",
                                    "before the last member's data"])
 def test_a_truncated_archive_is_refused(bundle, clone, where):
-    with tarfile.open(bundle, "r:") as tar:
+    with tarfile.open(bundle, "r:*") as tar:
         members = tar.getmembers()
     first, last = members[0], members[-1]
     cut = {"inside bundle.json": first.offset_data + first.size // 2,
            "after bundle.json": first.offset_data + first.size + (-first.size % 512),
            "inside the last member": last.offset_data + last.size // 2,
            "before the last member's data": last.offset_data - 100}[where]
-    bundle.write_bytes(bundle.read_bytes()[:cut])
+    bundle.write_bytes(gzip.compress(gzip.decompress(bundle.read_bytes())[:cut], compresslevel=1))
+    refused(bundle, clone, match=r"truncated|missing from the archive|unreadable")
+
+
+@pytest.mark.parametrize("fraction", [0.1, 0.5, 0.995])
+def test_a_truncated_compressed_archive_is_refused(bundle, clone, fraction):
+    """Cut anywhere, the tar's end blocks and gzip's trailer included (gzip's length and CRC)."""
+    data = bundle.read_bytes()
+    bundle.write_bytes(data[:int(len(data) * fraction)])
     refused(bundle, clone, match=r"truncated|missing from the archive|unreadable")
 
 
@@ -284,8 +324,8 @@ def test_a_traversal_member_alone_is_refused(bundle, clone, tmp_path):
 
 
 def test_another_bundle_version_is_refused(bundle, clone, tmp_path):
-    bad = rewrite_bundle(bundle, tmp_path / "bad.tar", manifest=lambda m: {**m, "bundle_version": 3})
-    refused(bad, clone, match=r"bundle_version 3: made by an incompatible version")
+    bad = rewrite_bundle(bundle, tmp_path / "bad.tar", manifest=lambda m: {**m, "bundle_version": 4})
+    refused(bad, clone, match=r"bundle_version 4: made by an incompatible version")
 
 
 @pytest.mark.parametrize("key, change, named", [
@@ -361,11 +401,11 @@ def test_files_of_equal_content_are_stored_once_as_links_and_imported_whole(stud
     import_into(path, clone)
     for name in jpegs:
         assert (clone / name).read_bytes() == b"jpeg bytes" * 1000
-    assert B.verify_bundle(path)["bundle_version"] == 2
+    assert B.verify_bundle(path)["bundle_version"] == 3
 
 
 def test_a_link_to_a_member_of_other_content_is_refused(bundle, clone, tmp_path):
-    with tarfile.open(bundle, "r:") as tar:
+    with tarfile.open(bundle, "r:*") as tar:
         items = [(m, tar.extractfile(m).read() if m.isfile() else None) for m in tar.getmembers()]
     manifest = json.loads(items[0][1])
     manifest["files"].append({"path": "results/extra.exr", "size": 6, "sha256": hashlib.sha256(b"xxxxxx").hexdigest(),

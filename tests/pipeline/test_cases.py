@@ -8,11 +8,12 @@ import os
 import shutil
 
 import numpy as np
+import OpenEXR
 import pandas as pd
 import pytest
 
 from mcbench import NOISY, BenchError
-from mcbench.io.exr import read_layers, write_layers
+from mcbench.io.exr import COMPRESSIONS, read_layers, write_layers
 from mcbench.io.file_cache import cached_read, clear_cache
 from mcbench.pipeline.cases import method_key, run_case, viewer_key
 from mcbench.pipeline.logs import run_logged
@@ -74,6 +75,13 @@ def make_case(folder, *, methods=METHODS, metrics=("relmse", "smape"), keep="all
                         "record": str(out / "case.json")}, "keep_outputs": keep}
 
 
+def compression(path) -> str:
+    """The name (a key of :data:`mcbench.io.exr.COMPRESSIONS`) of the compression of the EXR ``path``."""
+    with OpenEXR.File(str(path)) as exr:
+        code = exr.header()["compression"]
+    return next(name for name, value in COMPRESSIONS.items() if value == code)
+
+
 def mtimes(folder) -> dict[str, int]:
     return {str(p.relative_to(folder)): p.stat().st_mtime_ns for p in sorted(folder.rglob("*"))
             if p.is_file() and p.parent.name != "viewer_case" and not p.name.startswith((".case.", "case."))}
@@ -128,6 +136,7 @@ def test_outputs_no_method_reads_are_evaluated_then_removed_and_made_again_only_
     assert sorted(p.stem for p in out.glob("*.json")) == sorted(names)
     assert {name: m["kept"] for name, m in first["methods"].items()} == {"jbf": True, "oidn": True, "ens": True,
                                                                           "avg": False}
+    assert {p.stem: compression(p) for p in out.glob("*.exr")} == dict.fromkeys(["ens", "jbf", "oidn"], "zstd")
     before = mtimes(case_dir / "results")
     assert run_case(make_case(case_dir, keep="read"))["made"] == {"methods": [], "metrics": [], "viewer": []}
     assert mtimes(case_dir / "results") == before
@@ -143,6 +152,7 @@ def test_outputs_no_method_reads_are_evaluated_then_removed_and_made_again_only_
     for name in ("render.exr", "reference.exr"):
         shutil.copy(case_dir / name, every / name)
     run_case(make_case(every, keep="all", metrics=("relmse", "smape", "dssim")))
+    assert compression(every / "results/outputs/avg.exr") == "zstd"      # kept, though no method reads it
     pd.testing.assert_frame_equal(pd.read_csv(case_dir / "results/case.csv"), pd.read_csv(every / "results/case.csv"))
     grown = [*METHODS, ("avg2", "naive_average", {}, ["jbf", "oidn"])]
     assert run_case(make_case(case_dir, methods=grown, keep="read",

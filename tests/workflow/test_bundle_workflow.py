@@ -72,7 +72,7 @@ def test_an_imported_study_plans_nothing_and_an_added_method_only_its_jobs(smoke
     params trigger; without the records it would silently not)."""
     workdir, config = smoke_results
     run_snakemake(workdir, "export_study")
-    bundle = workdir / "results" / "bundle" / "study.tar"
+    bundle = workdir / "results" / "bundle" / "study.tar.gz"
     assert bundle.is_file()
 
     clone = copy_checkout(tmp_path / "clone")

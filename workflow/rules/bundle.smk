@@ -1,9 +1,9 @@
 # The finished study as one checked archive (mcbench.pipeline.bundle, docs/bundle.md):
-# `snakemake --cores 1 export_study` (not part of `all`) writes results/bundle/study.tar, holding
+# `snakemake --cores 1 export_study` (not part of `all`) writes results/bundle/study.tar.gz, holding
 # every file of results/ but the logs, the report and earlier bundles, with the resolved config,
 # the provenance and Snakemake's metadata records. Its inputs are the outputs of rule `all`, so
 # that a bundle is of a finished study. In a clone elsewhere, in the checkout's root:
-# `python -m mcbench.pipeline.bundle import results/bundle/study.tar [--configfile CONFIG]`.
+# `python -m mcbench.pipeline.bundle import results/bundle/study.tar.gz [--configfile CONFIG]`.
 
 
 rule export_study:
@@ -11,7 +11,7 @@ rule export_study:
     input:
         rules.all.input,
     output:
-        "results/bundle/study.tar",
+        "results/bundle/study.tar.gz",
     params:
         config_digest=STUDY.digest,
     threads: 1
