@@ -150,14 +150,13 @@ def _recorded_key(timing: str) -> str | None:
         return None
 
 
-def _run_stale(case: dict, keys: dict[str, str], names: list[str], *, threads: int) -> None:
+def _run_stale(case: dict, keys: dict[str, str], names: list[str], kept: set[str], *, threads: int) -> None:
     """Run the case's methods ``names`` (in the case's dependency order) into their files: those
-    the case keeps (:func:`kept_methods`) compressed with :data:`KEPT_OUTPUT_COMPRESSION`, the
-    others uncompressed."""
+    the case keeps (``kept``, :func:`kept_methods`) compressed with :data:`KEPT_OUTPUT_COMPRESSION`,
+    the others uncompressed."""
     from mcbench.pipeline.method_runs import run_methods
 
     by_name = {method["name"]: method for method in case["methods"]}
-    kept = kept_methods(case["methods"], case.get("keep_outputs", "read"))
     chosen = [m for m in case["methods"] if m["name"] in set(names)]
     if chosen:
         run_methods([{"name": m["name"], "module": m["module"], "params": m["params"], "key": keys[m["name"]],
@@ -167,14 +166,15 @@ def _run_stale(case: dict, keys: dict[str, str], names: list[str], *, threads: i
                      for m in chosen], case["render"], scene=case["scene"], spp=int(case["spp"]), threads=threads)
 
 
-def _remake_outputs(case: dict, keys: dict[str, str], names: list[str], *, threads: int) -> None:
+def _remake_outputs(case: dict, keys: dict[str, str], names: list[str], kept: set[str], *,
+                    threads: int) -> None:
     """Make again the outputs of ``names`` whose timing records hold their current keys (outputs a
     case removed), keeping those records as they are: the timing measured when the output was
     first made stays the one the tables read."""
     by_name = {method["name"]: method for method in case["methods"]}
     records = {name: read_json(by_name[name]["timing"]) for name in names
                if _recorded_key(by_name[name]["timing"]) == keys[name]}
-    _run_stale(case, keys, names, threads=threads)
+    _run_stale(case, keys, names, kept, threads=threads)
     for name, record in records.items():
         write_json(by_name[name]["timing"], record)
 
@@ -199,11 +199,11 @@ def run_case(case: dict, *, threads: int = 1) -> dict:
     stale = [m["name"] for m in case["methods"] if m["name"] in kept and m["name"] not in current]
     recorded = {m["name"] for m in case["methods"] if _recorded_key(m["timing"]) == keys[m["name"]]}
     stale += [m["name"] for m in case["methods"] if m["name"] not in kept and m["name"] not in recorded]
-    _remake_outputs(case, keys, stale, threads=threads)
+    _remake_outputs(case, keys, stale, kept, threads=threads)
     identities = _entry_identities(case, keys)
     removed = {name for name in keys if name not in kept and name not in current and name not in stale}
     wanted = _entries_to_evaluate(case, identities, removed) if removed else []
-    _remake_outputs(case, keys, wanted, threads=threads)     # removed outputs an evaluation needs again
+    _remake_outputs(case, keys, wanted, kept, threads=threads)     # removed outputs an evaluation needs again
     clock.lap("methods")
     evaluated = _evaluate_case(case, identities)
     clock.lap("evaluation")
@@ -257,7 +257,8 @@ def ensure_case_outputs(case: dict, names: list[str], *, threads: int = 1) -> li
             todo.extend(by_name[name]["inputs"])
     made = [m["name"] for m in case["methods"]
             if m["name"] in needed and _stored_method_key(m["exr"], m["timing"]) != keys[m["name"]]]
-    _remake_outputs(case, keys, made, threads=threads)
+    _remake_outputs(case, keys, made, kept_methods(case["methods"], case.get("keep_outputs", "read")),
+                    threads=threads)
     return made
 
 

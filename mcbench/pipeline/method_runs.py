@@ -64,15 +64,28 @@ def run_methods(entries: list[dict], render_path: str, *, scene: str = "", spp: 
     :func:`mcbench.io.file_cache.cached_read`, so a warm worker (:mod:`mcbench.pipeline.worker_pool`)
     running the next method of the same case does not decode them again.
     """
-    from mcbench.pipeline.registry import load_method, method_parameters
+    from mcbench.pipeline.registry import load_method
 
     modules = {entry["module"]: load_method(entry["module"], config_key=f"method '{entry['name']}'")
                for entry in entries}
-    by_rows = reads_rows(modules.values())
+    buffers, input_of = _case_reader(render_path, modules.values())
+    for entry in entries:
+        module = modules[entry["module"]]
+        inputs = [input_of(path) for path in entry.get("input_paths", ())]
+        params = _entry_params(entry, module, scene=scene, spp=spp)
+        result, seconds = _timed_run(entry["module"], module, buffers, inputs, params)
+        _write_method_output(entry, result, seconds, scene=scene, spp=spp, threads=threads,
+                             kind=method_spec(module).kind, shape=buffers.shape)
+
+
+def _case_reader(render_path: str, modules) -> tuple[RenderBuffers, Callable[[str], Denoised]]:
+    """The case's render (the layers ``modules`` read, by rows where one of them asks for it) and
+    a reader of input EXRs that reads each file once and checks its shape against the render."""
+    layers = render_layers(modules)
+    by_rows = reads_rows(modules)
     if by_rows:
-        buffers = _render_by_rows(render_path, render_layers(modules.values()))
+        buffers = _render_by_rows(render_path, layers)
     else:
-        layers = render_layers(modules.values())
         buffers = cached_read(render_path, lambda path: RenderBuffers.load(path, layers=layers),
                               key=("render", layers))
     loaded: dict[str, Denoised] = {}
@@ -87,41 +100,58 @@ def run_methods(entries: list[dict], render_path: str, *, scene: str = "", spp: 
             loaded[path] = denoised
         return loaded[path]
 
-    height, width = buffers.shape
-    warmed = _WARMED
-    for entry in entries:
-        method, module_name, params = entry["name"], entry["module"], dict(entry.get("params") or {})
-        module = modules[module_name]
-        inputs = [input_of(path) for path in entry.get("input_paths", ())]
-        # untimed run on a corner crop: compiles / loads the method's JIT kernels (numba's cache
-        # load alone can cost more than a small case's compute) and first-call set-up, once per
-        # module and parameters in the process (the 31 pool ensembles share one)
-        for key, value in (("name", method), ("scene", scene), ("spp", spp)):
-            if key in method_parameters(module) and key not in params:
-                params[key] = value          # a method that names its files gets its name and case
-        spec = method_spec(module)
-        if spec.learned is not None:
-            params[WEIGHTS_ARGUMENT] = _weights_file(entry, method)
-        key = (module_name, json.dumps(params, sort_keys=True, default=str))
-        if key not in warmed and spec.warm_up:
-            _apply(module, *_corner_crop(buffers, inputs), params)
-            warmed.add(key)
-        start = time.perf_counter()
-        result = _apply(module, buffers, inputs, params)
-        seconds = time.perf_counter() - start
-        if spec.program_seconds is not None:      # e.g. an external program: its own wall time
-            seconds = float(spec.program_seconds())
-        layers = result.layers()
-        bad = {name: layer for name, layer in layers.items() if not np.all(np.isfinite(layer))}
-        if bad:
-            check_finite(f"{entry['exr']} (output of method '{method}')", bad)
-        key = {"key": entry["key"]} if entry.get("key") else {}
-        write_layers(entry["exr"], stored_layers(result), metadata={"method": method, "scene": scene, "spp": spp,
-                                                     "seconds": f"{seconds:.6f}", **key},
-                     compression=entry.get("compression", "none"))
-        write_json(entry["timing"], {"scene": scene, "spp": spp, "method": method, "module": module_name,
-                                     "kind": spec.kind, "seconds": seconds, "width": width,
-                                     "height": height, "threads": threads, "machine": _machine(), **key})
+    return buffers, input_of
+
+
+def _entry_params(entry: dict, module, *, scene: str, spp: int) -> dict:
+    """The keyword arguments of ``entry``'s ``run``: its params, plus its name and case where its
+    ``run`` names them (a method that names its files), plus a learned method's weights file."""
+    from mcbench.pipeline.registry import method_parameters
+
+    params = dict(entry.get("params") or {})
+    for key, value in (("name", entry["name"]), ("scene", scene), ("spp", spp)):
+        if key in method_parameters(module) and key not in params:
+            params[key] = value
+    if method_spec(module).learned is not None:
+        params[WEIGHTS_ARGUMENT] = _weights_file(entry, entry["name"])
+    return params
+
+
+def _timed_run(module_name: str, module, buffers: RenderBuffers, inputs: list, params: dict):
+    """(result, seconds): the method's compute on the case, after an untimed run on the case's
+    corner crop that compiles / loads its JIT kernels (numba's cache load alone can cost more than
+    a small case's compute) and first-call set-up, once per module and parameters in the process
+    (the 31 pool ensembles share one). An external program reports its own wall time."""
+    spec = method_spec(module)
+    key = (module_name, json.dumps(params, sort_keys=True, default=str))
+    if key not in _WARMED and spec.warm_up:
+        _apply(module, *_corner_crop(buffers, inputs), params)
+        _WARMED.add(key)
+    start = time.perf_counter()
+    result = _apply(module, buffers, inputs, params)
+    seconds = time.perf_counter() - start
+    if spec.program_seconds is not None:
+        seconds = float(spec.program_seconds())
+    return result, seconds
+
+
+def _write_method_output(entry: dict, result, seconds: float, *, scene: str, spp: int, threads: int,
+                         kind: str, shape: tuple[int, int]) -> None:
+    """Check ``result`` for NaN/Inf (naming the output file and method), then write its EXR and
+    timing record."""
+    method = entry["name"]
+    layers = result.layers()
+    bad = {name: layer for name, layer in layers.items() if not np.all(np.isfinite(layer))}
+    if bad:
+        check_finite(f"{entry['exr']} (output of method '{method}')", bad)
+    key = {"key": entry["key"]} if entry.get("key") else {}
+    write_layers(entry["exr"], stored_layers(result), metadata={"method": method, "scene": scene, "spp": spp,
+                                                 "seconds": f"{seconds:.6f}", **key},
+                 compression=entry.get("compression", "none"))
+    height, width = shape
+    write_json(entry["timing"], {"scene": scene, "spp": spp, "method": method, "module": entry["module"],
+                                 "kind": kind, "seconds": seconds, "width": width, "height": height,
+                                 "threads": threads, "machine": _machine(), **key})
 
 
 def method_function(module, *, weights_dir) -> Callable:
