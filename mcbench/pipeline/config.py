@@ -118,8 +118,30 @@ def _cached_validator(path: str):
     return _validator(load_schema(path))
 
 
+def _import_jsonschema():
+    """``jsonschema``, imported without the optional IRI-syntax checker of its ``format``
+    keyword. With JupyterLab installed (jupyter-events asks for ``jsonschema[format-nongpl]``),
+    ``import jsonschema`` also imports ``rfc3987_syntax``, which builds a Lark grammar on import:
+    about 2 s of CPU in every process that validates a config (each ``snakemake`` call, each
+    worker). The config's validator asserts no formats (no ``FormatChecker``), so the checker is
+    never used: a ``None`` in ``sys.modules`` makes that one import raise ``ImportError``, which
+    jsonschema skips, and is removed again so that other code can still import the package."""
+    import sys
+
+    if "jsonschema" in sys.modules or "rfc3987_syntax" in sys.modules:
+        import jsonschema
+
+        return jsonschema
+    sys.modules["rfc3987_syntax"] = None
+    try:
+        import jsonschema
+    finally:
+        del sys.modules["rfc3987_syntax"]
+    return jsonschema
+
+
 def _validator(schema: dict):
-    import jsonschema
+    jsonschema = _import_jsonschema()
 
     base = jsonschema.Draft202012Validator
     strict_integer = base.TYPE_CHECKER.redefine(

@@ -193,3 +193,30 @@ def test_schema_training_overrides_are_the_training_settings():
     overrides = load_schema()["properties"]["training"]["properties"]["networks"]["additionalProperties"]
     assert set(overrides["properties"]) == set(DEFAULT_SETTINGS) - {"threads"}
     assert overrides["properties"]["loss"]["enum"] == list(LOSSES)
+
+
+def test_resolving_a_config_skips_jsonschemas_iri_grammar_and_keeps_refusing_bad_values():
+    """Resolving the default config in a fresh interpreter validates it without importing
+    rfc3987_syntax (its Lark grammar costs about 2 s of every process that validates a config),
+    still refuses a wrong type, and leaves the package importable afterwards."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, yaml\n"
+        "from mcbench.pipeline.config import ConfigError, resolve_config\n"
+        "resolve_config(yaml.safe_load(open('config.yaml')), source='config.yaml')\n"
+        "assert 'rfc3987_syntax' not in sys.modules and 'lark' not in sys.modules, 'grammar imported'\n"
+        "try:\n"
+        "    resolve_config({'spp': [4.0]}, source='c.yaml')\n"
+        "except ConfigError as error:\n"
+        "    assert 'spp[0]' in str(error), error\n"
+        "else:\n"
+        "    raise AssertionError('4.0 spp accepted')\n"
+        "import importlib.util\n"
+        "if importlib.util.find_spec('rfc3987_syntax'):\n"
+        "    import rfc3987_syntax  # still importable by other code\n"
+        "print('ok')\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], cwd=Path(__file__).resolve().parents[2], capture_output=True, text=True)
+    assert done.returncode == 0 and done.stdout.strip() == "ok", done.stderr
