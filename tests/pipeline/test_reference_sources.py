@@ -157,10 +157,7 @@ def test_a_finished_runs_merged_reference_is_stored_as_its_chunks_would_be(tmp_p
     assert b.provenance["spp"] == 64 and b.provenance["chunks"] == 2 and b.provenance["render_seconds"] == 9.5
 
 
-@pytest.mark.parametrize("config_file", [
-    pytest.param("config.yaml", marks=pytest.mark.xfail(
-        strict=True, reason="fog_beams's 128x128 reference is not in the store yet (docs/reference_store.md)")),
-    "workflow/configs/smoke.yaml"])
+@pytest.mark.parametrize("config_file", ["config.yaml", "workflow/configs/smoke.yaml"])
 def test_the_committed_store_serves_every_scene_of_the_default_and_smoke_studies(config_file):
     """Every reference of the default and smoke studies comes from the repository's store: each
     record's identity is that of the current scene files, resolution and installed Mitsuba, and
