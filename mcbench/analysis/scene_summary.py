@@ -155,7 +155,8 @@ def scene_markdown(table: pd.DataFrame) -> str:
     return (f"# Scenes\n\n`reference_relmse` is the reference's own estimated relMSE (mean of Var/(r²+0.01) "
             f"from its stored variance); `noisy_relmse` and `best_relmse` are measured at {top} spp; "
             f"`floor_ratio` = best_relmse / reference_relmse. CPU-hours are Snakemake's measured CPU time "
-            f"of the render jobs (all spp levels) and of the reference chunks.\n\n{verdict}\n\n"
+            f"of the render jobs (all spp levels) and of the reference chunks (0 for a reference taken from "
+            f"the store).\n\n{verdict}\n\n"
             + shown.to_markdown(index=False) + "\n")
 
 

@@ -138,8 +138,11 @@ def write_scene_table(metrics_csv: str, reference_paths: dict[str, str], referen
                       reference_records: list[str], tex_path: str | None = None) -> pd.DataFrame:
     """Scene table with reference noise floors and render costs.
 
-    Render costs come from the Snakemake ``benchmark:`` records of the noisy render jobs
-    (``noisy_records``) and reference chunk jobs (``reference_records``), inputs of the rule.
+    A reference's spp is the one its header records (a stored reference keeps its own, which the
+    config does not set); ``reference_spp`` (the plan's) only where the header records none (an
+    imported reference). Render costs come from the Snakemake ``benchmark:`` records of the noisy
+    render jobs (``noisy_records``) and reference chunk jobs (``reference_records``), inputs of the
+    rule: a reference taken from the store cost this run no chunk, so 0.
     """
 
     from mcbench.analysis.scene_summary import reference_relmse_floor, scene_latex, scene_markdown, scene_rows
@@ -158,7 +161,8 @@ def write_scene_table(metrics_csv: str, reference_paths: dict[str, str], referen
         floors[scene] = None if imported_without_variance else reference_relmse_floor(layers["color"], layers["variance"])
         spec = scene_spec(load_scene(scene))
         info[scene] = {"category": spec.category, "description": spec.description,
-                       "resolution": meta.get("resolution", ""), "reference_spp": reference_spp[scene]}
+                       "resolution": meta.get("resolution", ""),
+                       "reference_spp": _recorded_spp(meta, reference_spp[scene])}
         costs[scene] = {
             "render_cpu_hours": _benchmark_cpu_hours(_records_of(scene, noisy_records)),
             "reference_cpu_hours": _benchmark_cpu_hours(_records_of(scene, reference_records)),
@@ -172,6 +176,12 @@ def write_scene_table(metrics_csv: str, reference_paths: dict[str, str], referen
                                                         "highest spp; a floor ratio below 10 (bold) means the "
                                                         "reference is too noisy to rank there."))
     return table
+
+
+def _recorded_spp(metadata: dict, planned: int | None) -> int | None:
+    """The samples per pixel an EXR header records (``spp``), else ``planned``."""
+    value = str(metadata.get("spp", ""))
+    return int(value) if value.isdigit() and int(value) > 0 else planned
 
 
 def write_gallery(reference_paths: dict[str, str], png_path: str) -> None:
