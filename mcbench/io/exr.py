@@ -22,7 +22,7 @@ import OpenEXR
 from mcbench import BenchError
 from mcbench.io.checksums import CHECKSUM_ATTRIBUTE, ChecksumError, exr_checksum, layer_crc
 
-__all__ = ["ExrError", "NonFiniteError", "read_layers", "write_layers", "read_metadata", "recorded_checksum", "content_checksum", "check_finite",
+__all__ = ["ExrError", "NonFiniteError", "read_layers", "write_layers", "read_metadata", "recorded_spp", "recorded_checksum", "content_checksum", "check_finite",
            "check_resolution", "write_exr_atomically",
            "LayerRows", "layer_rows"]
 
@@ -372,6 +372,13 @@ def read_metadata(path: str | os.PathLike) -> dict[str, str]:
     with _open(path, header_only=True) as exr:      # the pixels are not decoded
         return {k[len("mcbench."):]: str(v) for k, v in exr.header().items()
                 if k.startswith("mcbench.") and k != f"mcbench.{CHECKSUM_ATTRIBUTE}"}
+
+
+def recorded_spp(metadata: dict[str, str]) -> int | None:
+    """The samples per pixel a header's metadata (:func:`read_metadata`) records as ``spp``: a
+    positive integer, or None when it records none."""
+    value = str(metadata.get("spp", ""))
+    return int(value) if value.isdigit() and int(value) > 0 else None
 
 
 def check_finite(path: str | os.PathLike, layers: dict[str, np.ndarray]) -> None:

@@ -12,7 +12,7 @@ from pathlib import Path
 
 from mcbench import METRICS_COLUMNS, BenchError
 from mcbench.contracts.scene import scene_spec
-from mcbench.io.exr import check_finite, check_resolution, read_layers, read_metadata
+from mcbench.io.exr import check_finite, check_resolution, read_layers, read_metadata, recorded_spp
 from mcbench.io.tables import read_table, write_csv, write_text
 from mcbench.pipeline.registry import load_metric
 
@@ -162,7 +162,7 @@ def write_scene_table(metrics_csv: str, reference_paths: dict[str, str], referen
         spec = scene_spec(load_scene(scene))
         info[scene] = {"category": spec.category, "description": spec.description,
                        "resolution": meta.get("resolution", ""),
-                       "reference_spp": _recorded_spp(meta, reference_spp[scene])}
+                       "reference_spp": recorded_spp(meta) or reference_spp[scene]}
         costs[scene] = {
             "render_cpu_hours": _benchmark_cpu_hours(_records_of(scene, noisy_records)),
             "reference_cpu_hours": _benchmark_cpu_hours(_records_of(scene, reference_records)),
@@ -176,12 +176,6 @@ def write_scene_table(metrics_csv: str, reference_paths: dict[str, str], referen
                                                         "highest spp; a floor ratio below 10 (bold) means the "
                                                         "reference is too noisy to rank there."))
     return table
-
-
-def _recorded_spp(metadata: dict, planned: int | None) -> int | None:
-    """The samples per pixel an EXR header records (``spp``), else ``planned``."""
-    value = str(metadata.get("spp", ""))
-    return int(value) if value.isdigit() and int(value) > 0 else planned
 
 
 def write_gallery(reference_paths: dict[str, str], png_path: str) -> None:

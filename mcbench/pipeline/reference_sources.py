@@ -177,13 +177,14 @@ def copy_stored_reference(stored: StoredReference, output_path: str) -> None:
 def _header_spp(path: str) -> int:
     """The samples per pixel an EXR's header records (``spp``); ``BenchError`` naming the file when
     it records none (the check's variance floor needs it)."""
-    from mcbench.io.exr import read_metadata
+    from mcbench.io.exr import read_metadata, recorded_spp
 
-    value = str(read_metadata(path).get("spp", ""))
-    if not value.isdigit() or int(value) <= 0:
-        raise BenchError(f"{path}: its header records no samples per pixel (spp = {value!r}); the reference "
-                         "check needs it. Render or store the file again with this version")
-    return int(value)
+    metadata = read_metadata(path)
+    spp = recorded_spp(metadata)
+    if spp is None:
+        raise BenchError(f"{path}: its header records no samples per pixel (spp = {metadata.get('spp', '')!r}); "
+                         "the reference check needs it. Render or store the file again with this version")
+    return spp
 
 
 def check_stored_reference(scene: str, reference_path: str, render_path: str, output_path: str) -> None:
