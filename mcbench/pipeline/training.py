@@ -240,6 +240,9 @@ def main(argv: list[str] | None = None) -> int:
     import argparse
     import sys
 
+    from mcbench.pipeline.freed_memory import keep_freed_memory
+
+    keep_freed_memory()   # a process of its own: its steps reuse the heap instead of page-faulting
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv[:1] == ["progressive"]:
         parser = argparse.ArgumentParser(prog="python -m mcbench.pipeline.training progressive",

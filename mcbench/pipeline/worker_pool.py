@@ -12,7 +12,8 @@ mtimes); the pool only changes where a job's Python runs.
 
 * Workers are started with ``forkserver`` (never ``fork`` from Snakemake's threaded process), with
   every library's thread pool held to ``threads`` (:func:`mcbench.pipeline.threads.limit_threads`
-  before any import) and the checkout's folders on ``sys.path`` (``methods/``, ``scenes/``).
+  before any import), freed memory kept for reuse (:func:`mcbench.pipeline.freed_memory.keep_freed_memory`:
+  a network's inference no longer page-faults) and the checkout's folders on ``sys.path`` (``methods/``, ``scenes/``).
 * A step runs under :func:`mcbench.pipeline.logs.run_logged` in the worker, so its stdout and
   stderr go to the job's log file alone; its failure comes back as :class:`mcbench.BenchError`
   naming the step and the log, and Snakemake fails the job as it would a script's.
@@ -44,9 +45,11 @@ _pool_key: tuple | None = None
 
 def _init_worker(threads: int, environment: dict[str, str], paths: list[str]) -> None:
     """Worker set-up: thread limits before any heavy import, the job environment, the checkout's paths."""
+    from mcbench.pipeline.freed_memory import keep_freed_memory
     from mcbench.pipeline.threads import limit_threads
 
     limit_threads(threads)
+    keep_freed_memory()
     os.environ.update(environment)
     for path in reversed(paths):
         if path not in sys.path:

@@ -1,6 +1,8 @@
+from mcbench.pipeline.freed_memory import keep_freed_memory
 from mcbench.pipeline.threads import limit_threads
 
 limit_threads(snakemake.threads)  # before any heavy import (numba, torch, OpenBLAS, OIDN read it)  # noqa: F821
+keep_freed_memory()  # a network's steps reuse the heap instead of page-faulting fresh memory
 
 from mcbench.pipeline.logs import run_logged  # noqa: E402
 from mcbench.pipeline.training import train_learned_method  # noqa: E402
