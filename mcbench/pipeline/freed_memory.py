@@ -6,10 +6,10 @@ blocks are freed) with fresh pages of its own ``mmap`` and unmaps them when it i
 returns the top of its heap to the kernel once more than its trim threshold (128 KiB) is free
 there. A network's forward and backward pass allocate and free the same tensors of tens of MB at
 every step, so every step maps new pages, and the kernel zeroes each one at its first touch (a
-minor page fault). Measured on 2 AMD EPYC Zen 4 vCPUs (``benchmarks/freed_memory.py``): a one-thread
-KPCN training of 30 steps spent 3.8 s in the kernel beside 15.5 s of user time (2.1 million page
-faults), KPCN's inference on a 128 x 128 case 0.48 s beside 0.96 s; with both thresholds at
-:data:`KEEP_BYTES`, 0.2 s and 0.00 s, user time the same.
+minor page fault). Measured on 2 AMD EPYC Zen 4 vCPUs (``benchmarks/freed_memory.py``,
+docs/measurements.md): a one-thread KPCN training of 20 steps spent 2.57 s in the kernel beside
+13.5 s of user time (1.45 million page faults), KPCN's inference on a 128 x 128 case 0.48 s beside
+0.96 s; with both thresholds at :data:`KEEP_BYTES`, 0.28 s and 0.00 s, user time the same.
 
 :func:`keep_freed_memory` sets both thresholds with ``mallopt`` (the environment's
 ``MALLOC_MMAP_THRESHOLD_`` and ``MALLOC_TRIM_THRESHOLD_`` do the same for a process started with
