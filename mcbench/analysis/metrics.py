@@ -3,8 +3,8 @@
 All take ``image`` and ``reference`` of shape (H, W, 3): linear HDR radiance, float.
 Accumulation is in float64; the result is a Python float. ``image`` must be finite
 (callers validate inputs); the denominators below are guarded by their 0.01 terms.
-FLIP (HDR-FLIP of Andersson et al. 2021, NVIDIA's ``flip-evaluator``) validates its inputs
-itself, since the package's C++ core ends the process on inputs it cannot handle.
+FLIP (HDR-FLIP of Andersson et al. 2021, as NVIDIA's ``flip-evaluator`` computes it, in float64 by
+:mod:`mcbench.analysis.hdr_flip`) keeps the reference's side of the last references it saw.
 The per-pixel maps (``relmse_map``, ``flip_map``) are for the report's viewer. Which metrics a
 study computes, their labels and maps are declared by the plugins of ``metrics/`` (one file per
 metric, :class:`mcbench.contracts.metric.MetricSpec`), which point to these functions.
@@ -152,62 +152,77 @@ def flip_exposure_range(image) -> tuple[float, float]:
 
 
 def _flip_inputs(image, reference) -> tuple[np.ndarray, np.ndarray]:
-    """Validated float32 (H, W, 3) copies for flip_evaluator, negatives clamped to 0."""
+    """Validated float64 (H, W, 3) copies, negatives clamped to 0."""
     y, r = _pair(image, reference)
     if y.ndim != 3 or y.shape[2] != 3 or y.shape[0] < 1 or y.shape[1] < 1:
         raise ValueError(f"FLIP needs (H, W, 3) images with H, W >= 1, got shape {y.shape}")
-    largest = float(np.finfo(np.float32).max)
     for name, value in (("image", y), ("reference", r)):
         if not np.all(np.isfinite(value)):
             raise ValueError(f"FLIP: {name} holds NaN or Inf values")
-        if value.size and value.max() > largest:
-            raise ValueError(f"FLIP: {name} holds values beyond float32's range ({largest:.3g})")
     # HDR-FLIP is defined on non-negative linear radiance: negative values (denoiser
     # undershoot) are clamped to 0, as the tone mapping of DSSIM does.
-    y32 = np.ascontiguousarray(np.maximum(y, 0.0), dtype=np.float32)
-    r32 = np.ascontiguousarray(np.maximum(r, 0.0), dtype=np.float32)
-    return y32, r32
+    return np.maximum(y, 0.0), np.maximum(r, 0.0)
+
+
+def _flip_range(image, reference) -> tuple[float, float]:
+    """The exposure range of a validated pair: the reference's own (:func:`flip_exposure_range`)
+    when the reference is not black (maximum luminance >= FLIP_MIN_LUMINANCE). Degenerate cases,
+    documented choices: a black reference with a non-black image takes the range from the image;
+    two black images are given the range of a uniform image of luminance FLIP_MIN_LUMINANCE
+    (start = stop, 2 exposures), so identical black images score 0 and any difference is seen at an
+    exposure that makes FLIP_MIN_LUMINANCE bright (0.85 after tone mapping)."""
+    for source in (reference, image):
+        try:
+            return flip_exposure_range(source)
+        except ValueError:
+            pass
+    return _flip_exposure_of(FLIP_MIN_LUMINANCE, FLIP_MIN_LUMINANCE)
+
+
+# The prepared references kept (mcbench.analysis.hdr_flip.FlipReference), newest last: a case
+# compares each of its entries with one reference, which is then prepared once.
+_PREPARED_REFERENCES: dict = {}
+_PREPARED_KEPT = 2
+
+
+def _prepared_reference(reference, start: float, stop: float):
+    """The reference's side of HDR-FLIP over [start, stop], from :data:`_PREPARED_REFERENCES`
+    when a reference of the same content (BLAKE2b of its bytes) and range was prepared before."""
+    import hashlib
+
+    from mcbench.analysis.hdr_flip import prepare_flip_reference
+
+    key = (reference.shape, start, stop, hashlib.blake2b(reference.tobytes(), digest_size=16).digest())
+    prepared = _PREPARED_REFERENCES.pop(key, None)
+    if prepared is None:
+        prepared = prepare_flip_reference(reference, start=start, stop=stop)
+    _PREPARED_REFERENCES[key] = prepared
+    while len(_PREPARED_REFERENCES) > _PREPARED_KEPT:
+        _PREPARED_REFERENCES.pop(next(iter(_PREPARED_REFERENCES)))
+    return prepared
 
 
 def _flip_evaluate(image, reference) -> tuple[np.ndarray, float]:
-    """(per-pixel HDR-FLIP (H, W) float64, the package's mean FLIP) for a validated pair.
+    """(per-pixel HDR-FLIP (H, W) float64, its mean) for a pair, through
+    :mod:`mcbench.analysis.hdr_flip` over the range of :func:`_flip_range`."""
+    from mcbench.analysis.hdr_flip import hdr_flip_map
 
-    The exposure range is the package's own (from the reference) when the reference is not
-    black (maximum luminance >= FLIP_MIN_LUMINANCE). Degenerate cases, documented choices:
-    a black reference with a non-black image takes the range from the image
-    (:func:`flip_exposure_range`), passed explicitly; two black images are given the range of
-    a uniform image of luminance FLIP_MIN_LUMINANCE (start = stop, 2 exposures), so identical
-    black images score 0 and any difference is seen at an exposure that makes
-    FLIP_MIN_LUMINANCE bright (0.85 after tone mapping). The call never reaches the package's
-    exit() paths: "HDR" is fixed, no viewing-condition options are passed, and start <= stop.
-    """
-    import flip_evaluator
-
-    y32, r32 = _flip_inputs(image, reference)
-    parameters = {}
-    try:
-        flip_exposure_range(r32)
-    except ValueError:
-        try:
-            start, stop = flip_exposure_range(y32)
-        except ValueError:
-            start, stop = _flip_exposure_of(FLIP_MIN_LUMINANCE, FLIP_MIN_LUMINANCE)
-        parameters = {"startExposure": start, "stopExposure": max(stop, start)}
-    error_map, mean, _ = flip_evaluator.evaluate(r32, y32, "HDR", applyMagma=False, computeMeanError=True,
-                                                 parameters=parameters)
-    error_map = np.asarray(error_map, dtype=np.float64).reshape(y32.shape[:2])
-    if not (np.all(np.isfinite(error_map)) and np.isfinite(mean)):
-        raise ValueError("FLIP returned a non-finite error (flip_evaluator)")
-    return error_map, float(mean)
+    y, r = _flip_inputs(image, reference)
+    start, stop = _flip_range(y, r)
+    error_map = hdr_flip_map(y, _prepared_reference(r, start, max(stop, start)))
+    if not np.all(np.isfinite(error_map)):
+        raise ValueError("FLIP gave a non-finite error")
+    return error_map, float(np.mean(error_map))
 
 
 def flip_map(image, reference) -> np.ndarray:
     """Per-pixel HDR-FLIP error, (H, W) float64 in [0, 1], no colour map applied.
 
-    HDR-FLIP (Andersson et al. 2021) through NVIDIA's ``flip_evaluator.evaluate(reference,
-    image, "HDR", applyMagma=False)`` with its defaults: ACES tone mapping, 67 pixels per
-    degree, automatic exposure range from the reference (see :func:`_flip_evaluate` for the
-    black-image cases). Negative radiance is clamped to 0; NaN/Inf raise ``ValueError``.
+    HDR-FLIP (Andersson et al. 2021) as NVIDIA's ``flip_evaluator.evaluate(reference, image,
+    "HDR")`` computes it with its defaults (ACES tone mapping, 67 pixels per degree, the exposure
+    range from the reference; :func:`_flip_range` for black images), in float64 by
+    :mod:`mcbench.analysis.hdr_flip` (its departure: the package's float32 rounding). Negative
+    radiance is clamped to 0; NaN/Inf raise ``ValueError``.
     """
     return _flip_evaluate(image, reference)[0]
 
@@ -218,7 +233,7 @@ def flip_with_map(image, reference) -> tuple[np.ndarray, float]:
 
 
 def flip(image, reference) -> float:
-    """Mean HDR-FLIP error over pixels (the package's own mean of :func:`flip_map`), in [0, 1].
+    """Mean HDR-FLIP error over pixels (the float64 mean of :func:`flip_map`), in [0, 1].
 
     0 for identical images; perceptual, on linear HDR radiance (Andersson et al. 2021).
     """

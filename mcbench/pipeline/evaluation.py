@@ -235,22 +235,24 @@ def _write_entry_viewer(folder: Path, scene: str, spp: int, entry: str, image, r
 @functools.lru_cache(maxsize=None)
 def metric_code_digest(name: str) -> str:
     """A digest of what computes the values of metric ``name``: the source of its plugin
-    ``metrics/<name>.py``, of :mod:`mcbench.analysis.metrics` and the versions of NumPy,
-    scikit-image and flip-evaluator. A kept value computed by other code is not reused
-    (:func:`read_metric_values`)."""
+    ``metrics/<name>.py``, of :mod:`mcbench.analysis.metrics` and :mod:`mcbench.analysis.hdr_flip`
+    and the versions of NumPy, SciPy and scikit-image. A kept value computed by other code is not
+    reused (:func:`read_metric_values`)."""
     import hashlib
     from importlib import metadata
 
+    import mcbench.analysis.hdr_flip as hdr_flip_module
     import mcbench.analysis.metrics as metrics_module
     from mcbench.pipeline.registry import metric_source
 
     versions = []
-    for package in ("numpy", "scikit-image", "flip-evaluator"):
+    for package in ("numpy", "scipy", "scikit-image"):
         try:
             versions.append(f"{package}=={metadata.version(package)}")
         except metadata.PackageNotFoundError:
             versions.append(f"{package}==none")
-    source = metric_source(name) + Path(metrics_module.__file__).read_bytes()
+    source = (metric_source(name) + Path(metrics_module.__file__).read_bytes()
+              + Path(hdr_flip_module.__file__).read_bytes())
     return hashlib.sha256(source + "\n".join(versions).encode()).hexdigest()[:16]
 
 

@@ -52,6 +52,7 @@ DISTRIBUTIONS = {
     "oidn": "pyoidn",
     "torch": "torch",
     "numpy": "numpy",
+    "scipy": "scipy",
     "flip_evaluator": "flip-evaluator",
     "snakemake": "snakemake",
 }

@@ -3,7 +3,7 @@
 A job is one Python process, and several libraries in it start thread pools of their own,
 sized by default to every core of the machine: numba's parallel loops (its ``omp`` threading
 layer, GNU OpenMP), PyTorch's intra-op pool (its own OpenMP), OpenBLAS under NumPy/SciPy,
-HDR-FLIP's OpenMP, and OIDN's TBB arena, which also pins its threads to cores. With
+and OIDN's TBB arena, which also pins its threads to cores. With
 ``snakemake --cores 2`` running two one-thread jobs, each such pool adds threads that compete for
 the same two cores, and OpenMP threads that spin while they wait for work burn CPU that the
 other job needed. :func:`limit_threads`, called by every workflow script before it imports
@@ -15,7 +15,7 @@ threads sleep instead of spin:
   rules, but not for ``script:`` rules), ``NUMBA_NUM_THREADS`` and ``OIDN_NUM_THREADS``: the job's
   ``threads``; these are read when each library loads, so they must be set before its import;
 * ``OMP_WAIT_POLICY=PASSIVE`` (GNU OpenMP's threads sleep at once instead of spinning about
-  0.3 ms per wait, for numba, PyTorch and FLIP alike) and ``OIDN_SET_AFFINITY=0`` (two jobs of
+  0.3 ms per wait, for numba and PyTorch alike) and ``OIDN_SET_AFFINITY=0`` (two jobs of
   one thread each would otherwise both pin OIDN to core 0);
 * for a library already imported when it is called (numba, torch), its runtime setter as well.
 

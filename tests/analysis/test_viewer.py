@@ -226,8 +226,9 @@ def test_error_maps_are_relmse_and_hdr_flip_of_the_pair():
                                rtol=1e-12)
     package, mean, _ = flip_evaluator.evaluate(reference.astype(np.float32), image.astype(np.float32), "HDR",
                                                applyMagma=False, computeMeanError=True)
-    np.testing.assert_allclose(maps["flip"][1], np.asarray(package).reshape(24, 24), atol=1e-6)
-    assert values["flip"] == pytest.approx(mean, abs=1e-7)
+    # within the package's float32 rounding (tests/analysis/test_hdr_flip.py)
+    np.testing.assert_allclose(maps["flip"][1], np.asarray(package).reshape(24, 24), atol=1e-5)
+    assert values["flip"] == pytest.approx(mean, rel=5e-6)
 
 
 # --- one case's images ------------------------------------------------------------------------

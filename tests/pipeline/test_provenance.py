@@ -19,7 +19,7 @@ from mcbench.pipeline.provenance import (ABSENT, DISTRIBUTIONS, UNKNOWN, collect
 from tests.conftest import REPO, SMOKE_CONFIG
 
 CPU_KEYS = {"avx2", "avx512f", "family", "logical_cores", "model", "model_number", "vendor"}
-VERSION_KEYS = {"mitsuba", "drjit", "oidn", "torch", "numpy", "flip_evaluator", "snakemake", "python", "mcbench"}
+VERSION_KEYS = {"mitsuba", "drjit", "oidn", "torch", "numpy", "scipy", "flip_evaluator", "snakemake", "python", "mcbench"}
 
 # /proc/cpuinfo's layout: one block per logical processor, "key\t: value", blank line between
 CPUINFO = """processor\t: 0

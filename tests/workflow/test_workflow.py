@@ -542,7 +542,7 @@ def test_manifest_describes_the_run_and_is_newer_than_its_tables(smoke_run, resu
     manifest = read_json(results / "manifest.json")
     assert list(manifest) == ["config_digest", "cpu", "git", "manifest_version", "platform", "references", "versions"]
     assert manifest["config_digest"] == config_digest(resolve_config(config))
-    assert set(manifest["versions"]) == {"mitsuba", "drjit", "oidn", "torch", "numpy", "flip_evaluator",
+    assert set(manifest["versions"]) == {"mitsuba", "drjit", "oidn", "torch", "numpy", "scipy", "flip_evaluator",
                                          "snakemake", "python", "mcbench"}
     assert manifest["cpu"]["logical_cores"] == os.cpu_count()
     # this checkout's HEAD, or (a smoke folder reused through $MCBENCH_TEST_SMOKE_DIR: a new commit
