@@ -26,6 +26,8 @@ def _tau_lines(results: Path) -> list[str]:
 
 def _mean_relmse(results: Path, names: list[str]) -> pd.DataFrame:
     metrics = pd.read_csv(results / "metrics.csv")
+    if "entry" not in metrics.columns:  # a run of the code before the column was named entry
+        metrics = metrics.rename(columns={"candidate": "entry"})
     rows = metrics[(metrics["metric"] == "relmse") & metrics["entry"].isin(names)]
     return rows.groupby(["entry", "spp"])["value"].mean().unstack("spp")
 
