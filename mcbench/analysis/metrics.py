@@ -179,10 +179,11 @@ def _flip_range(image, reference) -> tuple[float, float]:
     return _flip_exposure_of(FLIP_MIN_LUMINANCE, FLIP_MIN_LUMINANCE)
 
 
-# The prepared references kept (mcbench.analysis.hdr_flip.FlipReference), newest last: a case
-# compares each of its entries with one reference, which is then prepared once.
+# The prepared reference kept (mcbench.analysis.hdr_flip.FlipReference): a case compares each of
+# its entries with one reference, which is then prepared once. One, since a prepared reference
+# takes about 40 bytes per pixel and exposure (330 MB at 1280x720 with 9 exposures).
 _PREPARED_REFERENCES: dict = {}
-_PREPARED_KEPT = 2
+_PREPARED_KEPT = 1
 
 
 def _prepared_reference(reference, start: float, stop: float):
