@@ -28,14 +28,14 @@ step = (stop - start) / (n - 1), n = max(2, ceil(stop - start)); l. 2363-2376).
 
 **Departure from the package**: float64 throughout, where the package computes in float32 and sums
 its mean in float32 sequentially. The maps agree within 6.3e-5 per pixel and the means within
-2.2e-4 relative on the default study's images (docs/measurements.md). The largest differences are
-where an image equals the reference to float32 precision (a constant background both reproduce):
-HyAB's 0.7 power and the feature's 0.5 power have infinite slope at 0, so the package's float32
-rounding of two equal values becomes an error of up to ~1e-4 there, which float64 does not make.
-Why our own code: flip-evaluator's one entry point recomputes the reference's tone mapping,
-filtering and features for every image, and one case compares some 50 images with one reference;
-with the reference's side kept (:class:`FlipReference`), a call costs a tenth or less of the
-package's (``benchmarks/metric_costs.py``).
+2.2e-4 relative on the default study's images (``benchmarks/hdr_flip.py``, docs/measurements.md).
+The largest differences are where an image equals the reference to float32 precision (a constant
+background both reproduce): HyAB's 0.7 power and the feature's 0.5 power have infinite slope at 0,
+so the package's float32 rounding of two equal values becomes an error of up to ~3e-4 there, which
+float64 does not make. Why our own code: flip-evaluator's one entry point recomputes the
+reference's tone mapping, filtering and features for every image, and one case compares some 80
+images with one reference; with the reference's side kept (:class:`FlipReference`), a call costs
+about a fifth of the package's (``benchmarks/hdr_flip.py``).
 """
 
 from __future__ import annotations
