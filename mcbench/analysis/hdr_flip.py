@@ -46,7 +46,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.ndimage import correlate1d
 
-__all__ = ["FlipReference", "PIXELS_PER_DEGREE", "exposure_levels", "prepare_flip_reference", "hdr_flip_map"]
+__all__ = ["ACES", "FlipReference", "PIXELS_PER_DEGREE", "exposure_levels", "prepare_flip_reference", "hdr_flip_map"]
 
 #: FLIP's default viewing condition: 0.7 m from a 0.7 m wide monitor of 3840 pixels (l. 118).
 PIXELS_PER_DEGREE = 0.7 * (3840.0 / 0.7) * (np.pi / 180.0)
@@ -57,7 +57,7 @@ _QC, _PC, _PT, _W, _QF = 0.7, 0.4, 0.95, 0.082, 0.5
 _A1, _B1 = (1.0, 1.0, 34.1), (0.0047, 0.0053, 0.04)
 _A2, _B2 = (0.0, 0.0, 13.5), (1.0e-5, 1.0e-5, 0.025)
 # FLIP's ACES (l. 138): (a2 x^2 + a1 x) / (b2 x^2 + b1 x + b0), 0.6 the pre-exposure cancellation
-_ACES = (0.6 * 0.6 * 2.51, 0.6 * 0.03, 0.6 * 0.6 * 2.43, 0.6 * 0.59, 0.14)
+ACES = (0.6 * 0.6 * 2.51, 0.6 * 0.03, 0.6 * 0.6 * 2.43, 0.6 * 0.59, 0.14)
 # radiance above which ACES is 1 after the clamp (tm(x) > 1 for x > 8.2): a bound before x^2 keeps
 # float64 finite for any finite input without changing a value
 _ACES_INPUT_BOUND = 1.0e30
@@ -159,7 +159,7 @@ def _colour_distance_bounds() -> tuple[float, float]:
 
 def _tone_mapped(hdr, exposures):
     """(E, H, W, 3): ``hdr`` (H, W, 3) scaled by 2^e for each exposure e, FLIP's ACES, clamped to [0, 1]."""
-    a2, a1, b2, b1, b0 = _ACES
+    a2, a1, b2, b1, b0 = ACES
     x = np.minimum(hdr[None] * np.exp2(exposures)[:, None, None, None], _ACES_INPUT_BOUND)
     return np.clip((a2 * x * x + a1 * x) / (b2 * x * x + b1 * x + b0), 0.0, 1.0)
 

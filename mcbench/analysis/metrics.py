@@ -4,7 +4,7 @@ All take ``image`` and ``reference`` of shape (H, W, 3): linear HDR radiance, fl
 Accumulation is in float64; the result is a Python float. ``image`` must be finite
 (callers validate inputs); the denominators below are guarded by their 0.01 terms.
 FLIP (HDR-FLIP of Andersson et al. 2021, as NVIDIA's ``flip-evaluator`` computes it, in float64 by
-:mod:`mcbench.analysis.hdr_flip`) keeps the reference's side of the last references it saw.
+:mod:`mcbench.analysis.hdr_flip`) keeps the reference's side of the last reference it saw.
 The per-pixel maps (``relmse_map``, ``flip_map``) are for the report's viewer. Which metrics a
 study computes, their labels and maps are declared by the plugins of ``metrics/`` (one file per
 metric, :class:`mcbench.contracts.metric.MetricSpec`), which point to these functions.
@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import numpy as np
 from skimage.metrics import structural_similarity
+
+from mcbench.analysis.hdr_flip import ACES
 
 __all__ = ["relmse", "relmse_map", "relmse_corrected", "relmse_corrected_map", "smape", "dssim", "flip", "flip_map",
            "flip_with_map", "flip_exposure_range", "aces_filmic", "srgb_encode", "tonemap", "DSSIM_MIN_SIZE",
@@ -103,11 +105,10 @@ def dssim(image, reference) -> float:
 
 
 # --- HDR-FLIP -------------------------------------------------------------------------------
-# Rec. 709 luminance weights and ACES coefficients of FLIP's exposure range (Andersson et al.
+# Rec. 709 luminance weights and (hdr_flip.ACES) the ACES of FLIP's exposure range (Andersson et al.
 # 2021, "Visualizing Errors in Rendered High Dynamic Range Images", Sec. 4): FLIP's ACES is
 # Narkowicz's fit with a 0.6 pre-exposure, tm(x) = (a2 x² + a1 x) / (b2 x² + b1 x + b0).
 FLIP_LUMINANCE_WEIGHTS = np.array([0.2126, 0.7152, 0.0722])
-_FLIP_ACES = {"a2": 0.6 * 0.6 * 2.51, "a1": 0.6 * 0.03, "b2": 0.6 * 0.6 * 2.43, "b1": 0.6 * 0.59, "b0": 0.14}
 # The tone-mapped value the exposure range aims at: c_start brings the brightest pixel of the
 # reference to 0.85, c_stop brings its median pixel there.
 FLIP_TARGET = 0.85
@@ -121,9 +122,10 @@ FLIP_MIN_LUMINANCE = 2.0 ** -20
 
 
 def _flip_exposure_of(luminance_max: float, luminance_median: float) -> tuple[float, float]:
-    a = _FLIP_ACES["a2"] - FLIP_TARGET * _FLIP_ACES["b2"]
-    b = _FLIP_ACES["a1"] - FLIP_TARGET * _FLIP_ACES["b1"]
-    c = -FLIP_TARGET * _FLIP_ACES["b0"]
+    a2, a1, b2, b1, b0 = ACES
+    a = a2 - FLIP_TARGET * b2
+    b = a1 - FLIP_TARGET * b1
+    c = -FLIP_TARGET * b0
     # larger root of a x² + b x + c = 0: the radiance that tone-maps to FLIP_TARGET
     x_target = (-b + np.sqrt(b * b - 4.0 * a * c)) / (2.0 * a) if a != 0.0 else -c / b
     start = float(np.log2(x_target / luminance_max))

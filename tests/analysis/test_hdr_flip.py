@@ -63,7 +63,7 @@ def test_where_the_image_equals_the_reference_the_package_adds_its_rounding():
 @pytest.mark.parametrize("constant, value", [
     ("_QC", 0.71), ("_QF", 0.51), ("_PC", 0.41), ("_PT", 0.96), ("_W", 0.083),
     ("_A1", (1.0, 1.0, 34.0)), ("_B1", (0.0048, 0.0053, 0.04)), ("_B2", (1.0e-5, 1.0e-5, 0.026)),
-    ("_ACES", (0.6 * 0.6 * 2.51, 0.6 * 0.03, 0.6 * 0.6 * 2.43, 0.6 * 0.59, 0.141)),
+    ("ACES", (0.6 * 0.6 * 2.51, 0.6 * 0.03, 0.6 * 0.6 * 2.43, 0.6 * 0.59, 0.141)),
     ("_INV_ILLUMINANT", np.array([1.0, 1.0, 0.918357670])), ("PIXELS_PER_DEGREE", 66.0),
 ])
 def test_a_wrong_constant_fails_the_package_comparison(monkeypatch, constant, value):
