@@ -20,7 +20,7 @@ pixel positions, lens and time samples); its moments give ``position`` and ``vis
 their variances exactly as above. The colour pass itself is the one of renders made before the
 features: adding channels to its film changes the order in which the film sums a pixel's samples
 (1-ulp differences at more than 2 spp per pass), a separate pass leaves it bit-identical.
-Reference chunks and :func:`render_scene_sums` have no feature pass.
+:func:`render_scene_sums` has no feature pass; a reference chunk has one (below).
 
 Features (config key ``features``, :data:`FEATURE_CONVENTIONS`): with ``first_hit`` albedo, normal
 and depth come from the colour pass's ``aov`` integrator (the camera ray's first surface) and
@@ -28,9 +28,10 @@ position and visibility from the feature pass above. With ``tungsten`` the featu
 ``moment(mcbench_path_features)`` (:mod:`mcbench.render.path_features`): every feature recorded
 at the first vertex whose sampled BSDF lobe is not a delta lobe, as the paper's renderer records
 them, and averaged over the samples that recorded it (:func:`weighted_mean_variance`); the colour
-pass is the same bit for bit in both conventions. A reference chunk of the ``tungsten`` convention
-records its features in one feature pass of :data:`REFERENCE_FEATURE_SPP` samples
-(:func:`render_reference_chunk`).
+pass is the same bit for bit in both conventions. A reference chunk's colour passes render the
+scene's integrator in ``moment(aov(...))`` with no AOVs (the colour and its second moment), and it
+records its features, in either convention, in one feature pass of :data:`REFERENCE_FEATURE_SPP`
+samples (:func:`render_reference_chunk`).
 
 Each buffer or chunk is split into passes of at most :data:`MAX_WAVEFRONT` samples
 (:func:`passes_for`); every pass has its own 32-bit seed, laid out in :mod:`mcbench.render.seeds`
@@ -105,6 +106,13 @@ FEATURE_CHANNELS = {
                    (f"m2_nested.{VISIBILITY_CHILD}.{VISIBILITY_AOV}",)),
 }
 FEATURES = ("albedo", "normal", "depth")          # the features of a reference chunk
+# The colour pass of a reference chunk, ``moment(aov(<scene integrator>))`` with no AOVs: the colour
+# alone. (``moment(<scene integrator>)`` would not do: ``moment`` records a bare integrator's output
+# as CIE XYZ, whose second moments do not give the RGB variance.)
+COLOUR_CHANNELS = {"color": CHANNELS["color"]}
+# A first-hit reference chunk's feature pass, ``moment(aov(albedo, sh_normal, depth))`` with no
+# nested integrator: the first-hit features of :data:`CHANNELS`.
+REFERENCE_FIRST_HIT_CHANNELS = {q: CHANNELS[q] for q in FEATURES}
 
 #: Where a render's features are recorded (config key ``features``; module docstring, "Features"):
 #: ``tungsten`` at the first non-specular vertex of the path, as the paper's renderer records them
@@ -164,13 +172,15 @@ def _sensor_key(desc: dict, label: str) -> str:
         raise RenderError(f"scene '{label}': no {'/'.join(SENSOR_TYPES)} sensor in its dict") from None
 
 
-def _wrapped(desc: dict, label: str, width: int, height: int, variant: str) -> tuple[dict, dict]:
-    """A copy of ``desc`` with the moment/aov integrator wrapper, box filter and independent
-    sampler (``desc`` itself is not changed), and the scene's own integrator dict."""
+def _wrapped(desc: dict, label: str, width: int, height: int, variant: str, *,
+             aovs: bool = True) -> tuple[dict, dict]:
+    """A copy of ``desc`` with the moment/aov integrator wrapper (``aovs=False``: an ``aov``
+    integrator of no AOVs, the colour of a reference chunk), box filter and independent sampler
+    (``desc`` itself is not changed), and the scene's own integrator dict."""
     desc = dict(desc)
     integrator = desc["integrator"]
     desc["integrator"] = {"type": "moment",
-                          "nested": {"type": "aov", "aovs": AOVS, "integrator": integrator}}
+                          "nested": {"type": "aov", "aovs": AOVS if aovs else "", "integrator": integrator}}
     if variant.startswith("scalar"):
         desc["integrator"]["block_size"] = SCALAR_BLOCK_SIZE
     sensor_key = _sensor_key(desc, label)
@@ -188,20 +198,23 @@ def _wrapped(desc: dict, label: str, width: int, height: int, variant: str) -> t
     return desc, integrator
 
 
-def _loaded(key: str, build: Callable[[], dict], label: str, width: int, height: int, variant: str):
-    """Cached ``(Mitsuba scene, scene integrator dict)``; ``build()`` runs only on a miss."""
+def _loaded(key: str, build: Callable[[], dict], label: str, width: int, height: int, variant: str, *,
+            aovs: bool = True):
+    """Cached ``(Mitsuba scene, scene integrator dict)``; ``build()`` runs only on a miss. ``aovs``:
+    the colour pass's integrator records the first-hit features (:data:`CHANNELS`), else only the
+    colour (:data:`COLOUR_CHANNELS`)."""
     import mitsuba as mi
 
-    cache_key = (key, width, height, variant)
+    cache_key = (key, width, height, variant) + (() if aovs else ("colour",))
     if cache_key not in _scene_cache:
         desc = build()
         if isinstance(desc, XmlScene):        # a Mitsuba XML file (mcbench.render.xml_scenes)
             if (desc.width, desc.height) != (width, height):
                 raise RenderError(f"scene '{label}': build({width}, {height}) made a {desc.width}x{desc.height} film")
             _scene_cache[cache_key] = load_xml_scene(
-                desc, aovs=AOVS, block_size=SCALAR_BLOCK_SIZE if variant.startswith("scalar") else None)
+                desc, aovs=AOVS if aovs else "", block_size=SCALAR_BLOCK_SIZE if variant.startswith("scalar") else None)
             return _scene_cache[cache_key]
-        desc, integrator = _wrapped(desc, label, width, height, variant)
+        desc, integrator = _wrapped(desc, label, width, height, variant, aovs=aovs)
         try:
             _scene_cache[cache_key] = (mi.load_dict(desc), integrator)
         except Exception as exc:
@@ -278,19 +291,24 @@ def _max_vertices(integrator) -> int:
     return int(depth) if int(depth) > 0 else DEFAULT_MAX_VERTICES
 
 
-def _feature_integrator(variant: str, features: str = "first_hit", max_vertices: int = 64):
+def _feature_integrator(variant: str, features: str = "first_hit", max_vertices: int = 64, *,
+                        reference: bool = False):
     """The integrator of the feature pass (module docstring), one per variant and convention:
-    ``moment(aov(position, visibility))`` for ``first_hit``, ``moment(mcbench_path_features)`` for
-    ``tungsten``; with the colour pass's block size in scalar variants (the same block size gives
-    the same per-block seeds, hence the same camera rays)."""
+    ``moment(aov(position, visibility))`` for ``first_hit`` (a ``reference`` chunk's:
+    ``moment(aov(albedo, sh_normal, depth))``, the first-hit features its colour pass leaves out),
+    ``moment(mcbench_path_features)`` for ``tungsten``; with the colour pass's block size in scalar
+    variants (the same block size gives the same per-block seeds, hence the same camera rays)."""
     import mitsuba as mi
 
-    key = (variant, features, max_vertices if features == "tungsten" else None)
+    reference = reference and features == "first_hit"
+    key = (variant, features, max_vertices if features == "tungsten" else None, reference)
     if key not in _feature_integrators:
         if features == "tungsten":
             from mcbench.render.path_features import register as register_path_features
 
             desc = {"type": "moment", "nested": {"type": register_path_features(), "max_vertices": max_vertices}}
+        elif reference:
+            desc = {"type": "moment", "nested": {"type": "aov", "aovs": AOVS}}
         else:
             desc = {"type": "moment", "nested": {"type": "aov", "aovs": FEATURE_AOVS,
                                                  VISIBILITY_CHILD: {"type": register_visibility()}}}
@@ -303,14 +321,15 @@ def _feature_integrator(variant: str, features: str = "first_hit", max_vertices:
 def _moment_sums(label: str, scene_object, spp: int, seed_of: SeedOfPass, variant: str,
                  width: int, height: int, label_spp: int,
                  progress: str | None = None, features: str | None = None,
-                 max_vertices: int = 64) -> tuple[dict[str, tuple], list[int]]:
+                 max_vertices: int = 64, channels: dict = CHANNELS) -> tuple[dict[str, tuple], list[int]]:
     """Render ``spp`` samples in the passes of :func:`passes_for`, pass ``p`` seeded with
     ``seed_of(p)``; per quantity float64 sums (S1, S2), each (H, W, C), and the seeds used.
     ``features`` (a convention of :data:`FEATURE_CONVENTIONS`, or ``None`` for none): each pass is
     followed by its feature pass (same spp and seed): ``first_hit`` adds the quantities of
     :data:`FEATURE_CHANNELS`; ``tungsten`` those of :data:`PATH_FEATURE_CHANNELS`, which replace the
     colour pass's albedo, normal and depth (their ``*_count`` sums: the samples that recorded them).
-    With ``progress`` (a label), prints a :func:`mcbench.progress.progress_line` after each pass
+    ``channels``: the quantities of the colour pass (:data:`CHANNELS`, or :data:`COLOUR_CHANNELS`
+    for a scene loaded without the first-hit AOVs). With ``progress`` (a label), prints a :func:`mcbench.progress.progress_line` after each pass
     (passes done, elapsed time, ETA from the samples done so far)."""
     pass_spp = passes_for(spp, width, height, variant)
     seeds = [seed_of(p) for p in range(len(pass_spp))]
@@ -318,7 +337,7 @@ def _moment_sums(label: str, scene_object, spp: int, seed_of: SeedOfPass, varian
     started = time.perf_counter()
     for done, (spp, seed) in enumerate(zip(pass_spp, seeds), start=1):
         image = _render_pass(scene_object, spp, mitsuba_seed(seed, variant, width, height))
-        index = _channel_indices(scene_object)
+        index = _channel_indices(scene_object, channels, 31 if channels is CHANNELS else None)
         color = image[..., index["color"][0]]
         if not np.all(np.isfinite(color)) or not np.all(np.isfinite(image[..., index["color"][1]])):
             bad = int((~np.isfinite(image)).any(axis=2).sum())
@@ -346,14 +365,16 @@ def _moment_sums(label: str, scene_object, spp: int, seed_of: SeedOfPass, varian
 
 
 def _feature_pass(label: str, label_spp: int, scene_object, spp: int, seed: int, variant: str, width: int,
-                  height: int, features: str, max_vertices: int) -> tuple[np.ndarray, dict]:
+                  height: int, features: str, max_vertices: int, *, reference: bool = False) -> tuple[np.ndarray, dict]:
     """One feature pass (module docstring) of ``spp`` samples with pass seed ``seed``: the developed
     film (H, W, channels) and the indices of its quantities (:data:`FEATURE_CHANNELS` for
-    ``first_hit``, :data:`PATH_FEATURE_CHANNELS` for ``tungsten``); NaN/Inf stops with a
+    ``first_hit``, :data:`PATH_FEATURE_CHANNELS` for ``tungsten``; a ``reference`` chunk's
+    ``first_hit`` pass: :data:`REFERENCE_FIRST_HIT_CHANNELS`); NaN/Inf stops with a
     :class:`RenderError` naming ``label`` at ``label_spp``."""
+    first_hit = FEATURE_CHANNELS if not reference else REFERENCE_FIRST_HIT_CHANNELS
     image = _render_pass(scene_object, spp, mitsuba_seed(seed, variant, width, height),
-                         _feature_integrator(variant, features, max_vertices))
-    index = _channel_indices(scene_object, FEATURE_CHANNELS if features == "first_hit" else PATH_FEATURE_CHANNELS,
+                         _feature_integrator(variant, features, max_vertices, reference=reference))
+    index = _channel_indices(scene_object, first_hit if features == "first_hit" else PATH_FEATURE_CHANNELS,
                              None)
     if not np.all(np.isfinite(image)):
         bad = int((~np.isfinite(image)).any(axis=2).sum())
@@ -464,10 +485,10 @@ def _size(module: ModuleType, resolution) -> tuple[int, int]:
     return int(width), int(height)
 
 
-def _loaded_module(module: ModuleType, width: int, height: int, variant: str):
+def _loaded_module(module: ModuleType, width: int, height: int, variant: str, *, aovs: bool = True):
     build = scene_spec(module).build
     return _loaded(module.__name__, lambda: build(width, height), _scene_name(module),
-                   width, height, variant)
+                   width, height, variant, aovs=aovs)
 
 
 def render_buffers(scene_module: ModuleType, spp: int, *, resolution: tuple[int, int] | None = None,
@@ -521,14 +542,21 @@ def render_reference_chunk(scene_module: ModuleType, spp: int, chunk: int, *,
     """Render chunk ``chunk`` (0-based) of a reference of the scene module ``scene_module``: ``spp``
     samples with seeds disjoint from every noisy render and every other chunk.
 
+    The colour passes render ``moment(aov(<scene integrator>))`` with an empty AOV list, the colour
+    alone: the scene's own estimator and sample stream, as in a noisy render's colour pass (the
+    first-hit AOVs draw no random numbers), so a chunk's colour equals that of the wrapped pass up
+    to the film's float32 accumulation order, and the AOVs, 4-10 % of a chunk's CPU
+    (``docs/measurements.md``), are not computed for every sample.
+
     Layers (float32): ``color`` (H, W, 3) sample mean, ``color_m2`` (H, W, 3) mean of squared
-    samples, ``albedo``, ``normal`` (H, W, 3) and ``depth`` (H, W) sample means (``features``:
-    ``first_hit`` from the colour pass, all ``spp`` samples; ``tungsten`` from one path-feature pass
-    of ``min(spp, REFERENCE_FEATURE_SPP)`` samples seeded as the chunk's first pass, each the mean
-    over the samples that recorded it: no step of the study reads a reference's features, they are
-    kept for display and export, and a feature pass beside every colour pass would add its cost to
-    the study's most expensive renders). Metadata (strings): scene, spp, chunk, variant, seed, seeds,
-    mitsuba, seconds, resolution, integrator, features, feature_spp (the samples behind the features).
+    samples, ``albedo``, ``normal`` (H, W, 3) and ``depth`` (H, W) sample means from one feature
+    pass of ``min(spp, REFERENCE_FEATURE_SPP)`` samples seeded as the chunk's first pass (``features``:
+    ``first_hit``: ``moment(aov(albedo, sh_normal, depth))``; ``tungsten``: the path-feature pass,
+    each the mean over the samples that recorded it): no step of the study reads a reference's
+    features, they are kept for display and export, and a feature pass beside every colour pass
+    would add its cost to the study's most expensive renders. Metadata (strings): scene, spp,
+    chunk, variant, seed, seeds, mitsuba, seconds, resolution, integrator, features, feature_spp
+    (the samples behind the features).
     """
     module = scene_module
     name = _scene_name(module)
@@ -540,19 +568,18 @@ def render_reference_chunk(scene_module: ModuleType, spp: int, chunk: int, *,
     variant = pick_variant(variant)
     set_threads(threads)
     start = time.perf_counter()
-    scene_object, integrator = _loaded_module(module, width, height, variant)
+    scene_object, integrator = _loaded_module(module, width, height, variant, aovs=False)
     seed_of = lambda p: render_seed("reference", chunk=chunk, pass_index=p, base_seed=seed)  # noqa: E731
     sums, seeds = _moment_sums(
         name, scene_object, spp, seed_of,
-        variant, width, height, spp, progress=f"reference {name} chunk {chunk} ({width}x{height}, {variant})")
+        variant, width, height, spp, progress=f"reference {name} chunk {chunk} ({width}x{height}, {variant})",
+        channels=COLOUR_CHANNELS)
     layers = {"color": sums["color"][0] / spp, "color_m2": sums["color"][1] / spp}
-    feature_spp = spp
-    if features == "tungsten":
-        feature_spp = min(spp, REFERENCE_FEATURE_SPP)
-        image, index = _feature_pass(name, spp, scene_object, feature_spp, seed_of(0), variant, width, height,
-                                     features, _max_vertices(integrator))
-        sums = {quantity: (image[..., m1] * feature_spp, image[..., m2] * feature_spp)
-                for quantity, (m1, m2) in index.items()}
+    feature_spp = min(spp, REFERENCE_FEATURE_SPP)
+    image, index = _feature_pass(name, spp, scene_object, feature_spp, seed_of(0), variant, width, height,
+                                 features, _max_vertices(integrator), reference=True)
+    sums = {quantity: (image[..., m1] * feature_spp, image[..., m2] * feature_spp)
+            for quantity, (m1, m2) in index.items()}
     for quantity in FEATURES:
         count = sums[f"{quantity}_count"][0] if f"{quantity}_count" in sums else feature_spp
         layers[quantity] = _squeeze(weighted_mean_variance(*sums[quantity], count)[0])
