@@ -14,6 +14,16 @@ Greedy, lowest ratio first: double the spp of the scene whose ratio is lowest an
 ``--required`` (10, the scene table's rule), while the added CPU stays within the budget; a scene
 whose next doubling does not fit is left. Prints, per scene, the measured ratio, the spp and ratio
 after, the added core-minutes, and the ``reference: scene_spp:`` block for a config file.
+
+    python tools/reference_budget.py <a store run's scenes.csv> --fit 11 --max-spp 147456
+
+``--fit T`` instead gives every scene the least spp (a multiple of ``--step``) whose predicted
+ratio reaches T, from floors measured at any spp (best from a run on the reference store, whose
+floors are measured at its high spp): fewer samples where the measured floor leaves room, more
+where it is short. A scene that would need more than ``--max-spp`` keeps ``--keep-spp`` (the spp
+the config gives it now: its columns stay marked, as before, and no budget is spent on a ratio it
+cannot reach). ``--cost-per-kspp scene=seconds,...`` (CPU seconds per 1024 spp, measured) adds
+the CPU of each scene's reference at the spp after.
 """
 
 from __future__ import annotations
@@ -53,6 +63,28 @@ def plan(scenes: pd.DataFrame, *, budget_core_seconds: float, required: float = 
     return table
 
 
+def fit(scenes: pd.DataFrame, *, target: float, step: int = 1024, max_spp: int,
+        keep_spp: dict[str, int]) -> pd.DataFrame:
+    """Per scene the least multiple of ``step`` whose predicted floor ratio reaches ``target``
+    (:func:`_ratio`), or ``keep_spp[scene]`` where that is above ``max_spp`` (module docstring)."""
+    table = scenes[["scene", "reference_spp", "floor_ratio"]].copy()
+    spp_after, ratio_after, reached = [], [], []
+    for row in table.itertuples():
+        if not math.isfinite(row.floor_ratio) or row.floor_ratio <= 1.0:
+            raise ValueError(f"scene {row.scene!r}: floor ratio {row.floor_ratio} cannot be extrapolated (needs > 1)")
+        factor = (target - 1.0) / (row.floor_ratio - 1.0)
+        spp = max(step, math.ceil(factor * row.reference_spp / step) * step)
+        if spp > max_spp:
+            if row.scene not in keep_spp:
+                raise ValueError(f"scene {row.scene!r} needs {spp} spp (> --max-spp {max_spp}); give its --keep-spp")
+            spp = int(keep_spp[row.scene])
+        spp_after.append(spp)
+        ratio_after.append(_ratio(float(row.floor_ratio), spp / row.reference_spp))
+        reached.append(ratio_after[-1] >= target)
+    table["spp_after"], table["ratio_after"], table["reached"] = spp_after, ratio_after, reached
+    return table
+
+
 def _ratio(measured: float, factor: float) -> float:
     """The floor ratio with ``factor`` times the reference spp, from the ``measured`` one (module)."""
     return 1.0 + (measured - 1.0) * factor
@@ -61,9 +93,18 @@ def _ratio(measured: float, factor: float) -> float:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("scenes_csv")
-    parser.add_argument("--budget-core-minutes", type=float, required=True)
+    parser.add_argument("--budget-core-minutes", type=float)
     parser.add_argument("--required", type=float, default=10.0)
+    parser.add_argument("--fit", type=float, metavar="T", help="the least spp reaching floor ratio T per scene")
+    parser.add_argument("--step", type=int, default=1024)
+    parser.add_argument("--max-spp", type=int, default=2 ** 31)
+    parser.add_argument("--keep-spp", default="", help="scene=spp,... for the scenes above --max-spp")
+    parser.add_argument("--cost-per-kspp", default="", help="scene=CPU seconds per 1024 spp,...")
     args = parser.parse_args(argv)
+    if args.fit is not None:
+        return _print_fit(args)
+    if args.budget_core_minutes is None:
+        parser.error("give --budget-core-minutes (doublings within a budget) or --fit T")
     table = plan(pd.read_csv(args.scenes_csv), budget_core_seconds=60.0 * args.budget_core_minutes,
                  required=args.required)
     print("| scene | reference spp | floor ratio | spp after | ratio after | added core-min |")
@@ -76,6 +117,30 @@ def main(argv: list[str] | None = None) -> int:
     for row in table.itertuples():
         if row.spp_after != row.reference_spp:
             print(f"    {row.scene}: {row.spp_after}")
+    return 0
+
+
+
+def _pairs(text: str) -> dict[str, float]:
+    return {k.strip(): float(v) for k, v in (item.split("=") for item in text.split(",") if item.strip())}
+
+
+def _print_fit(args) -> int:
+    keep = {k: int(v) for k, v in _pairs(args.keep_spp).items()}
+    cost = _pairs(args.cost_per_kspp)
+    table = fit(pd.read_csv(args.scenes_csv), target=args.fit, step=args.step, max_spp=args.max_spp, keep_spp=keep)
+    print("| scene | measured at spp | floor ratio | spp after | predicted ratio | reaches target | CPU min |")
+    print("|---|---:|---:|---:|---:|---|---:|")
+    total = 0.0
+    for row in table.itertuples():
+        minutes = cost[row.scene] * row.spp_after / 1024 / 60 if row.scene in cost else math.nan
+        total += minutes
+        print(f"| {row.scene} | {row.reference_spp} | {row.floor_ratio:.1f} | {row.spp_after} | "
+              f"{row.ratio_after:.1f} | {'yes' if row.reached else 'no (kept)'} | {minutes:.1f} |")
+    print(f"\nCPU of the references: {total:.1f} core-minutes\n")
+    print("reference:\n  scene_spp:")
+    for row in table.itertuples():
+        print(f"    {row.scene}: {row.spp_after}")
     return 0
 
 
