@@ -15,15 +15,17 @@ Greedy, lowest ratio first: double the spp of the scene whose ratio is lowest an
 whose next doubling does not fit is left. Prints, per scene, the measured ratio, the spp and ratio
 after, the added core-minutes, and the ``reference: scene_spp:`` block for a config file.
 
-    python tools/reference_budget.py <a store run's scenes.csv> --fit 11 --max-spp 147456
+    python tools/reference_budget.py R/tables/scenes.csv --fit 10.5 --max-spp 147456 \
+        --cap-spp veach_ajar=65536,fog_beams=65536 --columns R/metrics.csv R/tables/ranking_relmse.csv
 
 ``--fit T`` instead gives every scene the least spp (a multiple of ``--step``) whose predicted
 ratio reaches T, from floors measured at any spp (best from a run on the reference store, whose
 floors are measured at its high spp): fewer samples where the measured floor leaves room, more
-where it is short. A scene that would need more than ``--max-spp`` keeps ``--keep-spp`` (the spp
-the config gives it now: its columns stay marked, as before, and no budget is spent on a ratio it
-cannot reach). ``--cost-per-kspp scene=seconds,...`` (CPU seconds per 1024 spp, measured) adds
-the CPU of each scene's reference at the spp after.
+where it is short. A scene that would need more than ``--max-spp`` gets at most its ``--cap-spp``
+(the spp the config gave it: no budget is spent on a ratio it cannot reach, its highest columns
+stay marked ‡), and with ``--columns <metrics.csv> <ranking csv>`` of the same run only as much as
+keeps ranked, at T, every spp column that its cap ranks. ``--cost-per-kspp scene=seconds,...``
+(CPU seconds per 1024 spp, measured) adds the CPU of each scene's reference at the spp after.
 """
 
 from __future__ import annotations
@@ -64,25 +66,47 @@ def plan(scenes: pd.DataFrame, *, budget_core_seconds: float, required: float = 
 
 
 def fit(scenes: pd.DataFrame, *, target: float, step: int = 1024, max_spp: int,
-        keep_spp: dict[str, int]) -> pd.DataFrame:
-    """Per scene the least multiple of ``step`` whose predicted floor ratio reaches ``target``
-    (:func:`_ratio`), or ``keep_spp[scene]`` where that is above ``max_spp`` (module docstring)."""
+        cap_spp: dict[str, int], columns: pd.DataFrame | None = None) -> pd.DataFrame:
+    """Per scene the least multiple of ``step`` whose predicted floor ratio (:func:`_ratio`) at the
+    highest spp reaches ``target``. A scene that would need more than ``max_spp`` takes its
+    ``cap_spp``, or less: the least spp that keeps every spp column it ranks at ``cap_spp`` (ratio
+    at least ``target`` in ``columns``: scene, spp, floor_ratio, measured with the references of
+    ``scenes``) at ``target``; without ``columns``, ``cap_spp`` itself. Columns: scene,
+    reference_spp, floor_ratio, spp_after, ratio_after (highest spp), reached, ranked_up_to (the
+    highest spp column the scene still ranks at ``target``; its own spp when it reaches ``target``)."""
     table = scenes[["scene", "reference_spp", "floor_ratio"]].copy()
-    spp_after, ratio_after, reached = [], [], []
+    spp_after, ratio_after, reached, ranked = [], [], [], []
     for row in table.itertuples():
         if not math.isfinite(row.floor_ratio) or row.floor_ratio <= 1.0:
             raise ValueError(f"scene {row.scene!r}: floor ratio {row.floor_ratio} cannot be extrapolated (needs > 1)")
-        factor = (target - 1.0) / (row.floor_ratio - 1.0)
-        spp = max(step, math.ceil(factor * row.reference_spp / step) * step)
+        spp = _least_spp(row.floor_ratio, row.reference_spp, target, step)
+        top = None
         if spp > max_spp:
-            if row.scene not in keep_spp:
-                raise ValueError(f"scene {row.scene!r} needs {spp} spp (> --max-spp {max_spp}); give its --keep-spp")
-            spp = int(keep_spp[row.scene])
+            if row.scene not in cap_spp:
+                raise ValueError(f"scene {row.scene!r} needs {spp} spp (> --max-spp {max_spp}); give its --cap-spp")
+            spp = int(cap_spp[row.scene])
+            if columns is not None:
+                own = columns[columns["scene"] == row.scene]
+                factor = spp / row.reference_spp
+                kept = own[[_ratio(r, factor) >= target for r in own["floor_ratio"]]]
+                if not kept.empty:
+                    binding = kept.loc[kept["floor_ratio"].idxmin()]
+                    spp = min(spp, _least_spp(float(binding["floor_ratio"]), row.reference_spp, target, step))
+                    top = int(kept["spp"].astype(int).max())
         spp_after.append(spp)
         ratio_after.append(_ratio(float(row.floor_ratio), spp / row.reference_spp))
         reached.append(ratio_after[-1] >= target)
+        ranked.append(top)
     table["spp_after"], table["ratio_after"], table["reached"] = spp_after, ratio_after, reached
+    table["ranked_up_to"] = pd.Series(ranked, index=table.index, dtype=object)
     return table
+
+
+def _least_spp(measured_ratio: float, measured_spp: int, target: float, step: int) -> int:
+    """The least multiple of ``step`` at which a ratio ``measured_ratio`` at ``measured_spp``
+    becomes ``target`` (:func:`_ratio` solved for the factor)."""
+    factor = (target - 1.0) / (measured_ratio - 1.0)
+    return max(step, math.ceil(factor * measured_spp / step - 1e-9) * step)
 
 
 def _ratio(measured: float, factor: float) -> float:
@@ -98,7 +122,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--fit", type=float, metavar="T", help="the least spp reaching floor ratio T per scene")
     parser.add_argument("--step", type=int, default=1024)
     parser.add_argument("--max-spp", type=int, default=2 ** 31)
-    parser.add_argument("--keep-spp", default="", help="scene=spp,... for the scenes above --max-spp")
+    parser.add_argument("--cap-spp", default="", help="scene=spp,... for the scenes above --max-spp")
+    parser.add_argument("--columns", nargs=2, metavar=("METRICS_CSV", "RANKING_CSV"),
+                        help="the same run's metrics.csv and a ranking table: per-column floor ratios")
     parser.add_argument("--cost-per-kspp", default="", help="scene=CPU seconds per 1024 spp,...")
     args = parser.parse_args(argv)
     if args.fit is not None:
@@ -126,17 +152,26 @@ def _pairs(text: str) -> dict[str, float]:
 
 
 def _print_fit(args) -> int:
-    keep = {k: int(v) for k, v in _pairs(args.keep_spp).items()}
+    cap = {k: int(v) for k, v in _pairs(args.cap_spp).items()}
     cost = _pairs(args.cost_per_kspp)
-    table = fit(pd.read_csv(args.scenes_csv), target=args.fit, step=args.step, max_spp=args.max_spp, keep_spp=keep)
-    print("| scene | measured at spp | floor ratio | spp after | predicted ratio | reaches target | CPU min |")
-    print("|---|---:|---:|---:|---:|---|---:|")
+    scenes = pd.read_csv(args.scenes_csv)
+    columns = None
+    if args.columns:
+        from mcbench.analysis.scene_summary import column_floor_ratios
+
+        metrics, ranking = (pd.read_csv(path) for path in args.columns)
+        columns = column_floor_ratios(metrics, dict(zip(scenes["scene"], scenes["reference_relmse"])),
+                                      candidates=list(ranking["candidate"]))
+    table = fit(scenes, target=args.fit, step=args.step, max_spp=args.max_spp, cap_spp=cap, columns=columns)
+    print("| scene | measured at spp | floor ratio | spp after | predicted ratio | reaches target | ranks up to | CPU min |")
+    print("|---|---:|---:|---:|---:|---|---:|---:|")
     total = 0.0
     for row in table.itertuples():
         minutes = cost[row.scene] * row.spp_after / 1024 / 60 if row.scene in cost else math.nan
         total += minutes
+        ranks = "all" if row.reached else (f"{row.ranked_up_to} spp" if row.ranked_up_to else "?")
         print(f"| {row.scene} | {row.reference_spp} | {row.floor_ratio:.1f} | {row.spp_after} | "
-              f"{row.ratio_after:.1f} | {'yes' if row.reached else 'no (kept)'} | {minutes:.1f} |")
+              f"{row.ratio_after:.1f} | {'yes' if row.reached else 'no'} | {ranks} | {minutes:.1f} |")
     print(f"\nCPU of the references: {total:.1f} core-minutes\n")
     print("reference:\n  scene_spp:")
     for row in table.itertuples():

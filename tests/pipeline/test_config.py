@@ -55,8 +55,8 @@ def test_config_yaml_sets_only_what_the_schema_does_not_default():
 
     assert list(copies(written, defaults, [])) == []
     assert resolve_config(written)["reference"]["scene_spp"] == {
-        "cornell_box": 45056, "veach_ajar": 65536, "glass_caustics": 144384, "envmap_objects": 23552,
-        "fine_textures": 26624, "furball": 18432, "depth_of_field": 18432, "fog_beams": 65536}
+        "cornell_box": 41984, "veach_ajar": 45056, "glass_caustics": 137216, "envmap_objects": 21504,
+        "fine_textures": 25600, "furball": 18432, "depth_of_field": 17408, "fog_beams": 63488}
 
 
 def test_a_config_file_is_the_whole_configuration():
