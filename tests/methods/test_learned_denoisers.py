@@ -16,7 +16,8 @@ from mcbench.io.tables import read_json
 from mcbench.nn.crops import CropSet, is_validation_seed
 from mcbench.nn.inference import image_tensors, load_network, run_network
 from mcbench.nn.train import evaluate
-from mcbench.io.weights import COMMITTED_WEIGHTS, is_learned_method, load_weights, record_path, weights_path
+from mcbench.io.weights import (COMMITTED_WEIGHTS, is_learned_method, load_weights, record_path, trained_features,
+                                weights_path)
 from methods import available_methods, load_method, method_spec
 
 #: every learned method, found through its declaration
@@ -165,12 +166,14 @@ def validation_scene():
         other = read_json(record_path(COMMITTED_WEIGHTS, name))["data"]
         assert {k: other[k] for k in ("spp_levels", "resolution", "target_spp")} == \
                {k: data[k] for k in ("spp_levels", "resolution", "target_spp")}
+        assert trained_features(record_path(COMMITTED_WEIGHTS, name)) == trained_features(record_path(COMMITTED_WEIGHTS, "kpcn"))
     if pick_variant("auto") == "scalar_rgb":
         pytest.skip("training renders need an LLVM or CUDA variant (libLLVM 19 missing)")
     seed = data["validation_scenes"][0]
     width, height = (int(v) for v in data["resolution"].split("x"))
     crops = training_example(seed, data["spp_levels"], int(data["target_spp"]), (width, height),
-                             data["crop_size"], data["crops_per_scene"])
+                             data["crop_size"], data["crops_per_scene"],
+                             features=trained_features(record_path(COMMITTED_WEIGHTS, "kpcn")))
     return seed, CropSet.from_layers(crops)
 
 

@@ -191,7 +191,7 @@ def combiner_validation_scene(tmp_path_factory):
     seed = data["validation_scenes"][0]
     width, height = (int(v) for v in data["resolution"].split("x"))
     crops = training_example(seed, data["spp_levels"], int(data["target_spp"]), (width, height),
-                             data["crop_size"], rendered)[:data["crops_per_scene"]]
+                             data["crop_size"], rendered, features=data.get("features", "first_hit"))[:data["crops_per_scene"]]
     folder = tmp_path_factory.mktemp("validation")
     paths = []
     for layers, meta in crops:
