@@ -32,9 +32,16 @@ def kept_round(history: list[dict], steps: int) -> dict | None:
 
 
 def _cpu(record: dict) -> str:
+    """The record's CPU: its model name, with family, model number and AVX-512 when recorded (a
+    virtual machine may name its CPU only "AMD EPYC", which several generations share)."""
     cpu = record.get("cpu") or {}
     model = cpu.get("model") if isinstance(cpu, dict) else None
-    return model or f"not recorded ({record.get('machine', 'unknown machine')})"
+    if not model:
+        return f"not recorded ({record.get('machine', 'unknown machine')})"
+    details = [f"family {cpu['family']} model {cpu['model_number']}"] if cpu.get("family") and cpu.get("model_number") else []
+    if "avx512f" in cpu:
+        details.append("AVX-512" if cpu["avx512f"] else "no AVX-512")
+    return f"{model} ({', '.join(details)})" if details else model
 
 
 def _number(value, digits: int = 5) -> str:

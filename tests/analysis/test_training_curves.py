@@ -33,6 +33,8 @@ def test_a_network_section_names_the_cpu_the_rule_and_the_kept_row():
     assert "ran 4000 steps in 2 round(s), stopped by plateau; kept: round 2" in text
     assert "| 4000 | 2 | 0.14 | 0.119 (kept) | 0.35 |" in text
     assert text.count("(kept)") == 1 and "features: tungsten" in text
+    vm = {**RECORD, "cpu": {"model": "AMD EPYC", "family": "25", "model_number": "17", "avx512f": True}}
+    assert "of AMD EPYC (family 25 model 17, AVX-512)" in "\n".join(network_section("net", vm))
 
 
 def test_the_page_and_curves_are_written_from_a_weights_folder(tmp_path):
