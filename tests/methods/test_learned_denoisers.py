@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 import torch
 
+from mcbench.analysis.training_curves import kept_round
 from mcbench.io.buffers import RenderBuffers
 from mcbench.io.tables import read_json
 from mcbench.nn.crops import CropSet, is_validation_seed
@@ -129,7 +130,10 @@ def test_committed_weights_load_safely_and_match_their_record(name):
     assert record["parameters"] == sum(p.numel() for p in network.parameters())
     for key in ("seconds", "machine", "torch", "settings", "data", "history", "validation"):
         assert key in record, key
-    assert record["settings"]["steps"] == record["history"][-1]["step"]
+    # whole rounds of its steps (one for a record made before rounds), the kept round's validation the record's
+    steps_run = record.get("steps_run", record["settings"]["steps"])
+    assert steps_run == record["history"][-1]["step"] and steps_run % record["settings"]["steps"] == 0
+    assert kept_round(record["history"], record["settings"]["steps"])["validation_loss"] == record["validation"]["loss"]
     assert np.isfinite(record["validation"]["loss"])
 
 

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from mcbench import BenchError
+from mcbench.analysis.training_curves import kept_round
 from mcbench.io.buffers import ALL_LAYERS, BIN_LAYERS, SUB_OUTPUTS, Denoised, RenderBuffers
 from mcbench.io.exr import read_layers, write_layers
 from mcbench.nn.crops import BUFFER_KEYS, crop_render_layers, load_combiner_crops
@@ -170,7 +171,10 @@ def test_committed_combiner_weights_load_safely_and_match_their_record(name):
     network.load_state_dict(blob["state_dict"])
     assert record["parameters"] == sum(p.numel() for p in network.parameters())
     assert record["data"]["bases"] == list(module.METHOD.learned.correlated_bases)
-    assert record["settings"]["steps"] == record["history"][-1]["step"]
+    # whole rounds of its steps (one for a record made before rounds), the kept round's validation the record's
+    steps_run = record.get("steps_run", record["settings"]["steps"])
+    assert steps_run == record["history"][-1]["step"] and steps_run % record["settings"]["steps"] == 0
+    assert kept_round(record["history"], record["settings"]["steps"])["validation_loss"] == record["validation"]["loss"]
     per_spp = record["validation"]["per_spp"]
     assert all(np.isfinite(v["loss"]) and v["loss"] < v["noisy_loss"] for v in per_spp.values())
 
