@@ -1,7 +1,7 @@
 """The learned networks' validation curves, from their training records (each trained
 until its validation loss stops improving, its curve in docs/).
 
-    python -m mcbench.analysis.training_curves WEIGHTS_DIR [--out docs/training.md]
+    python -m mcbench.analysis.training_curves WEIGHTS_DIR [--out docs/training.md] [--compare OTHER_DIR]
 
 A record (``<name>.json`` beside ``<name>.pt``, written by :func:`mcbench.nn.train.train_network`)
 holds ``history``: one entry per validation, ``{"step", "round", "train_loss",
@@ -20,7 +20,7 @@ from pathlib import Path
 
 from mcbench.io.tables import read_json
 
-__all__ = ["kept_round", "network_section", "training_page", "write_curve"]
+__all__ = ["kept_round", "network_section", "summary_table", "training_page", "write_curve"]
 
 
 def kept_round(history: list[dict], steps: int) -> dict | None:
@@ -77,6 +77,37 @@ def network_section(name: str, record: dict, *, image: str | None = None) -> lis
     return lines + [""]
 
 
+def summary_table(records: dict[str, dict], *, compare: dict[str, dict] | None = None,
+                  levels: tuple[str, ...] = ("4", "16", "1024")) -> list[str]:
+    """Markdown lines of one row per network of ``records`` (name -> record): its features, rounds
+    run, steps, minutes and torch threads, its validation loss and its validation relMSE at
+    ``levels`` spp (the noisy input's in parentheses); with ``compare`` (name -> record of the same
+    networks trained otherwise, e.g. on the other feature convention) that record's validation loss
+    beside it. The validation crops of two feature conventions are cut from the same scenes at the same
+    places with the same statistics but not the same samples (the Tungsten convention renders its
+    colour in a pass of its own), so their losses compare to within that noise: on the base networks'
+    crops the noisy input's loss agrees to 0.5 % at every level, its relMSE (outlier-driven) to 45 %."""
+    header = ["network", "features", "rounds (stopped by)", "steps", "minutes", "threads", "validation loss"]
+    if compare is not None:
+        header.append("compared: validation loss")
+    header.append(f"validation relMSE at {' / '.join(levels)} spp (noisy)")
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    for name, record in records.items():
+        per_spp = record.get("validation", {}).get("per_spp", {})
+        relmse = " / ".join(f"{_number(per_spp[l]['relmse'], 3)} ({_number(per_spp[l]['noisy_relmse'], 3)})"
+                            if l in per_spp else "—" for l in levels)
+        row = [f"`{name}`", str(record.get("data", {}).get("features", "first_hit")),
+               f"{record.get('rounds_run', 1)} ({record.get('stopped_by', 'fixed count')})",
+               str(record.get("steps_run", record.get("settings", {}).get("steps", "—"))),
+               f"{record.get('seconds', float('nan')) / 60:.0f}", str(record.get("threads", "?")),
+               _number(record.get("validation", {}).get("loss"), 4)]
+        if compare is not None:
+            other = compare.get(name)
+            row.append(_number(other.get("validation", {}).get("loss"), 4) if other else "—")
+        lines.append("| " + " | ".join(row + [relmse]) + " |")
+    return lines
+
+
 def write_curve(path: str | Path, name: str, record: dict) -> None:
     """A PNG of ``record``'s validation loss and relMSE against the step, the rounds' ends dashed."""
     import matplotlib
@@ -105,18 +136,30 @@ def write_curve(path: str | Path, name: str, record: dict) -> None:
     plt.close(figure)
 
 
-def training_page(weights_dir: str | Path, *, images: Path | None = None, relative_to: Path | None = None) -> str:
-    """The Markdown page of every training record in ``weights_dir`` (sorted by name), with a curve
-    per network written into ``images`` (linked relative to ``relative_to``) when given."""
+def training_page(weights_dir: str | Path, *, images: Path | None = None, relative_to: Path | None = None,
+                  out: Path | None = None, compare: str | Path | None = None) -> str:
+    """The Markdown page of every training record in ``weights_dir`` (sorted by name): a summary
+    table (:func:`summary_table`, with the records of the same names in ``compare`` when given), then
+    each network's section, with a curve per network written into ``images`` (linked relative to
+    ``relative_to``) when given; ``out``: the page's path, named in the command it gives."""
     folder = Path(weights_dir)
-    records = sorted(folder.glob("*.json"))
-    if not records:
+    paths = sorted(folder.glob("*.json"))
+    if not paths:
         raise ValueError(f"{folder}: no training records (<name>.json); train the networks first")
+    records = {path.stem: read_json(path) for path in paths}
+    compared = None
+    if compare is not None:
+        compared = {path.stem: read_json(path) for path in sorted(Path(compare).glob("*.json"))}
+        if not compared:
+            raise ValueError(f"{compare}: no training records (<name>.json) to compare with")
+    command = (f"python -m mcbench.analysis.training_curves {folder}" + (f" --out {out}" if out else "")
+               + (f" --compare {compare}" if compare is not None else ""))
     lines = ["# Training records and validation curves", "",
-             f"Generated from the records in `{folder}` by `python -m mcbench.analysis.training_curves {folder}"
-             + (f" --out {relative_to / 'training.md'}`" if relative_to else "`") + ".", ""]
-    for path in records:
-        record = read_json(path)
+             f"Generated from the records in `{folder}` by `{command}`"
+             + (f"; compared: the records in `{compare}`" if compare is not None else "") + ".", ""]
+    lines += summary_table(records, compare=compared) + [""]
+    for path in paths:
+        record = records[path.stem]
         image = None
         if images is not None:
             write_curve(images / f"{path.stem}.png", path.stem, record)
@@ -130,12 +173,15 @@ def main(argv: list[str] | None = None) -> int:
                                      description="Validation curves of the training records in a weights folder.")
     parser.add_argument("weights_dir")
     parser.add_argument("--out", default=None, help="write the page here, its curves in <out stem>/ (default: print)")
+    parser.add_argument("--compare", default=None,
+                        help="a second weights folder whose networks' validation losses the summary gives beside")
     args = parser.parse_args(argv)
     if args.out is None:
-        print(training_page(args.weights_dir))
+        print(training_page(args.weights_dir, compare=args.compare))
         return 0
     out = Path(args.out)
-    text = training_page(args.weights_dir, images=out.parent / out.stem, relative_to=out.parent)
+    text = training_page(args.weights_dir, images=out.parent / out.stem, relative_to=out.parent, out=out,
+                         compare=args.compare)
     out.write_text(text + "\n")
     print(f"wrote {out}")
     return 0
