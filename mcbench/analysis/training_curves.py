@@ -83,10 +83,11 @@ def summary_table(records: dict[str, dict], *, compare: dict[str, dict] | None =
     run, steps, minutes and torch threads, its validation loss and its validation relMSE at
     ``levels`` spp (the noisy input's in parentheses); with ``compare`` (name -> record of the same
     networks trained otherwise, e.g. on the other feature convention) that record's validation loss
-    beside it. The validation crops of two feature conventions are cut from the same scenes at the same
-    places with the same statistics but not the same samples (the Tungsten convention renders its
-    colour in a pass of its own), so their losses compare to within that noise: on the base networks'
-    crops the noisy input's loss agrees to 0.5 % at every level, its relMSE (outlier-driven) to 45 %."""
+    beside it. Rendered by the same code, the validation crops of the two feature conventions hold
+    the same colour and targets (the features alone differ), so their losses compare; records made
+    by older code may hold other samples of the same scenes (the committed first-hit base networks':
+    the noisy input's loss agrees to 0.5 % at every level, its outlier-driven relMSE to 45 %), so
+    compare the noisy input's per-level values in the records first."""
     header = ["network", "features", "rounds (stopped by)", "steps", "minutes", "threads", "validation loss"]
     if compare is not None:
         header.append("compared: validation loss")
