@@ -77,10 +77,18 @@ def network_section(name: str, record: dict, *, image: str | None = None) -> lis
     return lines + [""]
 
 
+def _inputs_loss(per_spp: dict) -> str:
+    """A combiner's inputs' validation loss (``correlated_loss``), the mean over the levels as the
+    record's own loss is over its equal number of crops per level; "—" for a network without inputs."""
+    values = [entry["correlated_loss"] for entry in per_spp.values() if "correlated_loss" in entry]
+    return _number(sum(values) / len(values), 4) if values and len(values) == len(per_spp) else "—"
+
+
 def summary_table(records: dict[str, dict], *, compare: dict[str, dict] | None = None,
                   levels: tuple[str, ...] = ("4", "16", "1024")) -> list[str]:
     """Markdown lines of one row per network of ``records`` (name -> record): its features, rounds
-    run, steps, minutes and torch threads, its validation loss and its validation relMSE at
+    run, steps, minutes and torch threads, its validation loss (a combiner's: beside its inputs' on
+    the same crops, :func:`_inputs_loss`) and its validation relMSE at
     ``levels`` spp (the noisy input's in parentheses); with ``compare`` (name -> record of the same
     networks trained otherwise, e.g. on the other feature convention) that record's validation loss
     beside it. Rendered by the same code, the validation crops of the two feature conventions hold
@@ -88,7 +96,8 @@ def summary_table(records: dict[str, dict], *, compare: dict[str, dict] | None =
     by older code may hold other samples of the same scenes (the committed first-hit base networks':
     the noisy input's loss agrees to 0.5 % at every level, its outlier-driven relMSE to 45 %), so
     compare the noisy input's per-level values in the records first."""
-    header = ["network", "features", "rounds (stopped by)", "steps", "minutes", "threads", "validation loss"]
+    header = ["network", "features", "rounds (stopped by)", "steps", "minutes", "threads", "validation loss",
+              "its inputs' loss"]
     if compare is not None:
         header.append("compared: validation loss")
     header.append(f"validation relMSE at {' / '.join(levels)} spp (noisy)")
@@ -101,7 +110,7 @@ def summary_table(records: dict[str, dict], *, compare: dict[str, dict] | None =
                f"{record.get('rounds_run', 1)} ({record.get('stopped_by', 'fixed count')})",
                str(record.get("steps_run", record.get("settings", {}).get("steps", "—"))),
                f"{record.get('seconds', float('nan')) / 60:.0f}", str(record.get("threads", "?")),
-               _number(record.get("validation", {}).get("loss"), 4)]
+               _number(record.get("validation", {}).get("loss"), 4), _inputs_loss(per_spp)]
         if compare is not None:
             other = compare.get(name)
             row.append(_number(other.get("validation", {}).get("loss"), 4) if other else "—")

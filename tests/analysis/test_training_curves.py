@@ -55,13 +55,16 @@ def test_the_summary_gives_each_network_its_rounds_losses_and_the_compared_loss(
         "4": {"relmse": 0.05, "noisy_relmse": 2.5}, "16": {"relmse": 0.02, "noisy_relmse": 0.35}}}}
     first_hit = {**RECORD, "data": {}, "validation": {"loss": 0.125}}
     lines = summary_table({"net": record}, compare={"net": first_hit})
-    assert lines[2] == "| `net` | tungsten | 2 (plateau) | 4000 | 10 | 1 | 0.119 | 0.125 | 0.05 (2.5) / 0.02 (0.35) / — |"
-    assert summary_table({"net": first_hit})[2].startswith("| `net` | first_hit | 2 (plateau) | 4000 | 10 | 1 | 0.125 |")
+    assert lines[2] == "| `net` | tungsten | 2 (plateau) | 4000 | 10 | 1 | 0.119 | — | 0.125 | 0.05 (2.5) / 0.02 (0.35) / — |"
+    assert summary_table({"net": first_hit})[2].startswith("| `net` | first_hit | 2 (plateau) | 4000 | 10 | 1 | 0.125 | — |")
+    combiner = {**record, "validation": {"loss": 0.1, "per_spp": {"4": {"correlated_loss": 0.3, "relmse": 0.2, "noisy_relmse": 2.0},
+                                                                 "16": {"correlated_loss": 0.1, "relmse": 0.1, "noisy_relmse": 0.3}}}}
+    assert "| 0.1 | 0.2 |" in summary_table({"dc": combiner})[2]          # the inputs' mean over the levels
     (tmp_path / "a").mkdir()
     (tmp_path / "a" / "net.json").write_text(json.dumps(record))
     (tmp_path / "b").mkdir()
     (tmp_path / "b" / "net.json").write_text(json.dumps(first_hit))
     main([str(tmp_path / "a"), "--out", str(tmp_path / "training.md"), "--compare", str(tmp_path / "b")])
     page = (tmp_path / "training.md").read_text()
-    assert f"--out {tmp_path / 'training.md'} --compare {tmp_path / 'b'}" in page and "| 0.119 | 0.125 |" in page
+    assert f"--out {tmp_path / 'training.md'} --compare {tmp_path / 'b'}" in page and "| 0.119 | — | 0.125 |" in page
 
