@@ -166,18 +166,19 @@ def validation_scene():
     from mcbench.training_data import training_example
 
     data = read_json(record_path(COMMITTED_WEIGHTS, "kpcn"))["data"]
+    features = trained_features(record_path(COMMITTED_WEIGHTS, "kpcn"))
     for name in LEARNED:
         other = read_json(record_path(COMMITTED_WEIGHTS, name))["data"]
         assert {k: other[k] for k in ("spp_levels", "resolution", "target_spp")} == \
                {k: data[k] for k in ("spp_levels", "resolution", "target_spp")}
-        assert trained_features(record_path(COMMITTED_WEIGHTS, name)) == trained_features(record_path(COMMITTED_WEIGHTS, "kpcn"))
+        assert trained_features(record_path(COMMITTED_WEIGHTS, name)) == features
     if pick_variant("auto") == "scalar_rgb":
         pytest.skip("training renders need an LLVM or CUDA variant (libLLVM 19 missing)")
     seed = data["validation_scenes"][0]
     width, height = (int(v) for v in data["resolution"].split("x"))
     crops = training_example(seed, data["spp_levels"], int(data["target_spp"]), (width, height),
                              data["crop_size"], data["crops_per_scene"],
-                             features=trained_features(record_path(COMMITTED_WEIGHTS, "kpcn")))
+                             features=features)
     return seed, CropSet.from_layers(crops)
 
 
