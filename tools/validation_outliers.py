@@ -22,6 +22,7 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from mcbench.analysis.metrics import relmse_map  # noqa: E402
 from mcbench.io.tables import read_json  # noqa: E402
 from mcbench.io.weights import record_path, weights_path  # noqa: E402
 from mcbench.nn.crops import load_crops, validation_batches  # noqa: E402
@@ -39,12 +40,12 @@ def item_errors(network, crops, spp: int) -> list[dict]:
             output = network(buffers)
             for i in np.flatnonzero(np.asarray(levels) == spp):
                 y, t = output[i], targets[i]
-                per_pixel = ((y - t) ** 2 / (t ** 2 + 0.01)).mean(dim=0)
-                row, col = divmod(int(torch.argmax(per_pixel)), per_pixel.shape[1])
+                per_pixel = relmse_map(y.permute(1, 2, 0).double().numpy(), t.permute(1, 2, 0).double().numpy())
+                row, col = np.unravel_index(int(np.argmax(per_pixel)), per_pixel.shape)
                 items.append({
                     "seed": int(seeds[i]), "relmse": float(relmse(y[None], t[None])),
                     "noisy_relmse": float(relmse(buffers["color"][i:i + 1], t[None])),
-                    "pixel": (row, col), "pixel_relmse": float(per_pixel[row, col]),
+                    "pixel": (int(row), int(col)), "pixel_relmse": float(per_pixel[row, col]),
                     **{key: np.round(tensor[:, row, col].double().numpy(), 4).tolist() for key, tensor in
                        (("output", y), ("reference", t), ("noisy", buffers["color"][i]), ("albedo", buffers["albedo"][i]))}})
     return sorted(items, key=lambda item: -item["relmse"])
